@@ -1,0 +1,27 @@
+# Both targets run the whole idempotent set-up first (scripts/setup.sh), then their job.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+ENV := source scripts/env.sh
+
+.PHONY: help setup demo test lint bench
+
+help:
+	@echo 'make demo   set up, then run the live demo'
+	@echo 'make test   set up, then run the test suite'
+	@echo 'make lint   ruff over the project'
+	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
+
+setup:
+	@bash scripts/setup.sh
+
+demo: setup
+	@$(ENV) && python -m zeus_ros.demo $(DEMO_ARGS)
+
+test: setup
+	@$(ENV) && ruff check . && python -m pytest -q $(PYTEST_ARGS)
+
+lint: setup
+	@$(ENV) && ruff check .
+
+bench: setup
+	@$(ENV) && for b in benchmarks/bench_*.py; do echo "== $$b"; python "$$b" || exit 1; done

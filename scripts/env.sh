@@ -1,0 +1,13 @@
+# Source me (bash): puts the venv, the colcon install space and the ROS 2 environment in place.
+# Discovery stays on loopback; pick your own ROS_DOMAIN_ID per run to keep runs apart.
+_zeus_root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+# shellcheck source=/dev/null
+source "$_zeus_root/.venv/bin/activate"
+export AMENT_PREFIX_PATH="$_zeus_root/.venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+# shellcheck source=/dev/null
+source "$_zeus_root/install/setup.bash"
+export PATH="$_zeus_root/install/zeus_ros/lib/zeus_ros:$PATH"
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+export MUJOCO_GL=${MUJOCO_GL:-egl}
+export PYOPENGL_PLATFORM=${PYOPENGL_PLATFORM:-$MUJOCO_GL}
+unset _zeus_root

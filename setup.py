@@ -1,0 +1,49 @@
+"""Install zeus_ros as an ament_python package (colcon build) or a plain Python package."""
+
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'zeus_ros'
+
+
+def tree(source: str, target: str) -> list[tuple[str, list[str]]]:
+    """List data_files entries that mirror the directory `source` under share/zeus_ros/target."""
+    entries = []
+    for root, _dirs, files in os.walk(source):
+        paths = [os.path.join(root, name) for name in files if not name.endswith('.pyc')]
+        if paths:
+            relative = os.path.relpath(root, source)
+            entries.append((os.path.normpath(os.path.join('share', PACKAGE, target, relative)),
+                            paths))
+    return entries
+
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(include=['zeus_ros', 'zeus_ros.*', 'sim_bridge', 'sim_bridge.*']),
+    package_data={'sim_bridge': ['assets/**/*']},
+    include_package_data=True,
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
+        ('share/' + PACKAGE + '/msg', glob('msg_defs/msg/*.msg')),
+        *tree('params', 'params'),
+        *tree('checkpoints', 'checkpoints'),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='zeus_ros developers',
+    maintainer_email='zeus-ros@example.org',
+    description='ZeUS zero-shot adaptation to changing physics, as ROS 2 nodes.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'sim_bridge_node = zeus_ros.nodes.sim_bridge_node:main',
+            'zeus = zeus_ros.cli:main',
+        ],
+    },
+)

@@ -1,0 +1,1 @@
+"""The ZeUS learning core: encoders, context model, SAC and baselines (PyTorch, no ROS)."""

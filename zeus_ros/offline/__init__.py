@@ -1,0 +1,1 @@
+"""Bags in, checkpoints out: collection, ingest, replay, training and evaluation (no ROS)."""
