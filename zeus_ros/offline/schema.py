@@ -111,7 +111,7 @@ def typestore() -> Typestore:
 
 
 def ns_from_sim_time(seconds: float) -> int:
-    """Simulation time in seconds to integer nanoseconds (the unit of stamps and bags)."""
+    """Convert simulation time in seconds to integer nanoseconds (stamps, bag times)."""
     return round(seconds * 1e9)
 
 
@@ -257,5 +257,5 @@ class Codec:
 
 @cache
 def codec() -> Codec:
-    """The process-wide codec over `typestore()`."""
+    """Return the process-wide codec over `typestore()`."""
     return Codec(typestore())

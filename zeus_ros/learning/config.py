@@ -1,0 +1,261 @@
+"""Training configuration: one dataclass, validated on construction, loadable from YAML.
+
+Defaults follow the paper's hyper-parameter tables (appendix B) where the paper gives a value and
+mtrl (the paper's starting codebase) where it does not. `alpha_psi` and `adam_beta1` may be
+`'auto'`; `resolve_config(config, task)` replaces them with the per-task values of the paper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from zeus_ros.learning.errors import ConfigError
+
+__all__ = [
+    'AGGREGATIONS',
+    'ALPHA_PSI_BY_TASK',
+    'METHODS',
+    'REWARD_VARYING_TASKS',
+    'ZeusConfig',
+    'config_from_dict',
+    'load_config',
+    'resolve_config',
+]
+
+METHODS = ('zeus', 'zeus_no_context_loss', 'no_context', 'up_osi', 'cadm', 'oracle')
+"""Methods behind the one agent interface (see agent.py for what each trains)."""
+
+AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
+"""Operators that combine the k per-transition encodings of psi."""
+
+ALPHA_PSI_BY_TASK: dict[str, float] = {
+    'Cheetah-Run-v0': 1.0,
+    'Finger-Spin-v0': 0.5,
+    'Walker-Walk-v0': 2.0,
+    'Walker-Walk-v1': 0.1,
+    'Cheetah-Run-v1': 1.0,
+    'Sawyer-Peg-v0': 1.0,
+}
+"""alpha_psi per task from the paper's ZeUS hyper-parameter table."""
+
+REWARD_VARYING_TASKS = frozenset({'Cheetah-Run-v1', 'Sawyer-Peg-v0'})
+"""Tasks whose context changes the reward; the paper uses Adam beta1 0.5 there, 0.9 elsewhere."""
+
+
+@dataclass(frozen=True)
+class ZeusConfig:
+    """Everything that shapes the networks and the updates of one training run."""
+
+    method: str = 'zeus'
+    """One of METHODS."""
+    obs_kind: str = 'state'
+    """'state' (float vectors, MLP phi) or 'pixels' (3 stacked 84x84 RGB frames, conv phi)."""
+    k: int = 5
+    """History length: transitions psi sees (paper: context length 5)."""
+    aggregation: str = 'mean'
+    """How psi combines the k transition encodings: one of AGGREGATIONS."""
+    context_dim: int = 10
+    """Size of psi(H) (ignored for no_context: 0, up_osi/oracle: number of context params)."""
+    transition_dim: int = 64
+    """Size of psi's per-transition encoding before aggregation."""
+    context_hidden_dim: int = 128
+    """Width of the two hidden layers of psi's per-transition MLP."""
+    alpha_psi: float | str = 'auto'
+    """Weight of the context loss (eq. 1); 'auto' = the paper's per-task value."""
+    cadm_beta: float = 0.5
+    """CaDM backward-dynamics loss weight (paper's CaDM table: 0.5)."""
+    up_osi_warmup_fraction: float = 0.01
+    """UP-OSI: fraction of num_updates during which the policy sees the true context."""
+    dynamics_loss: str = 'gaussian_nll'
+    """'gaussian_nll' (trains mu and sigma, so the W2 term of d is meaningful) or 'mse' on mu."""
+    feature_dim: int = 50
+    """Size of phi(o) (SAC-AE: 50)."""
+    num_conv_layers: int = 4
+    """Pixel phi: number of 3x3 conv layers (first has stride 2)."""
+    num_filters: int = 32
+    """Pixel phi: filters per conv layer."""
+    encoder_hidden_dim: int = 256
+    """State phi: width of the hidden layer of the MLP encoder."""
+    hidden_dim: int = 1024
+    """Actor / critic hidden width (2 hidden layers)."""
+    model_hidden_dim: int = 512
+    """T and R hidden width (1 hidden layer, paper table)."""
+    batch_size: int = 128
+    """Transitions per update (and per pair batch)."""
+    num_updates: int = 1_000_000
+    """Gradient updates of a training run."""
+    seed_steps: int = 1500
+    """Uniform-random environment steps before learning when collecting online (paper: 1500)."""
+    eval_interval: int = 10_000
+    """Updates between evaluations."""
+    eval_episodes: int = 10
+    """Episodes per evaluation."""
+    checkpoint_interval: int = 50_000
+    """Updates between checkpoints."""
+    log_interval: int = 1000
+    """Updates between metric rows."""
+    discount: float = 0.99
+    """Discount gamma."""
+    critic_tau: float = 0.01
+    """Soft-update rate of the target Q heads."""
+    encoder_tau: float = 0.05
+    """Soft-update rate of the target encoder phi."""
+    actor_update_freq: int = 2
+    """Actor (and temperature) update every this many updates."""
+    target_update_freq: int = 2
+    """Target network update every this many updates."""
+    actor_lr: float = 3e-4
+    """Adam learning rate of the policy."""
+    critic_lr: float = 3e-4
+    """Adam learning rate of the Q functions (and of phi through the critic loss)."""
+    encoder_lr: float = 1e-3
+    """Adam learning rate of phi for the model and autoencoder losses."""
+    decoder_lr: float = 1e-3
+    """Adam learning rate of the pixel decoder."""
+    context_lr: float = 1e-3
+    """Adam learning rate of psi."""
+    model_lr: float = 1e-3
+    """Adam learning rate of T and R (and CaDM's backward model)."""
+    alpha_lr: float = 1e-4
+    """Adam learning rate of the temperature."""
+    adam_beta1: float | str = 'auto'
+    """beta1 of Adam for policy, Q and temperature; 'auto' = 0.5 on reward-varying tasks, else 0.9."""
+    init_temperature: float = 0.1
+    """Initial SAC temperature."""
+    actor_log_std_min: float = -10.0
+    """Lower bound of the actor's log std."""
+    actor_log_std_max: float = 2.0
+    """Upper bound of the actor's log std."""
+    decoder_latent_lambda: float = 1e-6
+    """L2 weight on phi(o) in the SAC-AE autoencoder loss (pixels only)."""
+    decoder_weight_decay: float = 1e-7
+    """Weight decay of the decoder optimizer (SAC-AE)."""
+    device: str = 'auto'
+    """'auto' (CUDA if available), 'cpu', 'cuda' or 'cuda:N'."""
+    seed: int = 0
+    """Seed for torch, NumPy and Python."""
+
+    def __post_init__(self) -> None:
+        """Reject bad values early, naming the field."""
+        _check_choice('method', self.method, METHODS)
+        _check_choice('obs_kind', self.obs_kind, ('state', 'pixels'))
+        _check_choice('aggregation', self.aggregation, AGGREGATIONS)
+        _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
+        for name in ('k', 'context_dim', 'transition_dim', 'context_hidden_dim', 'feature_dim',
+                     'num_conv_layers', 'num_filters', 'encoder_hidden_dim', 'hidden_dim',
+                     'model_hidden_dim', 'batch_size', 'num_updates', 'eval_interval',
+                     'eval_episodes', 'checkpoint_interval', 'log_interval',
+                     'actor_update_freq', 'target_update_freq'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f'{name} must be a positive integer, got {value!r}')
+        if isinstance(self.seed_steps, bool) or not isinstance(self.seed_steps, int) \
+                or self.seed_steps < 0:
+            raise ConfigError(f'seed_steps must be an integer >= 0, got {self.seed_steps!r}')
+        for name in ('actor_lr', 'critic_lr', 'encoder_lr', 'decoder_lr', 'context_lr',
+                     'model_lr', 'alpha_lr', 'init_temperature'):
+            _check_float(name, getattr(self, name), low=0.0, low_open=True)
+        for name in ('critic_tau', 'encoder_tau', 'discount', 'up_osi_warmup_fraction'):
+            _check_float(name, getattr(self, name), low=0.0, high=1.0)
+        for name in ('cadm_beta', 'decoder_latent_lambda', 'decoder_weight_decay'):
+            _check_float(name, getattr(self, name), low=0.0)
+        _check_float('actor_log_std_min', self.actor_log_std_min)
+        _check_float('actor_log_std_max', self.actor_log_std_max)
+        if self.actor_log_std_min >= self.actor_log_std_max:
+            raise ConfigError('actor_log_std_min must be below actor_log_std_max, got '
+                              f'{self.actor_log_std_min} >= {self.actor_log_std_max}')
+        if self.alpha_psi != 'auto':
+            _check_float('alpha_psi', self.alpha_psi, low=0.0)
+        if self.adam_beta1 != 'auto':
+            _check_float('adam_beta1', self.adam_beta1, low=0.0, high=1.0, high_open=True)
+        if not isinstance(self.device, str) or not (
+                self.device in ('auto', 'cpu', 'cuda') or self.device.startswith('cuda:')):
+            raise ConfigError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', "
+                              f'got {self.device!r}')
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise ConfigError(f'seed must be an integer, got {self.seed!r}')
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data copy (for YAML, checkpoints and logs)."""
+        return dataclasses.asdict(self)
+
+    def replace(self, **changes: Any) -> ZeusConfig:
+        """Copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+def _check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ConfigError(f'{name} must be one of {", ".join(choices)}; got {value!r}')
+
+
+def _check_float(name: str, value: object, *, low: float | None = None,
+                 high: float | None = None, low_open: bool = False,
+                 high_open: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f'{name} must be a number, got {value!r}')
+    if low is not None and (value < low or (low_open and value == low)):
+        raise ConfigError(f'{name} must be {">" if low_open else ">="} {low}, got {value!r}')
+    if high is not None and (value > high or (high_open and value == high)):
+        raise ConfigError(f'{name} must be {"<" if high_open else "<="} {high}, got {value!r}')
+
+
+def config_from_dict(data: dict[str, Any], *, source: str = 'config') -> ZeusConfig:
+    """Build a config from plain data, rejecting unknown keys (typos must not pass silently)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f'{source}: expected a mapping of config keys, got {type(data).__name__}')
+    known = {field.name for field in fields(ZeusConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ConfigError(f'{source}: unknown config key(s) {", ".join(map(str, unknown))}; '
+                          f'known keys: {", ".join(sorted(known))}')
+    values = dict(data)
+    for name in ('actor_lr', 'critic_lr', 'encoder_lr', 'decoder_lr', 'context_lr', 'model_lr',
+                 'alpha_lr', 'decoder_weight_decay', 'decoder_latent_lambda'):
+        # YAML 1.1 reads '3e-4' (no dot) as a string; accept it as the number it means.
+        if isinstance(values.get(name), str):
+            try:
+                values[name] = float(values[name])
+            except ValueError:
+                raise ConfigError(f'{source}: {name} must be a number, '
+                                  f'got {values[name]!r}') from None
+    try:
+        return ZeusConfig(**values)
+    except ConfigError as error:
+        raise ConfigError(f'{source}: {error}') from None
+
+
+def load_config(path: str | Path) -> ZeusConfig:
+    """Read a YAML training config; unknown keys and bad values raise ConfigError."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as error:
+        raise ConfigError(f'{path}: cannot read config ({error.strerror})') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise ConfigError(f'{path}: not valid YAML ({error})') from None
+    return config_from_dict(data or {}, source=str(path))
+
+
+def resolve_config(config: ZeusConfig, task: str) -> ZeusConfig:
+    """Replace 'auto' values with the paper's per-task values and apply method overrides."""
+    alpha_psi = config.alpha_psi
+    if alpha_psi == 'auto':
+        if task not in ALPHA_PSI_BY_TASK:
+            raise ConfigError(f"alpha_psi: 'auto' needs a task from the paper's table "
+                              f'({", ".join(ALPHA_PSI_BY_TASK)}), got task {task!r}; '
+                              'set alpha_psi to a number')
+        alpha_psi = ALPHA_PSI_BY_TASK[task]
+    if config.method == 'zeus_no_context_loss':
+        alpha_psi = 0.0
+    beta1 = config.adam_beta1
+    if beta1 == 'auto':
+        beta1 = 0.5 if task in REWARD_VARYING_TASKS else 0.9
+    return config.replace(alpha_psi=float(alpha_psi), adam_beta1=float(beta1))

@@ -1,0 +1,114 @@
+"""psi, the context encoder: encode each transition of H, aggregate the k codes, project.
+
+Each transition (phi(o), a, r, phi(o')) goes through an MLP with a tanh output; bounding the codes
+keeps `product` from overflowing and puts every operator on the same scale. Missing slots of a
+partial history (hist_mask False) are neutral for every operator, so their content never matters,
+and an all-empty history (the first step of an episode) gives a finite, defined psi.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from zeus_ros.learning.config import AGGREGATIONS
+from zeus_ros.learning.utils import mlp
+
+__all__ = ['ContextEncoder', 'HistoryFeatures', 'aggregate']
+
+
+@dataclass(slots=True)
+class HistoryFeatures:
+    """A history H in phi space, oldest transition first, missing slots at the front."""
+
+    feat: torch.Tensor
+    """(B, k, F) phi(o_j)."""
+    action: torch.Tensor
+    """(B, k, A) a_j, normalised to [-1, 1]."""
+    reward: torch.Tensor
+    """(B, k, 1) r_{j+1}."""
+    next_feat: torch.Tensor
+    """(B, k, F) phi(o_{j+1})."""
+    mask: torch.Tensor
+    """(B, k) bool, True for real transitions."""
+
+    def shifted(self, feat: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
+                next_feat: torch.Tensor) -> HistoryFeatures:
+        """H_{t+1}: drop the oldest slot and append the transition (o_t, a_t, r_{t+1}, o_{t+1})."""
+        def push(hist: torch.Tensor, new: torch.Tensor) -> torch.Tensor:
+            return torch.cat([hist[:, 1:], new.unsqueeze(1).to(hist.dtype)], dim=1)
+
+        real = torch.ones_like(self.mask[:, :1])
+        return HistoryFeatures(
+            feat=push(self.feat, feat), action=push(self.action, action),
+            reward=push(self.reward, reward), next_feat=push(self.next_feat, next_feat),
+            mask=torch.cat([self.mask[:, 1:], real], dim=1))
+
+    def detach(self) -> HistoryFeatures:
+        """Same history without gradient."""
+        return HistoryFeatures(self.feat.detach(), self.action, self.reward,
+                               self.next_feat.detach(), self.mask)
+
+
+def aggregate(codes: torch.Tensor, mask: torch.Tensor, operator: str) -> torch.Tensor:
+    """Combine (B, k, E) transition codes over the k axis, ignoring slots where mask is False.
+
+    Args:
+        codes: per-transition codes, (B, k, E).
+        mask: (B, k) bool, True where the slot holds a real transition.
+        operator: one of AGGREGATIONS.
+
+    Returns:
+        (B, E), or (B, k * E) for 'concat'. Empty histories give zeros, except 'product' which
+        gives ones (its neutral element).
+    """
+    if codes.dim() != 3 or mask.shape != codes.shape[:2]:
+        raise ValueError(f'codes must be (B, k, E) and mask (B, k); got {tuple(codes.shape)} '
+                         f'and {tuple(mask.shape)}')
+    keep = mask.bool().unsqueeze(-1)
+    if operator == 'sum':
+        return torch.where(keep, codes, torch.zeros_like(codes)).sum(1)
+    if operator == 'mean':
+        total = torch.where(keep, codes, torch.zeros_like(codes)).sum(1)
+        count = keep.sum(1).clamp(min=1).to(codes.dtype)
+        return total / count
+    if operator == 'concat':
+        return torch.where(keep, codes, torch.zeros_like(codes)).flatten(1)
+    if operator == 'product':
+        return torch.where(keep, codes, torch.ones_like(codes)).prod(1)
+    if operator in ('min', 'max'):
+        fill = torch.full_like(codes, float('inf') if operator == 'min' else float('-inf'))
+        filled = torch.where(keep, codes, fill)
+        reduced = filled.amin(1) if operator == 'min' else filled.amax(1)
+        any_real = keep.any(1)
+        return torch.where(any_real, reduced, torch.zeros_like(reduced))
+    raise ValueError(f'aggregation must be one of {", ".join(AGGREGATIONS)}, got {operator!r}')
+
+
+class ContextEncoder(nn.Module):
+    """psi(H): k transitions in phi space -> a context vector of `context_dim`."""
+
+    def __init__(self, feature_dim: int, action_dim: int, k: int, context_dim: int,
+                 aggregation: str = 'mean', transition_dim: int = 64,
+                 hidden_dim: int = 128) -> None:
+        super().__init__()
+        if aggregation not in AGGREGATIONS:
+            raise ValueError(f'aggregation must be one of {", ".join(AGGREGATIONS)}, '
+                             f'got {aggregation!r}')
+        self.k = k
+        self.aggregation = aggregation
+        self.context_dim = context_dim
+        in_dim = 2 * feature_dim + action_dim + 1
+        self.transition = mlp(in_dim, (hidden_dim, hidden_dim), transition_dim)
+        aggregated = transition_dim * (k if aggregation == 'concat' else 1)
+        self.head = nn.Linear(aggregated, context_dim)
+
+    def forward(self, history: HistoryFeatures) -> torch.Tensor:
+        """Encode a history in phi space into (B, context_dim)."""
+        if history.feat.shape[1] != self.k:
+            raise ValueError(f'history length {history.feat.shape[1]} does not match k={self.k}')
+        x = torch.cat([history.feat, history.action, history.reward, history.next_feat], dim=-1)
+        codes = torch.tanh(self.transition(x))
+        return self.head(aggregate(codes, history.mask, self.aggregation))

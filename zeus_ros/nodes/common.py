@@ -1,0 +1,180 @@
+"""What every zeus_ros node shares: topic names, QoS decisions, stamps, conversions, main()."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+import sys
+import time
+from typing import TYPE_CHECKING
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.qos import (
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from sensor_msgs.msg import Image
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+__all__ = [
+    'TOPICS',
+    'NodeFinished',
+    'RateMeter',
+    'action_qos',
+    'array_from_image',
+    'diagnostics_message',
+    'image_from_array',
+    'image_qos',
+    'run_node',
+    'seconds_from_stamp',
+    'stamp_from_seconds',
+    'step_qos',
+]
+
+
+class TOPICS:
+    """Topic names of the step protocol (DESIGN.md section 1); one place for all nodes."""
+
+    STATE = '/zeus/observation/state'
+    IMAGE = '/zeus/observation/image'
+    STEP = '/zeus/step'
+    CONTEXT_TRUTH = '/zeus/context_truth'
+    CONTEXT = '/zeus/context'
+    ACTION = '/zeus/action'
+    CLOCK = '/clock'
+    DIAGNOSTICS = '/diagnostics'
+
+
+def step_qos(depth: int = 10) -> QoSProfile:
+    """Reliable keep-last: in lockstep no step may silently vanish (a loss shows as a gap)."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE
+    )
+
+
+def image_qos(mode: str) -> QoSProfile:
+    """Frames: reliable in lockstep (every step counts); sensor-data (best effort) in realtime."""
+    return step_qos() if mode == 'lockstep' else qos_profile_sensor_data
+
+
+def action_qos(mode: str) -> QoSProfile:
+    """Actions: reliable; in realtime only the newest matters (depth 1, zero-order hold)."""
+    return step_qos() if mode == 'lockstep' else step_qos(depth=1)
+
+
+def stamp_from_seconds(seconds: float) -> Time:
+    """Simulation time in seconds as a builtin_interfaces/Time."""
+    nanoseconds = round(seconds * 1e9)
+    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def seconds_from_stamp(stamp: Time) -> float:
+    """A builtin_interfaces/Time as float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def image_from_array(frame: np.ndarray, stamp: Time, frame_id: str = 'camera') -> Image:
+    """An HxWx3 uint8 frame as an rgb8 Image, copied as bytes (never element by element)."""
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = int(frame.shape[0]), int(frame.shape[1])
+    msg.encoding = 'rgb8'
+    msg.is_bigendian = 0
+    msg.step = msg.width * 3
+    msg.data = np.ascontiguousarray(frame, dtype=np.uint8).tobytes()
+    return msg
+
+
+def array_from_image(msg: Image, expect_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Decode an rgb8 Image to HxWx3 uint8; raise ValueError saying what is wrong with it."""
+    if msg.encoding != 'rgb8':
+        raise ValueError(f'image encoding is {msg.encoding!r}, expected rgb8')
+    if expect_shape is not None and (msg.height, msg.width) != tuple(expect_shape):
+        raise ValueError(
+            f'image is {msg.height}x{msg.width}, expected {expect_shape[0]}x{expect_shape[1]}'
+        )
+    expected = msg.height * msg.width * 3
+    if msg.step != msg.width * 3 or len(msg.data) != expected:
+        raise ValueError(
+            f'image data has {len(msg.data)} bytes (row step {msg.step}); '
+            f'{msg.height}x{msg.width} rgb8 needs {expected}'
+        )
+    return np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.width, 3)
+
+
+class RateMeter:
+    """Events per second over a sliding window of wall-clock time (for /diagnostics)."""
+
+    def __init__(self, window: float = 5.0) -> None:
+        self._window = window
+        self._times: list[float] = []
+
+    def tick(self) -> None:
+        """Record one event now."""
+        now = time.monotonic()
+        self._times.append(now)
+        cutoff = now - self._window
+        while self._times and self._times[0] < cutoff:
+            self._times.pop(0)
+
+    @property
+    def rate(self) -> float:
+        """Events per second in the window (0 with fewer than two events)."""
+        if len(self._times) < 2:
+            return 0.0
+        span = self._times[-1] - self._times[0]
+        return (len(self._times) - 1) / span if span > 0 else 0.0
+
+
+def diagnostics_message(
+    node: Node, name: str, values: dict[str, object], problems: Sequence[str] = ()
+) -> DiagnosticArray:
+    """One DiagnosticStatus (WARN when `problems` is not empty) wrapped in a DiagnosticArray."""
+    status = DiagnosticStatus()
+    status.name = f'{node.get_name()}: {name}'
+    status.hardware_id = 'zeus_ros'
+    status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+    status.message = '; '.join(problems) if problems else 'ok'
+    status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
+    array = DiagnosticArray()
+    array.header.stamp = node.get_clock().now().to_msg()
+    array.status = [status]
+    return array
+
+
+class NodeFinished(Exception):  # noqa: N818 - a signal, not an error
+    """Raised from a callback when a node has done its job (e.g. max_steps reached)."""
+
+
+def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Jazzy shutdown pattern: spin until Ctrl-C / external shutdown, then clean up.
+
+    A `ValueError` raised while building the node (bad parameters) is printed as one clear line
+    and gives exit code 2, instead of a traceback.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
+        pass
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return getattr(node, 'exit_code', 0)

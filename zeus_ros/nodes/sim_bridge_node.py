@@ -1,0 +1,307 @@
+"""sim_bridge node: a contextual MuJoCo task on ROS 2 topics, lockstep or realtime.
+
+For step k it publishes observation o_k (state, and an 84x84 frame when `pixels` is on), the
+StepFeedback (reward r_k of a_{k-1}, the action really applied), the true context c_k and /clock,
+all with the same stamp (simulation time) and step index; then it waits for Action k (lockstep)
+or applies the newest action on a wall-clock timer (realtime). The physics loop itself is
+`sim_bridge.env.ScheduledEnv`, shared with the in-process tools.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
+
+from sim_bridge.actions import ActionStatus
+from sim_bridge.env import EnvStep, ScheduledEnv
+from sim_bridge.registry import TASK_NAMES, make_task
+from sim_bridge.schedules import schedule_from_config
+from zeus_ros.nodes.common import (
+    TOPICS,
+    NodeFinished,
+    RateMeter,
+    action_qos,
+    diagnostics_message,
+    image_from_array,
+    image_qos,
+    run_node,
+    stamp_from_seconds,
+    step_qos,
+)
+
+MODES = ('lockstep', 'realtime')
+SCHEDULE_PREFIX = 'schedule.'
+DEFAULTS: dict[str, Any] = {
+    'task': 'Cheetah-Run-v0',
+    'mode': 'lockstep',
+    'seed': 0,
+    'pixels': False,
+    'image_size': 84,
+    'action_timeout': 2.0,
+    'control_rate': 0.0,
+    'stale_action_age': 0.0,
+    'max_steps': 0,
+    'wait_for_peers': True,
+    'peer_grace': 0.5,
+    'log_every': 0,
+}
+
+
+class SimBridgeNode(Node):
+    """Steps a ScheduledEnv and speaks the step protocol of DESIGN.md."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            'sim_bridge',
+            allow_undeclared_parameters=True,
+            automatically_declare_parameters_from_overrides=True,
+        )
+        self.params = self._read_parameters()
+        task = make_task(self.params['task'], seed=self.params['seed'])
+        schedule = schedule_from_config(self._schedule_config(), task, self.params['seed'])
+        self.env = ScheduledEnv(task, schedule)
+        self.mode: str = self.params['mode']
+        self.exit_code = 0
+        self.counts = dict.fromkeys(
+            ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected'), 0
+        )
+        self._rate = RateMeter()
+        self._awaiting: int | None = None
+        self._deadline = math.inf
+        self._newest_action: tuple[float, Action] | None = None
+        self._started = False
+        self._start_after = math.inf
+
+        qos = step_qos()
+        self._pub_state = self.create_publisher(StateVector, TOPICS.STATE, qos)
+        self._pub_step = self.create_publisher(StepFeedback, TOPICS.STEP, qos)
+        self._pub_truth = self.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, qos)
+        self._pub_clock = self.create_publisher(Clock, TOPICS.CLOCK, qos)
+        self._pub_image = None
+        if self.params['pixels']:
+            from sensor_msgs.msg import Image
+
+            self._pub_image = self.create_publisher(Image, TOPICS.IMAGE, image_qos(self.mode))
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self.create_subscription(Action, TOPICS.ACTION, self._on_action, action_qos(self.mode))
+        self._period = self._control_period(task)
+        tick = self._period if self.mode == 'realtime' else 0.005
+        self.create_timer(tick, self._on_tick)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.get_logger().info(
+            f'{self.params["task"]} in {self.mode} mode, contexts {list(task.context_names)}, '
+            f'pixels={self.params["pixels"]}; waiting for peers on {TOPICS.ACTION}'
+            if self.params['wait_for_peers'] else f'{self.params["task"]} in {self.mode} mode'
+        )
+
+    # -- parameters -------------------------------------------------------------------------
+    def _read_parameters(self) -> dict[str, Any]:
+        """Declare every known parameter with its default, then validate them all at once."""
+        for name, default in DEFAULTS.items():
+            if not self.has_parameter(name):
+                self.declare_parameter(name, default)
+        params = {name: self.get_parameter(name).value for name in DEFAULTS}
+        known = set(DEFAULTS) | {'use_sim_time'}
+        unknown = [
+            name for name in self._parameters
+            if name not in known and not name.startswith(SCHEDULE_PREFIX)
+        ]
+        if unknown:
+            raise ValueError(
+                f'sim_bridge: unknown parameter(s) {sorted(unknown)}; known: {sorted(DEFAULTS)} '
+                f'and schedule.* (see params/sim_bridge.yaml)'
+            )
+        for name, default in DEFAULTS.items():
+            value = params[name]
+            if isinstance(default, bool) and not isinstance(value, bool):
+                raise ValueError(
+                    f'sim_bridge: parameter {name} must be true or false, got {value!r}'
+                )
+            if isinstance(default, (int, float)) and not isinstance(default, bool):
+                if not isinstance(value, (int, float)) or isinstance(value, bool):
+                    raise ValueError(
+                        f'sim_bridge: parameter {name} must be a number, got {value!r}'
+                    )
+                if value < 0:
+                    raise ValueError(f'sim_bridge: parameter {name} must be >= 0, got {value}')
+        if params['task'] not in TASK_NAMES:
+            raise ValueError(
+                f'sim_bridge: parameter task={params["task"]!r} is not a task; '
+                f'allowed: {", ".join(TASK_NAMES)}'
+            )
+        if params['mode'] not in MODES:
+            raise ValueError(
+                f'sim_bridge: parameter mode={params["mode"]!r}; allowed: {", ".join(MODES)}'
+            )
+        if params['action_timeout'] <= 0:
+            raise ValueError('sim_bridge: parameter action_timeout must be > 0 seconds')
+        return params
+
+    def _schedule_config(self) -> dict[str, Any]:
+        """Collect the `schedule.*` parameters into the plain dict the schedule code reads."""
+        config: dict[str, Any] = {}
+        for name, parameter in self._parameters.items():
+            if name.startswith(SCHEDULE_PREFIX) and parameter.type_ != Parameter.Type.NOT_SET:
+                value = parameter.value
+                config[name[len(SCHEDULE_PREFIX):]] = list(value) if isinstance(
+                    value, (list, tuple, np.ndarray)) else value
+        return config or {'kind': 'constant'}
+
+    def _control_period(self, task: Any) -> float:
+        """Wall-clock period of one agent step in realtime mode."""
+        if self.params['control_rate'] > 0:
+            return 1.0 / self.params['control_rate']
+        return float(task.control_timestep * task.action_repeat)
+
+    # -- step protocol ----------------------------------------------------------------------
+    def _peers_ready(self) -> bool:
+        """True once a policy publishes actions and someone listens to observations."""
+        if not self.params['wait_for_peers']:
+            return True
+        return (self.count_publishers(TOPICS.ACTION) > 0
+                and self.count_subscribers(TOPICS.STATE) > 0)
+
+    def _on_tick(self) -> None:
+        now = time.monotonic()
+        if not self._started:
+            if math.isinf(self._start_after) and self._peers_ready():
+                self._start_after = now + self.params['peer_grace']
+            if now >= self._start_after:
+                self._started = True
+                self._publish(self.env.reset())
+            return
+        if self.mode == 'realtime':
+            self._realtime_step(now)
+        elif self._awaiting is not None and now >= self._deadline:
+            self.counts['timeouts'] += 1
+            self.get_logger().warning(
+                f'no action for step {self._awaiting} within {self.params["action_timeout"]} s: '
+                'applying the safe action (counted as a timeout)',
+                throttle_duration_sec=5.0,
+            )
+            self._advance(None)
+
+    def _on_action(self, msg: Action) -> None:
+        if self.mode == 'realtime':
+            self._newest_action = (time.monotonic(), msg)
+            return
+        if self._awaiting is None or msg.step != self._awaiting:
+            self.counts['unexpected'] += 1
+            self.get_logger().warning(
+                f'dropped action for step {msg.step}: waiting for step {self._awaiting}',
+                throttle_duration_sec=5.0,
+            )
+            return
+        self._advance(np.asarray(msg.data, dtype=np.float64))
+
+    def _realtime_step(self, now: float) -> None:
+        max_age = self.params['stale_action_age'] or 3 * self._period
+        action = None
+        if self._newest_action is not None:
+            received, msg = self._newest_action
+            if now - received <= max_age:
+                action = np.asarray(msg.data, dtype=np.float64)
+            else:
+                self.counts['stale'] += 1
+        self._advance(action, stale=action is None and self._newest_action is not None)
+
+    def _advance(self, action: np.ndarray | None, stale: bool = False) -> None:
+        """Apply one action (None: the safe action) and publish the next step."""
+        result = self.env.step(action)
+        if stale and result.status == ActionStatus.TIMEOUT:
+            result = result.with_status(ActionStatus.STALE)
+        self._count(result)
+        self._publish(result)
+
+    def _count(self, result: EnvStep) -> None:
+        if result.status == ActionStatus.OK:
+            self.counts['ok'] += 1
+        elif result.status == ActionStatus.CLIPPED:
+            self.counts['clipped'] += 1
+            self.get_logger().info(f'step {result.step}: {result.reason}',
+                                   throttle_duration_sec=5.0)
+        elif result.status == ActionStatus.REJECTED:
+            self.counts['rejected'] += 1
+            self.get_logger().warning(f'step {result.step}: {result.reason}',
+                                      throttle_duration_sec=1.0)
+
+    def _publish(self, result: EnvStep) -> None:
+        """Publish everything of step k with one stamp; then wait for Action k."""
+        stamp = stamp_from_seconds(result.sim_time)
+        task_name = self.params['task']
+        self._pub_clock.publish(Clock(clock=stamp))
+        truth = ContextTruth()
+        truth.header.stamp = stamp
+        truth.step = result.step
+        names = list(result.observation.context)
+        truth.names = names
+        truth.values = [float(result.observation.context[n]) for n in names]
+        truth.segment = result.segment
+        self._pub_truth.publish(truth)
+        if self._pub_image is not None:
+            size = self.params['image_size']
+            frame = self.env.task.render(size, size)
+            self._pub_image.publish(image_from_array(frame, stamp))
+        feedback = StepFeedback()
+        feedback.header.stamp = stamp
+        feedback.step = result.step
+        feedback.episode = result.episode
+        feedback.episode_step = result.episode_step
+        feedback.first = result.observation.first
+        feedback.last = result.observation.last
+        feedback.reward = float(result.observation.reward)
+        feedback.applied_action = (
+            [] if result.applied_action is None
+            else result.applied_action.astype(np.float32).tolist()
+        )
+        feedback.action_status = int(result.status)
+        feedback.task = task_name
+        self._pub_step.publish(feedback)
+        state = StateVector()
+        state.header.stamp = stamp
+        state.step = result.step
+        state.data = result.observation.state.astype(np.float64).tolist()
+        # The state goes last: a consumer that acts on o_k has c_k, r_k and the frame already.
+        self._pub_state.publish(state)
+        self.counts['steps'] += 1
+        self._rate.tick()
+        every = self.params['log_every']
+        if every and result.step % every == 0:
+            self.get_logger().info(
+                f'step {result.step} episode {result.episode} context {result.observation.context}'
+            )
+        max_steps = self.params['max_steps']
+        if max_steps and self.counts['steps'] > max_steps:
+            self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
+            raise NodeFinished
+        self._awaiting = result.step
+        self._deadline = time.monotonic() + self.params['action_timeout']
+
+    def _publish_diagnostics(self) -> None:
+        problems = [f'{self.counts[key]} {key}' for key in ('timeouts', 'rejected', 'stale')
+                    if self.counts[key]]
+        values = {'mode': self.mode, 'task': self.params['task'],
+                  'rate_hz': f'{self._rate.rate:.1f}', **self.counts}
+        self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems))
+
+    def close(self) -> None:
+        """Release the renderer."""
+        self.env.task.close()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of `ros2 run zeus_ros sim_bridge_node`."""
+    return run_node(SimBridgeNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,447 @@
+"""Rebuild step-aligned episodes from zeus bags (the only way training sees data).
+
+Messages are joined by their `step` index (images, which carry no step, by header stamp).
+Transition k of an episode is (o_k, a_k, r_{k+1}, o_{k+1}) where a_k is the `applied_action`
+of StepFeedback k+1 (what the physics saw, after clipping or a timeout's safe action) and
+r_{k+1} its reward. A step missing from any required topic cuts its episode there: the pieces
+on either side become separate episodes, so no transition or history spans a hole.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+import time
+from typing import TYPE_CHECKING, Any
+import warnings
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+
+from zeus_ros.offline.errors import BagError, IngestError
+from zeus_ros.offline.schema import (
+    MSGTYPES,
+    TOPIC_ACTION,
+    TOPIC_CONTEXT_TRUTH,
+    TOPIC_IMAGE,
+    TOPIC_STATE,
+    TOPIC_STEP,
+    codec,
+    ns_from_stamp,
+)
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+__all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'find_bags',
+           'ingest_bags']
+
+_STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
+_READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
+_MAX_LISTED = 20
+
+
+class IngestWarning(UserWarning):
+    """Bags were read but hold gaps, duplicates or mismatched stamps."""
+
+
+@dataclass(frozen=True)
+class Issue:
+    """One inconsistency found in a bag: where (file, topic, step) and what."""
+
+    file: str
+    topic: str
+    step: int | None
+    kind: str
+    """gap | duplicate | stamp_mismatch | episode."""
+    detail: str
+
+    def __str__(self) -> str:
+        where = f'step {self.step}' if self.step is not None else 'no step'
+        return f'{self.file}: {self.topic} {where}: {self.kind}: {self.detail}'
+
+
+@dataclass
+class IngestReport:
+    """What ingest read, skipped and found wrong, and how fast."""
+
+    bags: list[str] = field(default_factory=list)
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    """(bag, reason) of corrupt bags skipped with skip_corrupt=True."""
+    issues: list[Issue] = field(default_factory=list)
+    file_bytes: int = 0
+    messages: int = 0
+    steps: int = 0
+    seconds: float = 0.0
+
+    @property
+    def mb_per_s(self) -> float:
+        """Bag bytes on disk ingested per second (MB = 1e6 bytes)."""
+        return self.file_bytes / 1e6 / max(self.seconds, 1e-9)
+
+    @property
+    def steps_per_s(self) -> float:
+        """Control steps ingested per second."""
+        return self.steps / max(self.seconds, 1e-9)
+
+    def summary(self) -> str:
+        """One line for logs and the CLI."""
+        return (
+            f'{len(self.bags)} bag(s), {self.steps} steps, {self.messages} messages, '
+            f'{self.file_bytes / 1e6:.1f} MB in {self.seconds:.2f} s '
+            f'({self.mb_per_s:.1f} MB/s, {self.steps_per_s:.0f} steps/s); '
+            f'{len(self.issues)} issue(s), {len(self.skipped)} corrupt bag(s) skipped'
+        )
+
+
+@dataclass
+class Episode:
+    """A contiguous run of steps of one episode: T transitions over T+1 observations."""
+
+    source: str
+    """The bag it came from."""
+    episode: int
+    steps: np.ndarray
+    """(T+1,) int64 global step indices, consecutive."""
+    stamps_ns: np.ndarray
+    """(T+1,) int64 header stamps (simulation time)."""
+    obs: np.ndarray
+    """(T+1, D) float64 state observations."""
+    frames: np.ndarray | None
+    """(T+1, 3, H, W) uint8 channel-first RGB frames, or None without pixels."""
+    action: np.ndarray
+    """(T, A) float32: a_k as applied by the simulator (from StepFeedback k+1)."""
+    action_status: np.ndarray
+    """(T,) uint8 StepFeedback.action_status of a_k."""
+    policy_action: np.ndarray
+    """(T+1, A) float32: what the policy asked for at each step (/zeus/action); NaN if absent."""
+    reward: np.ndarray
+    """(T,) float64: r_{k+1}, earned by a_k."""
+    first: np.ndarray
+    """(T+1,) bool."""
+    last: np.ndarray
+    """(T+1,) bool: True at a time-limit end (which bootstraps: no terminal states here)."""
+    episode_step: np.ndarray
+    """(T+1,) int64."""
+    context: np.ndarray
+    """(T+1, C) float64 true context per step."""
+    segment: np.ndarray
+    """(T+1,) int64 context segment counter."""
+
+    @property
+    def num_transitions(self) -> int:
+        """T, the number of (o_k, a_k, r_{k+1}, o_{k+1}) transitions."""
+        return int(self.action.shape[0])
+
+
+@dataclass
+class Dataset:
+    """Episodes of one task, with the names needed to interpret them."""
+
+    task: str
+    context_names: tuple[str, ...]
+    episodes: list[Episode]
+    report: IngestReport
+
+    @property
+    def num_transitions(self) -> int:
+        """Transitions over all episodes."""
+        return sum(ep.num_transitions for ep in self.episodes)
+
+    @property
+    def has_frames(self) -> bool:
+        """True when every episode carries pixel frames."""
+        return bool(self.episodes) and all(ep.frames is not None for ep in self.episodes)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of the state observation."""
+        return int(self.episodes[0].obs.shape[1])
+
+    @property
+    def action_dim(self) -> int:
+        """Number of actuators."""
+        return int(self.episodes[0].action.shape[1])
+
+
+def find_bags(paths: Path | str | Sequence[Path | str]) -> list[Path]:
+    """Expand a bag directory, a .mcap/.db3 file or a directory of bags into bag paths."""
+    items = [paths] if isinstance(paths, str | Path) else list(paths)
+    found: list[Path] = []
+    for item in map(Path, items):
+        if not item.exists():
+            raise BagError(item, 'no such file or directory')
+        if item.is_file():
+            if item.suffix not in {'.mcap', '.db3'}:
+                raise BagError(item, 'not a bag: expected a .mcap or .db3 file or a bag directory')
+            found.append(item)
+        elif (item / 'metadata.yaml').exists() or _holds_storage(item):
+            found.append(item)
+        else:
+            children = sorted(
+                c for c in item.iterdir()
+                if (c.is_dir() and ((c / 'metadata.yaml').exists() or _holds_storage(c)))
+                or (c.is_file() and c.suffix in {'.mcap', '.db3'})
+            )
+            if not children:
+                raise BagError(item, 'no bags found (no metadata.yaml, .mcap or .db3 inside)')
+            found.extend(children)
+    return found
+
+
+def _holds_storage(folder: Path) -> bool:
+    return any(folder.glob('*.mcap')) or any(folder.glob('*.db3'))
+
+
+@dataclass
+class _Topic:
+    """Per-topic columns of one bag: step -> (stamp, message), first occurrence wins."""
+
+    by_step: dict[int, tuple[int, Any]] = field(default_factory=dict)
+
+
+def _read_bag(path: Path, report: IngestReport) -> dict[str, Any]:
+    """Deserialize the zeus topics of one bag, reporting duplicates; raise BagError if broken."""
+    cdc = codec()
+    topics: dict[str, _Topic] = {t: _Topic() for t in _STEP_TOPICS}
+    images: dict[int, list[Any]] = defaultdict(list)
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
+        raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}') from exc
+    count = 0
+    try:
+        conns = [c for c in reader.connections if c.topic in _READ_TOPICS]
+        for conn in conns:
+            expected = MSGTYPES[conn.topic]
+            if conn.msgtype != expected:
+                raise BagError(path, f'topic {conn.topic} has type {conn.msgtype}, '
+                                     f'expected {expected}')
+            ours = cdc.store.generate_msgdef(expected, ros_version=2)[0]
+            if conn.msgdef.data and conn.msgdef.data.strip() != ours.strip():
+                raise BagError(path, f'topic {conn.topic}: the bag embeds another definition '
+                                     f'of {expected} than this checkout; read it with the '
+                                     'zeus_msgs version that wrote it')
+        for conn, _, raw in reader.messages(connections=conns):
+            count += 1
+            msg = cdc.deserialize(raw, conn.msgtype)
+            stamp = ns_from_stamp(msg.header.stamp)
+            if conn.topic == TOPIC_IMAGE:
+                images[stamp].append(msg)
+                continue
+            step = int(msg.step)
+            col = topics[conn.topic].by_step
+            if step in col:
+                report.issues.append(Issue(str(path), conn.topic, step, 'duplicate',
+                                           'step seen again; keeping the first message'))
+            else:
+                col[step] = (stamp, msg)
+    except BagError:
+        raise
+    except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
+        raise BagError(path, f'corrupt or truncated after {count} messages: {exc}') from exc
+    finally:
+        reader.close()
+    report.messages += count
+    return {'topics': topics, 'images': images}
+
+
+def _check_alignment(path: Path, topics: dict[str, _Topic], report: IngestReport) -> set[int]:
+    """Report gaps, missing steps and stamp mismatches; return the fully usable steps."""
+    src = str(path)
+    required = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH)
+    all_steps = set().union(*(topics[t].by_step for t in required))
+    if not all_steps:
+        return set()
+    lo, hi = min(all_steps), max(all_steps)
+    holes = sorted(set(range(lo, hi + 1)) - all_steps)
+    for start, stop in _runs(holes):
+        report.issues.append(Issue(src, TOPIC_STEP, start, 'gap',
+                                   f'steps {start}..{stop} absent on every topic'))
+    usable = set(all_steps)
+    for topic in required:
+        missing = sorted(all_steps - topics[topic].by_step.keys())
+        usable -= set(missing)
+        for start, stop in _runs(missing):
+            report.issues.append(Issue(src, topic, start, 'gap',
+                                       f'steps {start}..{stop} missing on this topic only'))
+    ref = topics[TOPIC_STEP].by_step
+    for topic in (TOPIC_STATE, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION):
+        for step, (stamp, _) in topics[topic].by_step.items():
+            if step in ref and ref[step][0] != stamp:
+                usable.discard(step)
+                report.issues.append(Issue(
+                    src, topic, step, 'stamp_mismatch',
+                    f'stamp {stamp} ns != {TOPIC_STEP} stamp {ref[step][0]} ns'))
+    return usable
+
+
+def _runs(sorted_steps: list[int]) -> list[tuple[int, int]]:
+    """Contiguous runs [(start, stop)] of a sorted list of ints."""
+    runs: list[tuple[int, int]] = []
+    for s in sorted_steps:
+        if runs and runs[-1][1] == s - 1:
+            runs[-1] = (runs[-1][0], s)
+        else:
+            runs.append((s, s))
+    return runs
+
+
+def _match_images(
+    path: Path, steps: list[int], topics: dict[str, _Topic], images: dict[int, list[Any]],
+    report: IngestReport,
+) -> dict[int, Any]:
+    """Give each step its frame by stamp (n-th image of a stamp -> n-th step of that stamp)."""
+    by_stamp: dict[int, list[int]] = defaultdict(list)
+    for step in steps:
+        by_stamp[topics[TOPIC_STEP].by_step[step][0]].append(step)
+    frames: dict[int, Any] = {}
+    for stamp, stamp_steps in by_stamp.items():
+        msgs = images.get(stamp, [])
+        for i, step in enumerate(stamp_steps):
+            if i < len(msgs):
+                frames[step] = msgs[i]
+            else:
+                report.issues.append(Issue(str(path), TOPIC_IMAGE, step, 'gap',
+                                           f'no image with stamp {stamp} ns'))
+        if len(msgs) > len(stamp_steps):
+            report.issues.append(Issue(str(path), TOPIC_IMAGE, stamp_steps[0], 'duplicate',
+                                       f'{len(msgs)} images with stamp {stamp} ns'))
+    return frames
+
+
+def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
+            report: IngestReport) -> list[list[int]]:
+    """Split usable steps into contiguous runs of one episode each."""
+    pieces: list[list[int]] = []
+    prev: int | None = None
+    for step in steps:
+        msg = fb[step][1]
+        cont = (prev is not None and step == prev + 1 and not msg.first
+                and not fb[prev][1].last and msg.episode == fb[prev][1].episode)
+        if cont and msg.episode_step != fb[prev][1].episode_step + 1:
+            report.issues.append(Issue(str(path), TOPIC_STEP, step, 'episode',
+                                       f'episode_step {msg.episode_step} does not follow '
+                                       f'{fb[prev][1].episode_step}'))
+            cont = False
+        if cont:
+            pieces[-1].append(step)
+        else:
+            pieces.append([step])
+        prev = step
+    return [p for p in pieces if len(p) >= 2]
+
+
+def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
+                   frames: dict[int, Any] | None, action_dim: int) -> Episode:
+    fb = [topics[TOPIC_STEP].by_step[s][1] for s in piece]
+    truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
+    acts = topics[TOPIC_ACTION].by_step
+    policy = np.full((len(piece), action_dim), np.nan, np.float32)
+    for i, s in enumerate(piece):
+        if s in acts and acts[s][1].data.shape[0] == action_dim:
+            policy[i] = acts[s][1].data
+    pix = None
+    if frames is not None:
+        first = frames[piece[0]]
+        h, w = int(first.height), int(first.width)
+        pix = np.empty((len(piece), 3, h, w), np.uint8)
+        for i, s in enumerate(piece):
+            pix[i] = frames[s].data.reshape(h, w, 3).transpose(2, 0, 1)
+    return Episode(
+        source=str(path),
+        episode=int(fb[0].episode),
+        steps=np.asarray(piece, np.int64),
+        stamps_ns=np.asarray([topics[TOPIC_STEP].by_step[s][0] for s in piece], np.int64),
+        obs=np.stack([topics[TOPIC_STATE].by_step[s][1].data for s in piece]),
+        frames=pix,
+        action=np.stack([m.applied_action for m in fb[1:]]).astype(np.float32),
+        action_status=np.asarray([m.action_status for m in fb[1:]], np.uint8),
+        policy_action=policy,
+        reward=np.asarray([m.reward for m in fb[1:]], np.float64),
+        first=np.asarray([m.first for m in fb], bool),
+        last=np.asarray([m.last for m in fb], bool),
+        episode_step=np.asarray([m.episode_step for m in fb], np.int64),
+        context=np.stack([m.values for m in truth]).astype(np.float64),
+        segment=np.asarray([m.segment for m in truth], np.int64),
+    )
+
+
+def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any]) -> list[Episode]:
+    read = _read_bag(path, report)
+    topics: dict[str, _Topic] = read['topics']
+    usable = _check_alignment(path, topics, report)
+    fb = topics[TOPIC_STEP].by_step
+    for step in list(usable):
+        msg = fb[step][1]
+        if msg.task != meta.setdefault('task', msg.task):
+            raise IngestError(f'{path}: {TOPIC_STEP} step {step} is task {msg.task!r}, earlier '
+                              f'bags are {meta["task"]!r}; ingest one task at a time')
+    names = {tuple(m.names) for _, m in topics[TOPIC_CONTEXT_TRUTH].by_step.values()}
+    for n in names:
+        if n != meta.setdefault('names', n):
+            raise IngestError(f'{path}: {TOPIC_CONTEXT_TRUTH} names {list(n)} differ from '
+                              f'{list(meta["names"])} seen before')
+    frames = None
+    if read['images']:
+        frames = _match_images(path, sorted(usable), topics, read['images'], report)
+        usable &= frames.keys()
+    steps = sorted(usable)
+    report.steps += len(steps)
+    action_dims = {m.applied_action.shape[0] for s in steps if not (m := fb[s][1]).first}
+    if len(action_dims) > 1:
+        raise IngestError(f'{path}: {TOPIC_STEP} applied_action lengths differ: {action_dims}')
+    action_dim = action_dims.pop() if action_dims else 0
+    return [_build_episode(path, p, topics, frames, action_dim)
+            for p in _pieces(path, steps, fb, report)]
+
+
+def ingest_bags(
+    paths: Path | str | Sequence[Path | str],
+    *,
+    skip_corrupt: bool = False,
+    strict: bool = False,
+) -> Dataset:
+    """Read bags into a Dataset of step-aligned episodes.
+
+    `paths`: bag directories, .mcap/.db3 files, or directories holding bags. A corrupt or
+    truncated bag raises BagError naming it, or with `skip_corrupt` is skipped and listed in
+    `report.skipped`. Gaps, duplicates and stamp mismatches are listed in `report.issues` and
+    warned about (IngestWarning); with `strict` they raise IngestError instead.
+    """
+    start = time.perf_counter()
+    report = IngestReport()
+    meta: dict[str, Any] = {}
+    episodes: list[Episode] = []
+    for bag in find_bags(paths):
+        before = len(report.issues)
+        try:
+            eps = _ingest_one(bag, report, meta)
+        except BagError as exc:
+            if not skip_corrupt:
+                raise
+            report.skipped.append((str(bag), exc.reason))
+            warnings.warn(f'skipping corrupt bag {exc}', IngestWarning, stacklevel=2)
+            continue
+        episodes.extend(eps)
+        report.bags.append(str(bag))
+        report.file_bytes += sum(f.stat().st_size for f in _bag_files(bag))
+        new = report.issues[before:]
+        if new:
+            listed = '\n  '.join(map(str, new[:_MAX_LISTED]))
+            more = f'\n  ... and {len(new) - _MAX_LISTED} more' if len(new) > _MAX_LISTED else ''
+            if strict:
+                raise IngestError(f'{bag}: {len(new)} issue(s):\n  {listed}{more}')
+            warnings.warn(f'{bag}: {len(new)} issue(s):\n  {listed}{more}', IngestWarning,
+                          stacklevel=2)
+    report.seconds = time.perf_counter() - start
+    if not episodes:
+        raise IngestError(f'no usable episode in {paths}: {report.summary()}')
+    return Dataset(task=meta.get('task', ''), context_names=tuple(meta.get('names', ())),
+                   episodes=episodes, report=report)
+
+
+def _bag_files(bag: Path) -> list[Path]:
+    return [bag] if bag.is_file() else [f for f in bag.iterdir() if f.is_file()]
