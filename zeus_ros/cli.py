@@ -1,0 +1,47 @@
+"""The `zeus` command: one entry point for the record -> retrain -> redeploy loop.
+
+Each subcommand lives in its own module with a `main(argv) -> int`; this file only dispatches,
+so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    'collect': ('zeus_ros.offline.collect', 'run a task in-process and write bags (no ROS)'),
+    'train': ('zeus_ros.offline.train', 'train a checkpoint from bags'),
+    'eval': ('zeus_ros.offline.evaluate', 'evaluate a checkpoint in-process'),
+    'loop': ('zeus_ros.offline.loop', 'random collection -> train -> collect -> retrain'),
+    'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
+    'inspect': ('zeus_ros.inspect', 'live view of the context topics (subscribe only)'),
+    'recover': ('zeus_ros.offline.recover', 'restore a bag cut off by a crash'),
+    'demo': ('zeus_ros.demo', 'the live demo of the README'),
+}
+
+
+def usage() -> str:
+    """The top-level help text."""
+    lines = ['usage: zeus <command> [options]', '', 'commands:']
+    lines += [f'  {name:<9} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
+    lines += ['', "run 'zeus <command> --help' for a command's options"]
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the chosen subcommand and return its exit code."""
+    args = sys.argv[1:] if argv is None else argv
+    if not args or args[0] in ('-h', '--help'):
+        print(usage())
+        return 0
+    name, rest = args[0], args[1:]
+    if name not in SUBCOMMANDS:
+        print(f'zeus: unknown command {name!r}\n\n{usage()}', file=sys.stderr)
+        return 2
+    module = importlib.import_module(SUBCOMMANDS[name][0])
+    return int(module.main(rest) or 0)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

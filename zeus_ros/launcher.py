@@ -1,0 +1,177 @@
+"""`zeus launch`: start the zeus_ros nodes without the ROS launch system, supervise, stop.
+
+Every child gets loopback-only discovery and one shared domain id, its output is streamed with
+a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node exits: a non-zero
+exit names the node that died.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+import contextlib
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import IO
+
+NODES = {
+    'sim_bridge': 'zeus_ros.nodes.sim_bridge_node',
+    'context_estimator': 'zeus_ros.nodes.context_estimator_node',
+    'policy': 'zeus_ros.nodes.policy_node',
+    'recorder': 'zeus_ros.nodes.recorder_node',
+}
+
+
+@dataclass
+class NodeProcess:
+    """One supervised child process."""
+
+    name: str
+    argv: list[str]
+    process: subprocess.Popen[bytes] | None = None
+    reader: threading.Thread | None = None
+    lines: list[str] = field(default_factory=list)
+
+
+def ros_env(domain_id: int | None) -> dict[str, str]:
+    """The children's environment: loopback-only discovery and one domain id for the group."""
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    if domain_id is not None:
+        env['ROS_DOMAIN_ID'] = str(domain_id)
+    elif 'ROS_DOMAIN_ID' not in env:
+        env['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
+    env['PYTHONUNBUFFERED'] = '1'
+    env.setdefault('MUJOCO_GL', 'egl')
+    return env
+
+
+def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) -> list[str]:
+    """Build the argv of one node: `python -m <module> --ros-args --params-file F ...`."""
+    argv = [sys.executable, '-m', NODES[name], '--ros-args']
+    if params_file is not None:
+        argv += ['--params-file', str(params_file)]
+    return [*argv, *extra]
+
+
+def _pump(node: NodeProcess, stream: IO[bytes], out: IO[str], keep: int = 200) -> None:
+    """Copy a child's output line by line with its name as prefix; keep the tail for errors."""
+    for raw in iter(stream.readline, b''):
+        line = raw.decode(errors='replace').rstrip('\n')
+        node.lines.append(line)
+        del node.lines[:-keep]
+        print(f'[{node.name}] {line}', file=out, flush=True)
+
+
+class Supervisor:
+    """Starts a group of nodes and stops all of them together."""
+
+    def __init__(self, nodes: list[NodeProcess], env: dict[str, str],
+                 out: IO[str] = sys.stdout) -> None:
+        self.nodes = nodes
+        self.env = env
+        self.out = out
+
+    def start(self) -> None:
+        """Start every node in order (sim_bridge first: it waits for its peers)."""
+        for node in self.nodes:
+            node.process = subprocess.Popen(
+                node.argv, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+            assert node.process.stdout is not None
+            node.reader = threading.Thread(
+                target=_pump, args=(node, node.process.stdout, self.out), daemon=True)
+            node.reader.start()
+
+    def wait(self, timeout: float | None = None) -> tuple[str | None, int]:
+        """Block until one node exits (or timeout); return its name and exit code."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            for node in self.nodes:
+                assert node.process is not None
+                code = node.process.poll()
+                if code is not None:
+                    return node.name, code
+            if deadline is not None and time.monotonic() > deadline:
+                return None, 0
+            time.sleep(0.1)
+
+    def stop(self, grace: float = 10.0) -> None:
+        """SIGINT every running node, wait up to `grace` seconds, then SIGKILL what is left."""
+        for node in reversed(self.nodes):
+            if node.process is not None and node.process.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(node.process.pid, signal.SIGINT)
+        deadline = time.monotonic() + grace
+        for node in reversed(self.nodes):
+            if node.process is None:
+                continue
+            try:
+                node.process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(node.process.pid, signal.SIGKILL)
+                node.process.wait(timeout=5)
+            if node.reader is not None:
+                node.reader.join(timeout=2)
+
+
+def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | None = None,
+              out: IO[str] = sys.stdout) -> int:
+    """Start, supervise and stop a group; the exit code tells whether a node failed."""
+    supervisor = Supervisor(nodes, env, out)
+    supervisor.start()
+    try:
+        name, code = supervisor.wait(timeout)
+    except KeyboardInterrupt:
+        print('[zeus launch] Ctrl-C: stopping all nodes', file=out, flush=True)
+        supervisor.stop()
+        return 130
+    supervisor.stop()
+    if name is None:
+        print(f'[zeus launch] time limit of {timeout} s reached: stopped all nodes', file=out)
+        return 0
+    if code != 0:
+        print(f'[zeus launch] node {name!r} died with exit code {code}: stopped the others',
+              file=sys.stderr, flush=True)
+        return 1
+    print(f'[zeus launch] node {name!r} finished: stopped the others', file=out, flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus launch`."""
+    parser = argparse.ArgumentParser(prog='zeus launch', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--params', type=Path, default=None,
+                        help='ROS 2 params file for all nodes (node_name: ros__parameters: ...)')
+    parser.add_argument('--nodes', default='sim_bridge,context_estimator,policy',
+                        help=f'comma-separated subset of {",".join(NODES)}')
+    parser.add_argument('--record', action='store_true', help='also start the recorder')
+    parser.add_argument('--domain-id', type=int, default=None,
+                        help='ROS_DOMAIN_ID for the group (default: $ROS_DOMAIN_ID or random)')
+    parser.add_argument('--timeout', type=float, default=None,
+                        help='stop everything after this many seconds')
+    args = parser.parse_args(argv)
+    names = [name.strip() for name in args.nodes.split(',') if name.strip()]
+    if args.record and 'recorder' not in names:
+        names.append('recorder')
+    unknown = [name for name in names if name not in NODES]
+    if unknown:
+        parser.error(f'unknown node(s) {unknown}; choose from {list(NODES)}')
+    if args.params is not None and not args.params.is_file():
+        parser.error(f'params file {args.params} does not exist')
+    nodes = [NodeProcess(name, node_argv(name, args.params)) for name in names]
+    return run_group(nodes, ros_env(args.domain_id), args.timeout)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
