@@ -43,6 +43,9 @@ setup(
     entry_points={
         'console_scripts': [
             'sim_bridge_node = zeus_ros.nodes.sim_bridge_node:main',
+            'context_estimator_node = zeus_ros.nodes.context_estimator_node:main',
+            'policy_node = zeus_ros.nodes.policy_node:main',
+            'recorder_node = zeus_ros.nodes.recorder_node:main',
             'zeus = zeus_ros.cli:main',
         ],
     },

@@ -35,6 +35,7 @@ __all__ = [
     'run_node',
     'seconds_from_stamp',
     'stamp_from_seconds',
+    'stamp_ns',
     'step_qos',
 ]
 
@@ -73,6 +74,11 @@ def stamp_from_seconds(seconds: float) -> Time:
     """Simulation time in seconds as a builtin_interfaces/Time."""
     nanoseconds = round(seconds * 1e9)
     return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+
+def stamp_ns(stamp: Time) -> int:
+    """A builtin_interfaces/Time as integer nanoseconds (a dictionary key that never rounds)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def seconds_from_stamp(stamp: Time) -> float:

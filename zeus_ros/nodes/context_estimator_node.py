@@ -1,0 +1,162 @@
+"""context_estimator node: psi(H_k) from the last k transitions of the running episode.
+
+For step k it needs o_k and StepFeedback k (reward r_k, applied a_{k-1}, episode start); it
+appends (o_{k-1}, a_{k-1}, r_k, o_k) to the history, or clears it at an episode start, and
+publishes ContextEstimate k with the stamp of observation k. A step that never arrives is a
+counted gap (the transition across it is not formed), never a silent misalignment.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+from zeus_msgs.msg import ContextEstimate, ContextTruth, StateVector, StepFeedback
+
+from zeus_ros.learning.checkpoint import CheckpointError
+from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.common import (
+    TOPICS,
+    RateMeter,
+    diagnostics_message,
+    image_qos,
+    run_node,
+    stamp_ns,
+    step_qos,
+)
+from zeus_ros.nodes.observation import ObservationDecoder
+from zeus_ros.nodes.params import declare_and_validate
+
+DEFAULTS: dict[str, Any] = {
+    'checkpoint': '',
+    'task': '',
+    'mode': 'lockstep',
+    'image_size': 84,
+    'device': 'cpu',
+}
+
+
+class ContextEstimatorNode(Node):
+    """Keeps the rolling history and publishes the learned context for every step."""
+
+    def __init__(self) -> None:
+        super().__init__('context_estimator')
+        self.params = declare_and_validate(self, DEFAULTS, required=('checkpoint',))
+        try:
+            self.agent = InferenceAgent.from_checkpoint(
+                self.params['checkpoint'], expect_task=self.params['task'] or None,
+                device=self.params['device'])
+        except CheckpointError as error:
+            raise ValueError(f'context_estimator: {error}') from error
+        self.history = self.agent.new_history()
+        self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
+                                          self.params['image_size'])
+        self.counts = dict.fromkeys(('estimates', 'gaps', 'missing_steps', 'rejected'), 0)
+        self._prev: tuple[int, np.ndarray] | None = None
+        self._missing_in_episode = 0
+        self._rate = RateMeter()
+        self._latency_ms: list[float] = []
+        required = ['feedback', 'obs'] + (['truth'] if self.agent.needs_true_context else [])
+        self.assembler = StepAssembler(required, self._on_step)
+
+        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
+        self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
+        self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
+        if self.agent.obs_kind == 'pixels':
+            self.create_subscription(Image, TOPICS.IMAGE, self._on_image,
+                                     image_qos(self.params['mode']))
+        else:
+            self.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+        if self.agent.needs_true_context:
+            self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
+                                     lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
+        self.create_timer(1.0, self._publish_diagnostics)
+        self.get_logger().info(
+            f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
+            f'k={self.agent.k}, context dim {self.agent.context_dim})')
+
+    def _reject(self, step: int, topic: str, error: ValueError) -> None:
+        self.counts['rejected'] += 1
+        self.get_logger().warning(f'rejected {topic} for step {step}: {error}',
+                                  throttle_duration_sec=2.0)
+
+    def _on_state(self, msg: StateVector) -> None:
+        try:
+            raw = self.decoder.validate(msg)
+        except ValueError as error:
+            self._reject(msg.step, TOPICS.STATE, error)
+            return
+        self.assembler.add(msg.step, 'obs', (time.monotonic(), raw))
+
+    def _on_feedback(self, msg: StepFeedback) -> None:
+        self.assembler.add(msg.step, 'feedback', msg)
+        if self.agent.obs_kind == 'pixels':
+            self._join.feedback(stamp_ns(msg.header.stamp), msg.step)
+
+    def _on_image(self, msg: Image) -> None:
+        # Images carry no step index: the join matches them to a step through the stamp.
+        try:
+            raw = self.decoder.validate(msg)
+        except ValueError as error:
+            self._reject(-1, TOPICS.IMAGE, error)
+            return
+        self._join.image(stamp_ns(msg.header.stamp), (time.monotonic(), raw))
+
+    def _on_step(self, parts: StepParts) -> None:
+        feedback: StepFeedback = parts.parts['feedback']
+        received, raw = parts.parts['obs']
+        step = parts.step
+        obs = self.decoder.observation(raw, feedback.first)
+        if feedback.first:
+            self.history.clear()
+            self._missing_in_episode = 0
+        elif self._prev is not None and self._prev[0] == step - 1 and \
+                len(feedback.applied_action) == self.agent.action_dim:
+            self.history.push(self._prev[1], np.asarray(feedback.applied_action, np.float32),
+                              feedback.reward, obs)
+        else:
+            missing = step - self._prev[0] - 1 if self._prev is not None else 1
+            self.counts['gaps'] += 1
+            self.counts['missing_steps'] += max(missing, 1)
+            self._missing_in_episode += max(missing, 1)
+            self.get_logger().warning(
+                f'gap before step {step}: {max(missing, 1)} step(s) missing; the transition '
+                'across it is left out of the history', throttle_duration_sec=2.0)
+        self._prev = (step, obs)
+        truth = parts.parts.get('truth')
+        context = self.agent.context(self.history, None if truth is None else truth.values)
+        msg = ContextEstimate()
+        msg.header.stamp = feedback.header.stamp
+        msg.step = step
+        msg.data = context.astype(np.float32).tolist()
+        msg.history_length = len(self.history)
+        msg.missing_steps = self._missing_in_episode
+        self._pub.publish(msg)
+        self.counts['estimates'] += 1
+        self._rate.tick()
+        self._latency_ms.append((time.monotonic() - received) * 1e3)
+        del self._latency_ms[:-500]
+
+    def _publish_diagnostics(self) -> None:
+        latency = np.percentile(self._latency_ms, [50, 99]) if self._latency_ms else [0.0, 0.0]
+        values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{latency[0]:.2f}',
+                  'latency_p99_ms': f'{latency[1]:.2f}', 'dropped': self.assembler.dropped,
+                  'late': self.assembler.late, **self.counts}
+        problems = [f'{self.counts[key]} {key}' for key in ('gaps', 'rejected')
+                    if self.counts[key]]
+        self._pub_diag.publish(diagnostics_message(self, 'context', values, problems))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of `ros2 run zeus_ros context_estimator_node`."""
+    return run_node(ContextEstimatorNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,220 @@
+"""policy node: acts on observation k and context k, and never waits forever for a context.
+
+Action k answers observation k (same step, same stamp). When context k is late beyond
+`context_deadline` it acts on the newest context it has and counts the step as stale; with no
+context at all for `context_timeout` seconds it publishes the task's safe action. Without a
+checkpoint it is a seeded uniform-random policy (for data collection and demos).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+from zeus_msgs.msg import Action, ContextEstimate, StateVector, StepFeedback
+
+from zeus_ros.learning.checkpoint import CheckpointError
+from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.common import (
+    TOPICS,
+    RateMeter,
+    action_qos,
+    diagnostics_message,
+    image_qos,
+    run_node,
+    stamp_ns,
+    step_qos,
+)
+from zeus_ros.nodes.observation import ObservationDecoder
+from zeus_ros.nodes.params import declare_and_validate
+
+DEFAULTS: dict[str, Any] = {
+    'checkpoint': '',
+    'task': '',
+    'mode': 'lockstep',
+    'deterministic': True,
+    'noise': 0.0,
+    'seed': 0,
+    'context_deadline': 0.2,
+    'context_timeout': 2.0,
+    'image_size': 84,
+    'device': 'cpu',
+}
+
+
+class PolicyNode(Node):
+    """Publishes Action k for observation k, conditioned on the context of step k."""
+
+    def __init__(self) -> None:
+        super().__init__('policy')
+        self.params = declare_and_validate(self, DEFAULTS, choices={
+            'mode': ('lockstep', 'realtime')})
+        self.rng = np.random.default_rng(self.params['seed'])
+        self.agent: InferenceAgent | None = None
+        if self.params['checkpoint']:
+            try:
+                self.agent = InferenceAgent.from_checkpoint(
+                    self.params['checkpoint'], expect_task=self.params['task'] or None,
+                    device=self.params['device'])
+            except CheckpointError as error:
+                raise ValueError(f'policy: {error}') from error
+            low, high = self.agent.action_low, self.agent.action_high
+            obs_kind, obs_shape = self.agent.obs_kind, self.agent.obs_shape
+            self.needs_context = self.agent.context_dim > 0
+        else:
+            if not self.params['task']:
+                raise ValueError('policy: give a checkpoint (-p checkpoint:=PATH), or a task '
+                                 '(-p task:=Cheetah-Run-v0) for the random policy')
+            from sim_bridge.registry import make_task
+
+            task = make_task(self.params['task'])
+            low, high = task.action_bounds
+            obs_kind, obs_shape = 'state', (task.state_dim,)
+            task.close()
+            self.needs_context = False
+        self.low = np.asarray(low, dtype=np.float32)
+        self.high = np.asarray(high, dtype=np.float32)
+        self.decoder = ObservationDecoder(obs_kind, obs_shape, self.params['image_size'])
+        self.counts = dict.fromkeys(('actions', 'fresh', 'stale', 'safe', 'rejected'), 0)
+        self._contexts: dict[int, np.ndarray] = {}
+        self._newest_context: tuple[float, np.ndarray] | None = None
+        self._waiting: tuple[int, Any, np.ndarray, float] | None = None
+        self._rate = RateMeter()
+        self._started = time.monotonic()
+        self.assembler = StepAssembler(['feedback', 'obs'], self._on_observation)
+        self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
+
+        mode = self.params['mode']
+        self._pub = self.create_publisher(Action, TOPICS.ACTION, action_qos(mode))
+        self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
+        if obs_kind == 'pixels':
+            self.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(mode))
+        else:
+            self.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+        if self.needs_context:
+            self.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context,
+                                     step_qos())
+        self.create_timer(0.002, self._check_deadline)
+        self.create_timer(1.0, self._publish_diagnostics)
+        source = 'random policy' if self.agent is None else \
+            f'{self.agent.method} checkpoint for {self.agent.task}'
+        self.get_logger().info(f'{source}; {obs_kind} observations, '
+                               f'{"waits for" if self.needs_context else "no"} context')
+
+    # -- inputs ------------------------------------------------------------------------------
+    def _on_feedback(self, msg: StepFeedback) -> None:
+        self.assembler.add(msg.step, 'feedback', msg)
+        if self.decoder.obs_kind == 'pixels':
+            self._join.feedback(stamp_ns(msg.header.stamp), msg.step)
+
+    def _on_state(self, msg: StateVector) -> None:
+        try:
+            self.assembler.add(msg.step, 'obs', self.decoder.validate(msg))
+        except ValueError as error:
+            self._reject(msg.step, error)
+
+    def _on_image(self, msg: Image) -> None:
+        try:
+            self._join.image(stamp_ns(msg.header.stamp), self.decoder.validate(msg))
+        except ValueError as error:
+            self._reject(-1, error)
+
+    def _on_context(self, msg: ContextEstimate) -> None:
+        context = np.asarray(msg.data, dtype=np.float32)
+        if self.agent is not None and context.shape != (self.agent.context_dim,):
+            self._reject(msg.step, ValueError(
+                f'context has {context.size} values, expected {self.agent.context_dim}'))
+            return
+        self._newest_context = (time.monotonic(), context)
+        self._contexts[msg.step] = context
+        for old in [step for step in self._contexts if step < msg.step - 16]:
+            del self._contexts[old]
+        if self._waiting is not None and self._waiting[0] == msg.step:
+            step, feedback, obs, _deadline = self._waiting
+            self._waiting = None
+            self._act(step, feedback, obs, context, 'fresh')
+
+    def _reject(self, step: int, error: ValueError) -> None:
+        self.counts['rejected'] += 1
+        self.get_logger().warning(f'rejected input for step {step}: {error}',
+                                  throttle_duration_sec=2.0)
+
+    # -- acting ------------------------------------------------------------------------------
+    def _on_observation(self, parts: StepParts) -> None:
+        feedback: StepFeedback = parts.parts['feedback']
+        obs = self.decoder.observation(parts.parts['obs'], feedback.first)
+        if self._waiting is not None:  # a newer observation overtook the one still waiting
+            self._expire_waiting()
+        if not self.needs_context:
+            self._act(parts.step, feedback, obs, np.zeros(0, np.float32), 'fresh')
+        elif parts.step in self._contexts:
+            self._act(parts.step, feedback, obs, self._contexts[parts.step], 'fresh')
+        else:
+            deadline = time.monotonic() + self.params['context_deadline']
+            self._waiting = (parts.step, feedback, obs, deadline)
+
+    def _check_deadline(self) -> None:
+        if self._waiting is not None and time.monotonic() >= self._waiting[3]:
+            self._expire_waiting()
+
+    def _expire_waiting(self) -> None:
+        """Context k did not come in time: act on the newest one, or safely if none is recent."""
+        assert self._waiting is not None
+        step, feedback, obs, _deadline = self._waiting
+        self._waiting = None
+        newest = self._newest_context
+        last_seen = self._started if newest is None else newest[0]
+        if newest is None or time.monotonic() - last_seen > self.params['context_timeout']:
+            self._publish(step, feedback, self._safe_action(), 'safe')
+            self.get_logger().warning(
+                f'no context for {time.monotonic() - last_seen:.1f} s: safe action for step '
+                f'{step}', throttle_duration_sec=2.0)
+        else:
+            self._act(step, feedback, obs, newest[1], 'stale')
+            self.get_logger().warning(f'context {step} late: acting on the newest context',
+                                      throttle_duration_sec=2.0)
+
+    def _safe_action(self) -> np.ndarray:
+        return np.clip(np.zeros_like(self.low), self.low, self.high)
+
+    def _act(self, step: int, feedback: StepFeedback, obs: np.ndarray, context: np.ndarray,
+             kind: str) -> None:
+        if self.agent is None:
+            action = self.rng.uniform(self.low, self.high).astype(np.float32)
+        else:
+            action = self.agent.act(obs, context, deterministic=self.params['deterministic'],
+                                    noise=self.params['noise'], rng=self.rng)
+        self._publish(step, feedback, action, kind)
+
+    def _publish(self, step: int, feedback: StepFeedback, action: np.ndarray, kind: str) -> None:
+        msg = Action()
+        msg.header.stamp = feedback.header.stamp
+        msg.header.frame_id = feedback.header.frame_id
+        msg.step = step
+        msg.data = np.clip(action, self.low, self.high).astype(np.float32).tolist()
+        self._pub.publish(msg)
+        self.counts['actions'] += 1
+        self.counts[kind] += 1
+        self._rate.tick()
+
+    def _publish_diagnostics(self) -> None:
+        values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
+                  **self.counts}
+        problems = [f'{self.counts[key]} {key}' for key in ('stale', 'safe', 'rejected')
+                    if self.counts[key]]
+        self._pub_diag.publish(diagnostics_message(self, 'actions', values, problems))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of `ros2 run zeus_ros policy_node`."""
+    return run_node(PolicyNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
