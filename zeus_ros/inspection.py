@@ -1,0 +1,199 @@
+"""What `zeus inspect` and the demo show: per-step records, context segments, plots (no ROS)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    'SegmentSummary',
+    'StepLog',
+    'StepRecord',
+    'format_segments',
+    'percentile',
+    'plot_inspection',
+]
+
+
+@dataclass
+class StepRecord:
+    """Everything seen about one control step."""
+
+    step: int
+    episode: int = -1
+    first: bool = False
+    reward: float = 0.0
+    truth: tuple[float, ...] | None = None
+    segment: int = -1
+    estimate: np.ndarray | None = None
+    history_length: int = 0
+    t_observation: float | None = None
+    """Wall-clock receipt time of the step's feedback (seconds, monotonic)."""
+    t_action: float | None = None
+    """Wall-clock receipt time of the action answering it."""
+
+    @property
+    def latency_ms(self) -> float | None:
+        """Observation-to-action latency as seen by the inspector."""
+        if self.t_observation is None or self.t_action is None:
+            return None
+        return (self.t_action - self.t_observation) * 1e3
+
+
+@dataclass
+class SegmentSummary:
+    """One stretch of constant true context: its values, length and return."""
+
+    segment: int
+    context: tuple[float, ...]
+    first_step: int
+    last_step: int
+    steps: int
+    total_return: float
+    reward_per_step: float
+    context_error: float | None = None
+    """Mean distance of the estimate from its segment mean (spread of psi inside the segment)."""
+
+
+@dataclass
+class StepLog:
+    """Step records keyed by step index, in arrival order of their parts."""
+
+    context_names: tuple[str, ...] = ()
+    records: dict[int, StepRecord] = field(default_factory=dict)
+
+    def record(self, step: int) -> StepRecord:
+        """The record of `step`, created on first use."""
+        if step not in self.records:
+            self.records[step] = StepRecord(step)
+        return self.records[step]
+
+    def ordered(self) -> list[StepRecord]:
+        """Records sorted by step index."""
+        return [self.records[key] for key in sorted(self.records)]
+
+    def segments(self) -> list[SegmentSummary]:
+        """Per-context-segment summary: the return earned while each context was in force.
+
+        The reward of step k was earned under the context of step k (the context that produced
+        o_k), so it is credited to that segment; reset observations earn nothing.
+        """
+        summaries: list[SegmentSummary] = []
+        current: list[StepRecord] = []
+
+        def close() -> None:
+            if not current:
+                return
+            rewards = [r.reward for r in current if not r.first]
+            estimates = [r.estimate for r in current if r.estimate is not None
+                         and r.estimate.size]
+            error = None
+            if estimates:
+                stack = np.stack(estimates)
+                error = float(np.linalg.norm(stack - stack.mean(0), axis=1).mean())
+            total = float(np.sum(rewards)) if rewards else 0.0
+            summaries.append(SegmentSummary(
+                segment=current[0].segment, context=current[0].truth or (),
+                first_step=current[0].step, last_step=current[-1].step, steps=len(current),
+                total_return=total, reward_per_step=total / max(len(rewards), 1),
+                context_error=error))
+
+        for record in self.ordered():
+            if record.truth is None:
+                continue
+            if current and record.segment != current[-1].segment:
+                close()
+                current = []
+            current.append(record)
+        close()
+        return summaries
+
+    def latencies_ms(self) -> np.ndarray:
+        """All measured observation-to-action latencies."""
+        values = [r.latency_ms for r in self.records.values() if r.latency_ms is not None]
+        return np.asarray(values, dtype=np.float64)
+
+
+def format_segments(segments: Sequence[SegmentSummary], names: Sequence[str]) -> str:
+    """A fixed-width table of the segment summaries."""
+    header = f'{"seg":>4} {"steps":>6} {"from":>6} {"to":>6}  {"context":<28} ' \
+             f'{"return":>9} {"per step":>9} {"psi spread":>10}'
+    lines = [header, '-' * len(header)]
+    for s in segments:
+        context = ', '.join(f'{n}={v:g}' for n, v in zip(names, s.context, strict=False))
+        spread = '' if s.context_error is None else f'{s.context_error:10.3f}'
+        lines.append(f'{s.segment:>4} {s.steps:>6} {s.first_step:>6} {s.last_step:>6}  '
+                     f'{context:<28} {s.total_return:>9.2f} {s.reward_per_step:>9.3f} {spread}')
+    return '\n'.join(lines)
+
+
+def _projection(points: np.ndarray) -> np.ndarray:
+    """First two principal components (zeros for a degenerate cloud)."""
+    centered = points - points.mean(0)
+    if points.shape[1] < 2 or not np.any(centered):
+        return np.zeros((points.shape[0], 2))
+    _u, _s, vt = np.linalg.svd(centered, full_matrices=False)
+    return centered @ vt[:2].T
+
+
+def plot_inspection(log: StepLog, path: Path, title: str = '') -> Path:
+    """Save the inspection figure: context over time, psi projection, return per segment."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    records = [r for r in log.ordered() if r.truth is not None]
+    segments = log.segments()
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.5))
+    ax = axes[0]
+    steps = np.array([r.step for r in records])
+    truth = np.array([r.truth[0] for r in records]) if records else np.zeros(0)
+    ax.plot(steps, truth, color='black', lw=2, label=f'true {log.context_names[0]}'
+            if log.context_names else 'true context')
+    with_est = [r for r in records if r.estimate is not None and r.estimate.size]
+    if with_est:
+        est = np.stack([r.estimate for r in with_est])
+        proj = _projection(est)[:, 0]
+        scale = (truth.std() or 1.0) / (proj.std() or 1.0)
+        corr = np.corrcoef(proj, [r.truth[0] for r in with_est])[0, 1] if len(proj) > 2 else 0
+        sign = -1.0 if corr < 0 else 1.0
+        shown = truth.mean() + sign * scale * (proj - proj.mean())
+        ax.plot([r.step for r in with_est], shown, color='tab:blue', lw=1, alpha=0.8,
+                label='psi (1st PC, rescaled)')
+    for s in segments[1:]:
+        ax.axvline(s.first_step, color='tab:red', ls='--', lw=0.8)
+    ax.set_xlabel('step')
+    ax.set_title('context over time (dashed: switches)')
+    ax.legend(loc='best', fontsize=8)
+
+    ax = axes[1]
+    if with_est:
+        xy = _projection(np.stack([r.estimate for r in with_est]))
+        colour = [r.truth[0] for r in with_est]
+        scatter = ax.scatter(xy[:, 0], xy[:, 1], c=colour, cmap='viridis', s=6)
+        fig.colorbar(scatter, ax=ax, label=log.context_names[0] if log.context_names else '')
+    ax.set_title('psi(H), 2-D PCA, coloured by true context')
+
+    ax = axes[2]
+    if segments:
+        labels = [f'{s.segment}: {s.context[0]:g}' if s.context else str(s.segment)
+                  for s in segments]
+        ax.bar(range(len(segments)), [s.reward_per_step for s in segments], color='tab:green')
+        ax.set_xticks(range(len(segments)), labels, rotation=60, fontsize=7)
+    ax.set_title('reward per step, per context segment')
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def percentile(values: np.ndarray, q: float) -> float:
+    """Percentile that is NaN (not an error) for an empty array."""
+    return float(np.percentile(values, q)) if values.size else math.nan
