@@ -41,11 +41,10 @@ class Inspector:
     def __init__(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
+        from rclpy.executors import SingleThreadedExecutor
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StepFeedback
 
         from zeus_ros.nodes.common import TOPICS, step_qos
-
-        from rclpy.executors import SingleThreadedExecutor
 
         rclpy.init()
         self.node = rclpy.create_node('zeus_inspect')
