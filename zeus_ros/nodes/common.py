@@ -176,6 +176,11 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+    except Exception:
+        # A signal that shuts the context down while a callback publishes surfaces as an
+        # RCLError from that callback: that is a normal stop, not a crash.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             close = getattr(node, 'close', None)

@@ -62,9 +62,10 @@ def _message_class(msgtype: str) -> type:
 
 @dataclass
 class _Closing:
-    """The bag before a split: it takes messages of steps < `boundary` until `deadline`."""
+    """A bag before a split: it takes late messages of steps first..boundary-1 until deadline."""
 
     writer: DurableBagWriter
+    first: int
     boundary: int
     deadline: float
 
@@ -92,7 +93,9 @@ class RecorderNode(Node):
         self.bytes_written = 0
         self.flushes = 0
         self._writer: DurableBagWriter | None = None
-        self._closing: _Closing | None = None
+        self._closing: list[_Closing] = []
+        self._first_step = -1
+        """Lowest step of the bag being written (the boundary of the last split)."""
         self._recent: OrderedDict[int, int] = OrderedDict()
         """stamp -> step of recent steps: routes /clock and images, which carry no step."""
         self._opened = time.monotonic()
@@ -188,18 +191,23 @@ class RecorderNode(Node):
 
     def _split(self) -> None:
         """Open the next bag; the old one keeps taking late messages of its steps a moment."""
-        self._close_old()
         assert self._writer is not None
         old = self._writer
-        boundary = max(self.last_step.values(), default=-1) + 1
+        boundary = max(max(self.last_step.values(), default=-1) + 1, self._first_step)
         self._open_next_bag()
-        self._closing = _Closing(old, boundary, time.monotonic() + SPLIT_GRACE_S)
+        self._closing.append(
+            _Closing(old, self._first_step, boundary, time.monotonic() + SPLIT_GRACE_S))
+        self._first_step = boundary
 
-    def _close_old(self) -> None:
-        if self._closing is not None:
-            self._closing.writer.close()
-            self.flushes += self._closing.writer.flushes
-            self._closing = None
+    def _close_old(self, now: float | None = None) -> None:
+        """Close the split-off bags whose grace is over (all of them without `now`)."""
+        for closing in list(self._closing):
+            if now is None or now >= closing.deadline:
+                closing.writer.close()
+                self.flushes += closing.writer.flushes
+                self._closing.remove(closing)
+            else:
+                closing.writer.flush()
 
     def _on_message(self, topic: str, data: bytes) -> None:
         """Write one serialized message; count it and the steps it skipped."""
@@ -210,10 +218,11 @@ class RecorderNode(Node):
             if len(self._recent) > RECENT_STAMPS:
                 self._recent.popitem(last=False)
         writer = self._writer
-        if self._closing is not None:  # a split never cuts a step: all its messages go together
-            of_step = step if step is not None else self._recent.get(stamp, None)
-            if of_step is not None and of_step < self._closing.boundary:
-                writer = self._closing.writer
+        of_step = step if step is not None else self._recent.get(stamp, None)
+        if of_step is not None:  # a split never cuts a step: all its messages go together
+            for closing in self._closing:
+                if closing.first <= of_step < closing.boundary:
+                    writer = closing.writer
         assert writer is not None
         writer.write_serialized(topic, time.time_ns(), data)
         self.counts[topic] += 1
@@ -239,17 +248,14 @@ class RecorderNode(Node):
         assert self._writer is not None
         self._writer.flush()
         now = time.monotonic()
-        if self._closing is not None:
-            if now >= self._closing.deadline:
-                self._close_old()
-            else:
-                self._closing.writer.flush()
+        self._close_old(now)
         duration = self.params['split_duration_s']
         if duration and now - self._opened >= duration:
             self._split()
 
     def _publish_diagnostics(self) -> None:
-        open_writers = [w for w in (self._writer, self._closing and self._closing.writer) if w]
+        open_writers = [c.writer for c in self._closing]
+        open_writers += [self._writer] if self._writer else []
         flushes = self.flushes + sum(w.flushes for w in open_writers)
         values: dict[str, object] = {
             'bag': self.bags[-1] if self.bags else '', 'storage': self.storage,
@@ -261,7 +267,11 @@ class RecorderNode(Node):
                 values[f'gaps {topic}'] = self.gaps[topic]
                 values[f'last_step {topic}'] = self.last_step.get(topic, '')
         problems = [f'{n} steps missing on {t}' for t, n in self.gaps.items() if n]
-        self._pub_diag.publish(diagnostics_message(self, 'bag', values, problems))
+        try:
+            self._pub_diag.publish(diagnostics_message(self, 'bag', values, problems))
+        except Exception:  # rclpy's RCLError when SIGTERM shut the context down mid-callback
+            if self.context.ok():
+                raise
 
     def close(self) -> None:
         """Finalize the open bag (mcap footer, final metadata.yaml) and log the totals."""

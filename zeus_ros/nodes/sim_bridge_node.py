@@ -110,7 +110,7 @@ class SimBridgeNode(Node):
             if not self.has_parameter(name):
                 self.declare_parameter(name, default)
         params = {name: self.get_parameter(name).value for name in DEFAULTS}
-        known = set(DEFAULTS) | {'use_sim_time'}
+        known = set(DEFAULTS) | {'use_sim_time', 'start_type_description_service'}
         unknown = [
             name for name in self._parameters
             if name not in known and not name.startswith(SCHEDULE_PREFIX)
