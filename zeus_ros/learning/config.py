@@ -124,7 +124,7 @@ class ZeusConfig:
     alpha_lr: float = 1e-4
     """Adam learning rate of the temperature."""
     adam_beta1: float | str = 'auto'
-    """beta1 of Adam for policy, Q and temperature; 'auto' = 0.5 on reward-varying tasks, else 0.9."""
+    """Adam beta1 of policy, Q and temperature; 'auto': 0.5 on reward-varying tasks, else 0.9."""
     init_temperature: float = 0.1
     """Initial SAC temperature."""
     actor_log_std_min: float = -10.0
@@ -208,7 +208,8 @@ def _check_float(name: str, value: object, *, low: float | None = None,
 def config_from_dict(data: dict[str, Any], *, source: str = 'config') -> ZeusConfig:
     """Build a config from plain data, rejecting unknown keys (typos must not pass silently)."""
     if not isinstance(data, dict):
-        raise ConfigError(f'{source}: expected a mapping of config keys, got {type(data).__name__}')
+        raise ConfigError(f'{source}: expected a mapping of config keys, '
+                          f'got {type(data).__name__}')
     known = {field.name for field in fields(ZeusConfig)}
     unknown = sorted(set(data) - known)
     if unknown:

@@ -53,11 +53,9 @@ class Actor(nn.Module):
 
 def squashed_sample(out: PolicyOutput, deterministic: bool = False) -> PolicySample:
     """Sample (or take the mode of) the squashed Gaussian (SAC paper, appendix C)."""
-    if deterministic:
-        pre_tanh = out.mu
-    else:
-        pre_tanh = out.mu + torch.randn_like(out.mu) * out.log_std.exp()
-    noise = (pre_tanh - out.mu) / out.log_std.exp()
+    std = out.log_std.exp()
+    pre_tanh = out.mu if deterministic else out.mu + torch.randn_like(out.mu) * std
+    noise = (pre_tanh - out.mu) / std
     log_prob = (-0.5 * noise.pow(2) - out.log_std).sum(-1, keepdim=True)
     log_prob = log_prob - 0.5 * math.log(2 * math.pi) * out.mu.shape[-1]
     action = torch.tanh(pre_tanh)

@@ -167,25 +167,25 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     and gives exit code 2, instead of a traceback.
     """
     rclpy.init(args=args)
-    node = None
     try:
         node = factory()
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
         pass
-    except ValueError as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 2
     except Exception:
         # A signal that shuts the context down while a callback publishes surfaces as an
         # RCLError from that callback: that is a normal stop, not a crash.
         if rclpy.ok():
             raise
     finally:
-        if node is not None:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-            node.destroy_node()
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        node.destroy_node()
         rclpy.try_shutdown()
-    return getattr(node, 'exit_code', 0)
+    return int(getattr(node, 'exit_code', 0))

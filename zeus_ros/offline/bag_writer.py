@@ -112,24 +112,25 @@ class StepBagWriter:
         self.bytes_written += len(data)
 
     def write_step(self, rec: StepRecord, *, log_ns: int | None = None) -> None:
-        """Write /clock, the observation(s), /zeus/step and /zeus/context_truth of one step."""
+        """Write /clock, /zeus/context_truth, the frame, /zeus/step and the state of one step."""
         if self.pixels and rec.frame is None:
             raise ValueError(f'{self.path}: step {rec.step} has no frame but pixels are on')
         if not self.pixels and rec.frame is not None:
             raise ValueError(f'{self.path}: step {rec.step} has a frame but pixels are off')
         log = rec.stamp_ns if log_ns is None else log_ns
         c = self.codec
+        # The sim_bridge node's publish order: clock, truth, image, feedback, state last.
         self.write_serialized(TOPIC_CLOCK, log, c.serialize(c.clock(rec.stamp_ns)))
-        self.write_serialized(
-            TOPIC_STATE, log, c.serialize(c.state(rec.step, rec.stamp_ns, rec.state))
-        )
+        truth = c.truth(rec.step, rec.stamp_ns, rec.context_names, rec.context_values, rec.segment)
+        self.write_serialized(TOPIC_CONTEXT_TRUTH, log, c.serialize(truth))
         if rec.frame is not None:
             self.write_serialized(TOPIC_IMAGE, log, c.serialize(c.image(rec.stamp_ns, rec.frame)))
         self.write_serialized(
             TOPIC_STEP, log, c.serialize(c.feedback(rec.step, rec.stamp_ns, rec.feedback))
         )
-        truth = c.truth(rec.step, rec.stamp_ns, rec.context_names, rec.context_values, rec.segment)
-        self.write_serialized(TOPIC_CONTEXT_TRUTH, log, c.serialize(truth))
+        self.write_serialized(
+            TOPIC_STATE, log, c.serialize(c.state(rec.step, rec.stamp_ns, rec.state))
+        )
 
     def write_action(
         self, step: int, stamp_ns: int, action: np.ndarray, *, log_ns: int | None = None

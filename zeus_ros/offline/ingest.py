@@ -54,7 +54,7 @@ class Issue:
     topic: str
     step: int | None
     kind: str
-    """gap | duplicate | stamp_mismatch | episode."""
+    """gap | duplicate | stamp_mismatch | episode | schema."""
     detail: str
 
     def __str__(self) -> str:
@@ -219,11 +219,12 @@ def _read_bag(path: Path, report: IngestReport) -> dict[str, Any]:
             if conn.msgtype != expected:
                 raise BagError(path, f'topic {conn.topic} has type {conn.msgtype}, '
                                      f'expected {expected}')
-            ours = cdc.store.generate_msgdef(expected, ros_version=2)[0]
-            if conn.msgdef.data and conn.msgdef.data.strip() != ours.strip():
-                raise BagError(path, f'topic {conn.topic}: the bag embeds another definition '
-                                     f'of {expected} than this checkout; read it with the '
-                                     'zeus_msgs version that wrote it')
+            ours = cdc.store.hash_rihs01(expected)
+            if conn.digest.startswith('RIHS01_') and conn.digest != ours:
+                report.issues.append(Issue(str(path), conn.topic, None, 'schema',
+                                           f"type hash {conn.digest} != this checkout's "
+                                           f'{ours} for {expected}: written with another '
+                                           'definition; decoding may fail'))
         for conn, _, raw in reader.messages(connections=conns):
             count += 1
             msg = cdc.deserialize(raw, conn.msgtype)

@@ -66,9 +66,9 @@ MSGTYPES: dict[str, str] = {
 """Every topic a bag may hold, with its message type."""
 
 ZEUS_MSG_NAMES = ('Action', 'ContextEstimate', 'ContextTruth', 'StateVector', 'StepFeedback')
-FRAME_ID = 'world'
-"""header.frame_id of the state, step, context and action messages."""
-IMAGE_FRAME_ID = 'tracking_camera'
+FRAME_ID = ''
+"""header.frame_id of the state, step, context and action messages (as the nodes publish)."""
+IMAGE_FRAME_ID = 'camera'
 IMAGE_ENCODING = 'rgb8'
 ACTION_STATUS_NONE = 0
 """StepFeedback.ACTION_NONE: no action was applied (the reset observation)."""
