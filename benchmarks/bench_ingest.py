@@ -1,0 +1,104 @@
+"""Ingest throughput next to a plain rosbags read of the same files, in the same run.
+
+The plain read iterates every raw message with rosbags' Reader without deserializing: the
+floor any ingest pays. Usage:
+
+    python benchmarks/bench_ingest.py                    # writes a temporary state bag
+    python benchmarks/bench_ingest.py --pixels --steps 2000 --storage sqlite3
+    python benchmarks/bench_ingest.py --bags data/bags   # existing bags
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import tempfile
+import time
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+
+from zeus_ros.offline.bag_writer import StepBagWriter, StepRecord
+from zeus_ros.offline.ingest import find_bags, ingest_bags
+from zeus_ros.offline.schema import StepFeedbackFields
+
+EP_LEN = 500
+STATE_DIM = 17
+ACTION_DIM = 6
+
+
+def write_bag(path: Path, steps: int, *, pixels: bool, storage: str) -> None:
+    """A cheetah-shaped bag (17-d state, 6-d action, 84x84 frames) from random arrays."""
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 256, (84, 84, 3), np.uint8)
+    with StepBagWriter(path, storage=storage, pixels=pixels) as writer:
+        for k in range(steps):
+            ep, es = divmod(k, EP_LEN + 1)
+            stamp = (k + 1) * 40_000_000
+            fb = StepFeedbackFields(
+                episode=ep, episode_step=es, first=es == 0, last=es == EP_LEN,
+                reward=float(rng.random()),
+                applied_action=np.zeros(0) if es == 0 else rng.random(ACTION_DIM),
+                action_status=0 if es == 0 else 1, task='Cheetah-Run-v0')
+            writer.write_step(StepRecord(
+                step=k, stamp_ns=stamp, state=rng.random(STATE_DIM), feedback=fb,
+                context_names=('torso_length',), context_values=np.array([0.5 + ep % 3]),
+                segment=ep, frame=np.roll(frame, k, axis=1) if pixels else None))
+            writer.write_action(k, stamp, rng.random(ACTION_DIM))
+
+
+def plain_read(paths: list[Path]) -> tuple[float, int]:
+    """Seconds to iterate every raw message of `paths`, and the payload bytes seen."""
+    start = time.perf_counter()
+    total = 0
+    for path in paths:
+        with Reader(path) as reader:
+            for _, _, raw in reader.messages():
+                total += len(raw)
+    return time.perf_counter() - start, total
+
+
+def disk_bytes(paths: list[Path]) -> int:
+    """Bytes on disk of the bags' files."""
+    files = [p for path in paths for p in ([path] if path.is_file() else path.iterdir())]
+    return sum(f.stat().st_size for f in files if f.is_file())
+
+
+def main() -> None:
+    """Print plain-read and ingest MB/s (best of --repeat) and their ratio."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--bags', type=Path, help='existing bags (else a temporary one)')
+    parser.add_argument('--steps', type=int, default=20_000)
+    parser.add_argument('--pixels', action='store_true')
+    parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
+    parser.add_argument('--repeat', type=int, default=3)
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.bags
+        if root is None:
+            root = Path(tmp) / 'bag'
+            t0 = time.perf_counter()
+            write_bag(root, args.steps, pixels=args.pixels, storage=args.storage)
+            print(f'wrote {args.steps} steps (pixels={args.pixels}, {args.storage}) '
+                  f'in {time.perf_counter() - t0:.2f} s')
+        paths = find_bags(root)
+        size_mb = disk_bytes(paths) / 1e6
+        plain_read(paths)  # warm the page cache for both contenders
+        plain_s = min(plain_read(paths)[0] for _ in range(args.repeat))
+        best = None
+        for _ in range(args.repeat):
+            ds = ingest_bags(paths)
+            if best is None or ds.report.seconds < best.report.seconds:
+                best = ds
+        assert best is not None
+        rep = best.report
+        print(f'bags: {len(paths)}, {size_mb:.1f} MB on disk, {rep.steps} steps, '
+              f'{rep.messages} messages')
+        print(f'plain read : {size_mb / plain_s:8.1f} MB/s  ({plain_s:.3f} s)')
+        print(f'ingest     : {rep.mb_per_s:8.1f} MB/s  ({rep.seconds:.3f} s, '
+              f'{rep.steps_per_s:.0f} steps/s)')
+        print(f'ratio ingest/plain: {rep.mb_per_s / (size_mb / plain_s):.2f}')
+
+
+if __name__ == '__main__':
+    main()

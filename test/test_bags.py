@@ -1,0 +1,306 @@
+"""Bags: collect -> ingest round trip, corrupt bags, gaps and duplicates."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+
+from zeus_ros.offline.bag_writer import StepBagWriter
+from zeus_ros.offline.errors import BagError, IngestError
+from zeus_ros.offline.ingest import IngestWarning, ingest_bags
+from zeus_ros.offline.schema import (
+    TOPIC_ACTION,
+    TOPIC_CONTEXT_TRUTH,
+    TOPIC_STATE,
+    TOPIC_STEP,
+    StepFeedbackFields,
+    codec,
+)
+
+EP_LEN = 5
+
+
+@dataclass
+class Faults:
+    """Messages to drop, duplicate or re-stamp when writing a synthetic bag."""
+
+    drop: set[tuple[str, int]] = field(default_factory=set)
+    dup: set[tuple[str, int]] = field(default_factory=set)
+    shift: set[tuple[str, int]] = field(default_factory=set)
+
+
+def _write_synthetic(path: Path, steps: int, faults: Faults | None = None,
+                     storage: str = 'mcap') -> Path:
+    """Write `steps` steps of a 2-d toy run (episodes of EP_LEN transitions) message by message."""
+    faults = faults or Faults()
+    c = codec()
+    with StepBagWriter(path, storage=storage, pixels=False) as w:
+        for k in range(steps):
+            ep, es = divmod(k, EP_LEN + 1)
+            stamp = 1_000_000 * (k + 1)
+            fb = StepFeedbackFields(
+                episode=ep, episode_step=es, first=es == 0, last=es == EP_LEN,
+                reward=0.0 if es == 0 else k * 0.5,
+                applied_action=np.zeros(0) if es == 0 else np.array([k, -k], np.float32),
+                action_status=0 if es == 0 else 1, task='Toy-v0')
+            msgs = {
+                TOPIC_STATE: c.state(k, stamp, np.array([k, ep], float)),
+                TOPIC_STEP: c.feedback(k, stamp, fb),
+                TOPIC_CONTEXT_TRUTH: c.truth(k, stamp, ['mass'], np.array([1.0 + ep]), ep),
+                TOPIC_ACTION: c.action(k, stamp, np.array([k + 1, -k - 1], np.float32)),
+            }
+            for topic, msg in msgs.items():
+                if (topic, k) in faults.drop:
+                    continue
+                if (topic, k) in faults.shift:
+                    msg.header.stamp.nanosec += 7
+                for _ in range(2 if (topic, k) in faults.dup else 1):
+                    w.write_serialized(topic, stamp, c.serialize(msg))
+    return path
+
+
+def test_synthetic_bag_ingests_step_aligned(tmp_path: Path) -> None:
+    """a_k and r_{k+1} come from StepFeedback k+1; obs, context and stamps from step k."""
+    ds = ingest_bags(_write_synthetic(tmp_path / 'bag', 12))
+    assert [len(e.steps) for e in ds.episodes] == [6, 6]
+    ep = ds.episodes[1]
+    np.testing.assert_array_equal(ep.steps, np.arange(6, 12))
+    np.testing.assert_array_equal(ep.obs[:, 0], np.arange(6, 12))
+    np.testing.assert_array_equal(ep.action[:, 0], np.arange(7, 12))
+    np.testing.assert_array_equal(ep.reward, np.arange(7, 12) * 0.5)
+    np.testing.assert_array_equal(ep.policy_action[:, 0], np.arange(7, 13))
+    np.testing.assert_array_equal(ep.context[:, 0], 2.0)
+    np.testing.assert_array_equal(ep.stamps_ns, 1_000_000 * np.arange(7, 13))
+    assert ep.first.tolist() == [True] + [False] * 5 and ep.last.tolist() == [False] * 5 + [True]
+    assert ds.task == 'Toy-v0' and ds.context_names == ('mass',)
+    assert not ds.report.issues
+
+
+def test_gap_on_one_topic_reported_and_episode_cut(tmp_path: Path) -> None:
+    """A state missing at step 3 is reported with file, topic and step; no transition spans it."""
+    bag = _write_synthetic(tmp_path / 'gap', 6, Faults(drop={(TOPIC_STATE, 3)}))
+    with pytest.warns(IngestWarning, match='step 3'):
+        ds = ingest_bags(bag)
+    [issue] = ds.report.issues
+    assert (issue.file, issue.topic, issue.step, issue.kind) == (str(bag), TOPIC_STATE, 3, 'gap')
+    assert [e.steps.tolist() for e in ds.episodes] == [[0, 1, 2], [4, 5]]
+
+
+def test_gap_on_all_topics_reported(tmp_path: Path) -> None:
+    """A step absent on every topic is one gap issue at that step."""
+    drop = {(t, 8) for t in (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)}
+    with pytest.warns(IngestWarning):
+        ds = ingest_bags(_write_synthetic(tmp_path / 'hole', 12, Faults(drop=drop)))
+    assert [(i.topic, i.step, i.kind) for i in ds.report.issues] == [(TOPIC_STEP, 8, 'gap')]
+
+
+def test_duplicate_step_reported(tmp_path: Path) -> None:
+    """A step written twice on /zeus/step is reported with file, topic and step, kept once."""
+    bag = _write_synthetic(tmp_path / 'dup', 6, Faults(dup={(TOPIC_STEP, 2)}))
+    with pytest.warns(IngestWarning, match='duplicate'):
+        ds = ingest_bags(bag)
+    [issue] = ds.report.issues
+    assert (issue.file, issue.topic, issue.step, issue.kind) == (str(bag), TOPIC_STEP, 2,
+                                                                 'duplicate')
+    assert ds.episodes[0].steps.tolist() == [0, 1, 2, 3, 4, 5]
+
+
+def test_stamp_mismatch_reported(tmp_path: Path) -> None:
+    """A context truth whose stamp differs from its step's is reported and not used."""
+    bag = _write_synthetic(tmp_path / 'st', 6, Faults(shift={(TOPIC_CONTEXT_TRUTH, 4)}))
+    with pytest.warns(IngestWarning):
+        ds = ingest_bags(bag)
+    [issue] = ds.report.issues
+    assert (issue.topic, issue.step, issue.kind) == (TOPIC_CONTEXT_TRUTH, 4, 'stamp_mismatch')
+    assert [e.steps.tolist() for e in ds.episodes] == [[0, 1, 2, 3]]
+
+
+def test_strict_raises_on_issue(tmp_path: Path) -> None:
+    """strict=True turns a reported gap into an IngestError naming file, topic and step."""
+    bag = _write_synthetic(tmp_path / 'gap', 6, Faults(drop={(TOPIC_STATE, 3)}))
+    with pytest.raises(IngestError, match=rf'{bag}.*{TOPIC_STATE} step 3'):
+        ingest_bags(bag, strict=True)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_truncated_bag_named(tmp_path: Path, storage: str) -> None:
+    """A bag whose storage file was cut short raises BagError naming that bag."""
+    bag = _write_synthetic(tmp_path / 'cut', 60, storage=storage)
+    [data] = [p for p in bag.iterdir() if p.suffix in {'.mcap', '.db3'}]
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    with pytest.raises(BagError) as info:
+        ingest_bags(bag)
+    assert info.value.path == bag
+
+
+def test_unclosed_bag_named(tmp_path: Path) -> None:
+    """A bag directory without metadata.yaml (writer killed) raises BagError naming it."""
+    bag = _write_synthetic(tmp_path / 'killed', 12)
+    (bag / 'metadata.yaml').unlink()
+    with pytest.raises(BagError, match='killed'):
+        ingest_bags(tmp_path)
+
+
+def test_corrupt_bag_skipped_and_counted(tmp_path: Path) -> None:
+    """skip_corrupt=True ingests the good bag and lists the corrupt one in the report."""
+    _write_synthetic(tmp_path / 'a_good', 12)
+    bad = _write_synthetic(tmp_path / 'b_bad', 12)
+    [data] = bad.glob('*.mcap')
+    data.write_bytes(data.read_bytes()[:100])
+    with pytest.warns(IngestWarning, match='b_bad'):
+        ds = ingest_bags(tmp_path, skip_corrupt=True)
+    assert len(ds.report.skipped) == 1 and ds.report.skipped[0][0] == str(bad)
+    assert ds.report.bags == [str(tmp_path / 'a_good')]
+    assert ds.num_transitions == 10
+
+
+def test_single_storage_file_accepted(tmp_path: Path) -> None:
+    """A bare .mcap file ingests like its bag directory."""
+    bag = _write_synthetic(tmp_path / 'bag', 12)
+    [data] = bag.glob('*.mcap')
+    assert ingest_bags(data).num_transitions == ingest_bags(bag).num_transitions == 10
+
+
+def test_interrupted_writer_leaves_readable_bag(tmp_path: Path) -> None:
+    """A KeyboardInterrupt inside the writer's with-block still finalizes the bag."""
+    with pytest.raises(KeyboardInterrupt), StepBagWriter(tmp_path / 'b2', pixels=False) as w:
+        c = codec()
+        fb = StepFeedbackFields(episode=0, episode_step=0, first=True, last=False, reward=0.0,
+                                applied_action=np.zeros(0), action_status=0, task='Toy-v0')
+        w.write_serialized(TOPIC_STEP, 1, c.serialize(c.feedback(0, 1, fb)))
+        raise KeyboardInterrupt
+    assert w.closed and (tmp_path / 'b2' / 'metadata.yaml').exists()
+    with AnyReader([tmp_path / 'b2']) as reader:
+        assert reader.message_count == 1
+
+
+def test_definitions_embedded_for_other_tools(tmp_path: Path) -> None:
+    """The rosbags AnyReader decodes our bag from the definitions embedded in it alone."""
+    bag = _write_synthetic(tmp_path / 'bag', 3)
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == TOPIC_STEP]
+        msgs: list[Any] = [reader.deserialize(raw, c.msgtype)
+                           for c, _, raw in reader.messages(connections=conns)]
+    assert [m.task for m in msgs] == ['Toy-v0'] * 3
+    assert msgs[2].applied_action.tolist() == [2.0, -2.0]
+
+
+# --- collect -> ingest round trip on the real ScheduledEnv ---------------------------------
+
+ROUND_TRIP_TASK = 'Cheetah-Run-v1'  # 40-step episodes: 100 steps cross two episode ends
+
+
+class RecordingEnv:
+    """The real ScheduledEnv, keeping every EnvStep it returns as the ground truth."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.seen: dict[int, Any] = {}
+
+    def reset(self) -> Any:
+        """Reset the env and keep the first step."""
+        return self._keep(self.env.reset())
+
+    def step(self, action: np.ndarray) -> Any:
+        """Step the env and keep the result."""
+        return self._keep(self.env.step(action))
+
+    def _keep(self, es: Any) -> Any:
+        self.seen[int(es.step)] = es
+        return es
+
+
+def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[Any, dict, dict]:
+    """Collect `steps` steps into `out`; return the env record, actions and frames per step."""
+    from sim_bridge.env import ScheduledEnv
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+    from zeus_ros.offline.collect import collect, random_policy
+
+    task = make_task(ROUND_TRIP_TASK, seed=3)
+    env = RecordingEnv(ScheduledEnv(task, schedule_from_config({'kind': 'constant'}, task, 3)))
+    inner = random_policy(task, 3)
+    actions: dict[int, np.ndarray] = {}
+    frames: dict[int, np.ndarray] = {}
+
+    def policy(es: Any, rec: Any) -> Any:
+        out_ = inner(es, rec)
+        actions[int(es.step)] = out_.action
+        if rec.frame is not None:
+            frames[int(es.step)] = rec.frame
+        return out_
+
+    try:
+        with StepBagWriter(out, storage=storage, pixels=pixels) as writer:
+            collect(env, task, policy, writer, steps, progress=False)
+    finally:
+        task.close()
+    return env, actions, frames
+
+
+def _check_against_env(ds: Any, env: RecordingEnv, actions: dict, frames: dict,
+                       steps: int) -> None:
+    """Every ingested field equals what the env produced for that step."""
+    from zeus_ros.offline.schema import ns_from_sim_time
+
+    covered = sorted(int(s) for ep in ds.episodes for s in ep.steps)
+    assert covered == list(range(steps))
+    assert ds.task == ROUND_TRIP_TASK and not ds.report.issues
+    for ep in ds.episodes:
+        truth = [env.seen[int(s)] for s in ep.steps]
+        np.testing.assert_array_equal(ep.obs, np.stack([t.observation.state for t in truth]))
+        assert ep.stamps_ns.tolist() == [ns_from_sim_time(t.sim_time) for t in truth]
+        assert ep.first.tolist() == [t.observation.first for t in truth]
+        assert ep.last.tolist() == [t.observation.last for t in truth]
+        assert ep.episode_step.tolist() == [t.episode_step for t in truth]
+        assert {ep.episode} == {t.episode for t in truth}
+        np.testing.assert_array_equal(ep.context, [[t.observation.context[n] for n in
+                                                    ds.context_names] for t in truth])
+        assert ep.segment.tolist() == [t.segment for t in truth]
+        np.testing.assert_array_equal(
+            ep.action, np.stack([t.applied_action for t in truth[1:]]).astype(np.float32))
+        np.testing.assert_array_equal(ep.reward, [t.observation.reward for t in truth[1:]])
+        assert ep.action_status.tolist() == [int(t.status) for t in truth[1:]]
+        np.testing.assert_array_equal(ep.policy_action,
+                                      np.stack([actions[int(s)] for s in ep.steps]))
+        if frames:
+            assert ep.frames is not None
+            np.testing.assert_array_equal(
+                ep.frames, np.stack([frames[int(s)].transpose(2, 0, 1) for s in ep.steps]))
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_collect_ingest_round_trip(tmp_path: Path, storage: str) -> None:
+    """Collected bags ingest back to exactly the env's states, actions, rewards and context."""
+    env, actions, frames = _run_collect(tmp_path / 'bag', storage=storage, pixels=False,
+                                        steps=100)
+    ds = ingest_bags(tmp_path / 'bag')
+    assert not ds.has_frames
+    _check_against_env(ds, env, actions, frames, 100)
+
+
+def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:
+    """With pixels, every 84x84 frame comes back channel-first and bit-exact."""
+    env, actions, frames = _run_collect(tmp_path / 'bag', storage='mcap', pixels=True, steps=12)
+    ds = ingest_bags(tmp_path / 'bag')
+    assert ds.has_frames and len(frames) == 12
+    _check_against_env(ds, env, actions, frames, 12)
+
+
+def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:
+    """A second `zeus collect` into the same --out needs --append and adds bag_001."""
+    from zeus_ros.offline.collect import main
+
+    argv = ['--task', ROUND_TRIP_TASK, '--steps', '30', '--out', str(tmp_path),
+            '--no-progress']
+    assert main(argv) == 0
+    assert main(argv) == 2
+    assert main([*argv, '--append', '--seed', '1', '--storage', 'sqlite3']) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag_000', 'bag_001']
+    ds = ingest_bags(tmp_path)
+    assert len(ds.report.bags) == 2 and ds.report.steps == 60

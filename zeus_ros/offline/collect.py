@@ -1,0 +1,308 @@
+"""`zeus collect`: run a scheduled task in-process (no ROS) and write bags like the recorder.
+
+The bag holds exactly what the live nodes publish for each control step (same topics, types,
+header stamps = simulation time, step indices), so training cannot tell the two apart.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+import signal
+import sys
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from tqdm import tqdm
+import yaml
+
+from zeus_ros.offline.bag_writer import StepBagWriter, StepRecord
+from zeus_ros.offline.schema import StepFeedbackFields, ns_from_sim_time
+
+if TYPE_CHECKING:
+    from zeus_ros.learning.inference import InferenceAgent
+
+__all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyOutput', 'collect', 'main',
+           'next_bag_path', 'parse_schedule', 'random_policy']
+
+SCHEDULE_HELP = """\
+context schedule: a YAML file (as accepted by sim_bridge.schedules.schedule_from_config), or
+the inline form KIND[:PRESET][:KEY=VALUE[,KEY=VALUE...]] where KIND is a schedule kind
+(constant, switch, drift, random_walk), PRESET names a value list under params/ (train,
+interpolation, extrapolation) and KEY=VALUE are the kind's options, e.g.
+  constant                      the task's default context, never changing
+  switch:train:every=100        cycle through the train preset every 100 steps
+  switch:train:every=episode    ... at every episode boundary
+  drift:train:shape=sine,period=500
+Numbers in VALUE are parsed as YAML scalars (100 -> int, 0.5 -> float)."""
+
+
+@dataclass(frozen=True)
+class CollectStats:
+    """What one collection run wrote."""
+
+    bag: Path
+    steps: int
+    episodes: int
+    seconds: float
+    bytes_written: int
+
+    @property
+    def steps_per_s(self) -> float:
+        """Control steps written per wall-clock second."""
+        return self.steps / max(self.seconds, 1e-9)
+
+
+@dataclass(frozen=True)
+class PolicyOutput:
+    """A policy's answer to one step: the action, and psi(H) when it estimates a context."""
+
+    action: np.ndarray
+    context: np.ndarray | None = None
+    history_length: int = 0
+
+
+Policy = Callable[[Any, StepRecord], PolicyOutput]
+"""policy(env_step, step_record) -> PolicyOutput; the record holds the frame when recording."""
+
+
+def parse_schedule(text: str) -> dict[str, Any]:
+    """A schedule config dict from a YAML file path or the inline form (see SCHEDULE_HELP)."""
+    path = Path(text)
+    if path.suffix in {'.yaml', '.yml'} or path.is_file():
+        if not path.is_file():
+            raise ValueError(f'--schedule: no such YAML file {path}')
+        config = yaml.safe_load(path.read_text())
+        if not isinstance(config, dict):
+            kind = type(config).__name__
+            raise ValueError(f'--schedule: {path} must hold a mapping, got {kind}')
+        return config
+    parts = text.split(':')
+    if not parts[0] or not parts[0].replace('_', '').isalpha():
+        raise ValueError(f'--schedule {text!r}: expected KIND[:PRESET][:KEY=VALUE,...]')
+    config: dict[str, Any] = {'kind': parts[0]}
+    rest = parts[1:]
+    if rest and '=' not in rest[0]:
+        config['preset'] = rest.pop(0)
+    if len(rest) > 1:
+        raise ValueError(f'--schedule {text!r}: give options as one KEY=VALUE,KEY=VALUE list')
+    for item in rest[0].split(',') if rest and rest[0] else []:
+        key, sep, value = item.partition('=')
+        if not sep or not key:
+            raise ValueError(f'--schedule {text!r}: option {item!r} is not KEY=VALUE')
+        config[key] = yaml.safe_load(value)
+    return config
+
+
+def next_bag_path(out: Path, *, append: bool) -> Path:
+    """Where the new bag goes: out/bag_NNN; refuse to mix with existing bags unless appending."""
+    existing = sorted(p for p in out.glob('bag_*') if p.is_dir()) if out.is_dir() else []
+    if existing and not append:
+        raise FileExistsError(f'{out} already holds {len(existing)} bag(s) ({existing[-1].name} '
+                              '...); pass --append to add one, or choose another --out')
+    numbers = [int(p.name[4:]) for p in existing if p.name[4:].isdigit()]
+    return out / f'bag_{max(numbers, default=-1) + 1:03d}'
+
+
+class _LogClock:
+    """Monotonic bag times from stamps that restart at 0 on every episode reset."""
+
+    def __init__(self) -> None:
+        self.offset = 0
+        self.last = -1
+
+    def __call__(self, stamp_ns: int) -> int:
+        if stamp_ns + self.offset <= self.last:
+            self.offset = self.last + 1 - stamp_ns
+        self.last = stamp_ns + self.offset
+        return self.last
+
+
+def _record(es: Any, task: Any, pixels: bool) -> StepRecord:
+    """The StepRecord the sim_bridge node publishes for one EnvStep."""
+    obs = es.observation
+    applied = es.applied_action
+    names = tuple(obs.context)
+    return StepRecord(
+        step=int(es.step),
+        stamp_ns=ns_from_sim_time(es.sim_time),
+        state=obs.state,
+        feedback=StepFeedbackFields(
+            episode=int(es.episode),
+            episode_step=int(es.episode_step),
+            first=bool(obs.first),
+            last=bool(obs.last),
+            reward=float(obs.reward),
+            applied_action=np.zeros(0, np.float32) if applied is None else applied,
+            action_status=int(es.status),
+            task=task.name,
+        ),
+        context_names=names,
+        context_values=np.asarray([obs.context[n] for n in names], np.float64),
+        segment=int(es.segment),
+        frame=task.render(84, 84) if pixels else None,
+    )
+
+
+def collect(
+    env: Any,
+    task: Any,
+    policy: Policy,
+    writer: StepBagWriter,
+    steps: int,
+    *,
+    progress: bool = True,
+) -> CollectStats:
+    """Run `steps` control steps of `env`, writing each step's messages and the policy's action.
+
+    `policy(env_step, record)` answers the observation of every step, as the policy node
+    does; after a `last` observation the env starts the next episode itself (time limit).
+    """
+    clock = _LogClock()
+    start = time.perf_counter()
+    episodes = 0
+    es = env.reset()
+    with tqdm(total=steps, disable=not progress, unit='step', desc='collect') as bar:
+        for n in range(steps):
+            rec = _record(es, task, writer.pixels)
+            log = clock(rec.stamp_ns)
+            writer.write_step(rec, log_ns=log)
+            episodes += int(rec.feedback.first)
+            bar.update(1)
+            out = policy(es, rec)
+            action = np.asarray(out.action, np.float32)
+            if out.context is not None and out.context.size:
+                writer.write_estimate(rec.step, rec.stamp_ns, out.context, out.history_length,
+                                      log_ns=log)
+            writer.write_action(rec.step, rec.stamp_ns, action, log_ns=log)
+            if n < steps - 1:
+                es = env.step(action)
+    return CollectStats(writer.path, steps, episodes, time.perf_counter() - start,
+                        writer.bytes_written)
+
+
+def random_policy(task: Any, seed: int) -> Policy:
+    """Uniform actions inside the task's bounds, from a seeded generator."""
+    low, high = task.action_bounds
+    rng = np.random.default_rng(seed)
+    return lambda _es, _rec: PolicyOutput(rng.uniform(low, high).astype(np.float32))
+
+
+class AgentPolicy:
+    """A checkpointed agent acting as the context_estimator + policy nodes would, plus noise.
+
+    The history is fed with the applied action and reward from each step's feedback (what the
+    estimator node sees), and cleared at episode starts.
+    """
+
+    def __init__(self, agent: InferenceAgent, *, noise: float, seed: int) -> None:
+        from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
+
+        self.agent = agent
+        self.noise = noise
+        self.rng = np.random.default_rng(seed)
+        self.history = agent.new_history()
+        self.frames = FrameStack() if agent.obs_kind == 'pixels' else None
+        self._prev: np.ndarray | None = None
+
+    def _observation(self, es: Any, rec: StepRecord) -> np.ndarray:
+        if self.frames is None:
+            return np.asarray(es.observation.state, np.float32)
+        if rec.frame is None:
+            raise ValueError('a pixel checkpoint needs frames: run zeus collect with --pixels')
+        if es.observation.first:
+            return self.frames.reset(rec.frame)
+        return self.frames.push(rec.frame)
+
+    def __call__(self, es: Any, rec: StepRecord) -> PolicyOutput:
+        """Update H with the step's transition, estimate psi(H) and act on o_k."""
+        obs = self._observation(es, rec)
+        if es.observation.first or self._prev is None:
+            self.history.clear()
+        else:
+            self.history.push(self._prev, es.applied_action, es.observation.reward, obs)
+        self._prev = obs
+        truth = es.observation.context
+        true_ctx = np.asarray([truth[n] for n in self.agent.context_names], np.float32)
+        psi = self.agent.context(self.history, true_context=true_ctx)
+        action = self.agent.act(obs, psi, deterministic=True, noise=self.noise, rng=self.rng)
+        return PolicyOutput(action, None if self.agent.needs_true_context else psi,
+                            len(self.history))
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='zeus collect',
+        description='Run a task with a context schedule in-process and write a rosbag2 bag '
+        'with the topics and stamps the live nodes publish (no ROS needed).',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=SCHEDULE_HELP,
+    )
+    parser.add_argument('--task', required=True, help='task name, e.g. Cheetah-Run-v0')
+    parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
+    parser.add_argument('--steps', type=int, required=True, help='control steps to record')
+    parser.add_argument('--seed', type=int, default=0, help='seeds task, schedule and policy')
+    parser.add_argument('--out', type=Path, required=True, help='directory for the bag(s)')
+    parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
+    parser.add_argument('--pixels', action='store_true', help='also record 84x84 rgb8 frames')
+    parser.add_argument('--checkpoint', type=Path, help='act with this agent, not at random')
+    parser.add_argument('--noise', type=float, default=0.0,
+                        help='Gaussian exploration noise for --checkpoint, as a fraction of '
+                        'half the action range (actions are clipped to the bounds)')
+    parser.add_argument('--append', action='store_true',
+                        help='add a new bag next to the bags already in --out')
+    parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus collect`; returns the process exit code."""
+    args = _build_parser().parse_args(argv)
+    if args.steps < 1:
+        print(f'zeus collect: --steps must be >= 1, got {args.steps}', file=sys.stderr)
+        return 2
+    try:
+        schedule_config = parse_schedule(args.schedule)
+        bag = next_bag_path(args.out, append=args.append)
+    except (ValueError, FileExistsError) as exc:
+        print(f'zeus collect: {exc}', file=sys.stderr)
+        return 2
+    from sim_bridge.env import ScheduledEnv
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+
+    task = make_task(args.task, seed=args.seed)
+    schedule = schedule_from_config(schedule_config, task, args.seed)
+    env = ScheduledEnv(task, schedule)
+    policy = random_policy(task, args.seed)
+    if args.checkpoint is not None:
+        from zeus_ros.learning.inference import InferenceAgent
+
+        agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name)
+        if agent.obs_kind == 'pixels' and not args.pixels:
+            print(f'zeus collect: {args.checkpoint} is a pixel agent; add --pixels',
+                  file=sys.stderr)
+            return 2
+        policy = AgentPolicy(agent, noise=args.noise, seed=args.seed)
+    # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        with StepBagWriter(bag, storage=args.storage, pixels=args.pixels) as writer:
+            stats = collect(env, task, policy, writer, args.steps, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f'zeus collect: interrupted; the steps written so far are in {bag}',
+              file=sys.stderr)
+        return 130
+    finally:
+        task.close()
+    print(f'wrote {stats.steps} steps ({stats.episodes} episode starts) to {stats.bag} in '
+          f'{stats.seconds:.1f} s ({stats.steps_per_s:.0f} steps/s)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
