@@ -10,7 +10,7 @@ from torch import nn
 
 from zeus_ros.learning.utils import mlp
 
-__all__ = ['Actor', 'Critic', 'PolicyOutput', 'PolicySample', 'squashed_sample']
+__all__ = ['Actor', 'Critic', 'PolicyOutput', 'PolicySample', 'QValues', 'squashed_sample']
 
 
 @dataclass(slots=True)
@@ -64,6 +64,20 @@ def squashed_sample(out: PolicyOutput, deterministic: bool = False) -> PolicySam
     return PolicySample(action=action, log_prob=log_prob - correction.sum(-1, keepdim=True))
 
 
+@dataclass(slots=True)
+class QValues:
+    """Both Q estimates of the twin critic."""
+
+    q1: torch.Tensor
+    """(B, 1) first head."""
+    q2: torch.Tensor
+    """(B, 1) second head."""
+
+    def min(self) -> torch.Tensor:
+        """Clipped double-Q estimate, (B, 1)."""
+        return torch.min(self.q1, self.q2)
+
+
 class Critic(nn.Module):
     """Twin Q heads on [phi(o), psi(H), a] (clipped double Q)."""
 
@@ -72,7 +86,7 @@ class Critic(nn.Module):
         self.q1 = mlp(in_dim + action_dim, (hidden_dim, hidden_dim), 1)
         self.q2 = mlp(in_dim + action_dim, (hidden_dim, hidden_dim), 1)
 
-    def forward(self, x: torch.Tensor, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, x: torch.Tensor, action: torch.Tensor) -> QValues:
         """Both Q estimates, each (B, 1)."""
         xa = torch.cat([x, action], dim=-1)
-        return self.q1(xa), self.q2(xa)
+        return QValues(q1=self.q1(xa), q2=self.q2(xa))

@@ -1,0 +1,72 @@
+"""Training config: YAML files, validation and per-task 'auto' values."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from zeus_ros.learning import ConfigError, ZeusConfig, load_config, resolve_config
+
+PARAMS = Path(__file__).resolve().parents[1] / 'params' / 'train'
+
+
+@pytest.mark.parametrize('name', ['pixels_paper.yaml', 'state_cpu.yaml'])
+def test_shipped_configs_load(name: str) -> None:
+    """The shipped configs load and resolve for a paper task."""
+    config = resolve_config(load_config(PARAMS / name), 'Cheetah-Run-v0')
+    assert config.batch_size == 128 and config.alpha_psi == 1.0
+
+
+def test_paper_config_matches_paper_table() -> None:
+    """pixels_paper.yaml carries the paper's widths and rates."""
+    config = load_config(PARAMS / 'pixels_paper.yaml')
+    assert (config.hidden_dim, config.model_hidden_dim, config.k) == (1024, 512, 5)
+    assert (config.actor_lr, config.critic_lr, config.alpha_lr) == (3e-4, 3e-4, 1e-4)
+    assert config.obs_kind == 'pixels'
+
+
+def test_unknown_key_is_named(tmp_path: Path) -> None:
+    """A typo in a YAML key raises ConfigError naming the key and the file."""
+    path = tmp_path / 'c.yaml'
+    path.write_text('method: zeus\nbatchsize: 64\n')
+    with pytest.raises(ConfigError, match=r'c\.yaml: unknown config key\(s\) batchsize'):
+        load_config(path)
+
+
+def test_bad_value_is_named(tmp_path: Path) -> None:
+    """An invalid choice raises ConfigError naming the field and the choices."""
+    path = tmp_path / 'c.yaml'
+    path.write_text('aggregation: median\n')
+    with pytest.raises(ConfigError, match='aggregation must be one of sum, mean'):
+        load_config(path)
+
+
+def test_negative_batch_size_rejected() -> None:
+    """Non-positive sizes are refused."""
+    with pytest.raises(ConfigError, match='batch_size'):
+        ZeusConfig(batch_size=0)
+
+
+def test_alpha_psi_auto_uses_paper_table() -> None:
+    """'auto' alpha_psi takes the paper's per-task value."""
+    assert resolve_config(ZeusConfig(), 'Walker-Walk-v0').alpha_psi == 2.0
+    assert resolve_config(ZeusConfig(), 'Walker-Walk-v1').alpha_psi == 0.1
+
+
+def test_alpha_psi_auto_unknown_task_fails() -> None:
+    """'auto' on a task outside the table asks for a number."""
+    with pytest.raises(ConfigError, match='set alpha_psi to a number'):
+        resolve_config(ZeusConfig(), 'Hopper-Hop-v0')
+
+
+def test_no_context_loss_forces_alpha_zero() -> None:
+    """zeus_no_context_loss is ZeUS with alpha_psi = 0."""
+    config = resolve_config(ZeusConfig(method='zeus_no_context_loss', alpha_psi=3.0), 'x')
+    assert config.alpha_psi == 0.0
+
+
+def test_adam_beta1_auto_by_task_family() -> None:
+    """Reward-varying tasks use beta1 0.5, dynamics-varying tasks 0.9."""
+    assert resolve_config(ZeusConfig(), 'Sawyer-Peg-v0').adam_beta1 == 0.5
+    assert resolve_config(ZeusConfig(), 'Finger-Spin-v0').adam_beta1 == 0.9

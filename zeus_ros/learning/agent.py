@@ -1,0 +1,402 @@
+"""The agent: owns the networks, optimizers and target nets of every method, and updates them.
+
+Who trains what (one place to read it):
+- phi is trained by the critic loss (SAC-AE), by the representation losses of the method (eq. 1
+  for ZeUS: gradients reach phi through phi(o_t) and through the history features), and for
+  pixels by the SAC-AE autoencoder loss. Dynamics targets phi(o') are always stopped.
+- psi is trained ONLY by its method's objective (ZeUS: eq. 1; CaDM: forward + beta * backward
+  dynamics; UP-OSI: regression on the true context). Actor and critic see psi(H) detached, so
+  the methods differ only in how the context space is learned.
+- the actor sees [phi(o), psi(H)] detached (SAC-AE/drqv2: the encoder is trained via the critic).
+- T and R get no gradient from the context loss: d(c1, c2) is computed under no_grad.
+
+The dynamics loss is the Gaussian NLL of mtrl (dynamics_loss='gaussian_nll'): its optimum in mu
+is the same conditional mean that eq. 1's MSE targets, and it also fits sigma, without which the
+sigma part of the W2 distance in d would be untrained noise. 'mse' fits mu only (sigma unused).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+import torch.nn.functional as F  # noqa: N812
+
+from zeus_ros.learning.batch import HistoryBatch
+from zeus_ros.learning.config import ZeusConfig, resolve_config
+from zeus_ros.learning.context import ContextEncoder, HistoryFeatures
+from zeus_ros.learning.encoders import PixelDecoder, PixelEncoder, StateEncoder
+from zeus_ros.learning.models import RewardModel, TransitionModel
+from zeus_ros.learning.representation import representation_losses
+from zeus_ros.learning.sac import Actor, Critic, squashed_sample
+from zeus_ros.learning.spec import AgentSpec
+from zeus_ros.learning.utils import (
+    resolve_device,
+    set_seed_everywhere,
+    soft_update_params,
+    weight_init,
+)
+
+__all__ = ['PSI_METHODS', 'ZeusAgent', 'make_agent']
+
+PSI_METHODS = frozenset({'zeus', 'zeus_no_context_loss', 'up_osi', 'cadm'})
+"""Methods whose context comes from the learned encoder psi(H)."""
+
+
+def make_agent(config: ZeusConfig, spec: AgentSpec, *,
+               device: str | torch.device | None = None) -> ZeusAgent:
+    """Build a fresh agent: resolves 'auto' config values for spec.task and seeds torch."""
+    if config.obs_kind != spec.obs_kind:
+        raise ValueError(f'config.obs_kind={config.obs_kind!r} but the task spec has '
+                         f'obs_kind={spec.obs_kind!r}')
+    resolved = resolve_config(config, spec.task)
+    set_seed_everywhere(resolved.seed)
+    return ZeusAgent(resolved, spec, device=device)
+
+
+class ZeusAgent:
+    """SAC(-AE) on [phi(o), c] where c is psi(H), the true context or nothing (see `method`)."""
+
+    def __init__(self, config: ZeusConfig, spec: AgentSpec, *,
+                 device: str | torch.device | None = None) -> None:
+        if config.alpha_psi == 'auto' or config.adam_beta1 == 'auto':
+            raise ValueError('ZeusAgent needs a resolved config: build it with make_agent()')
+        self.config = config
+        self.spec = spec
+        self.method = config.method
+        self.device = resolve_device(config.device) if device is None else torch.device(device)
+        cfg, a_dim = config, spec.action_dim
+        if self.method == 'no_context':
+            self.context_dim = 0
+        elif self.method in ('up_osi', 'oracle'):
+            if spec.num_context_params == 0:
+                raise ValueError(f'method {self.method!r} needs named context parameters')
+            self.context_dim = spec.num_context_params
+        else:
+            self.context_dim = cfg.context_dim
+        low = torch.tensor(spec.action_low, dtype=torch.float32)
+        high = torch.tensor(spec.action_high, dtype=torch.float32)
+        self._action_scale = ((high - low) / 2).to(self.device)
+        self._action_bias = ((high + low) / 2).to(self.device)
+
+        self.modules: dict[str, nn.Module] = {}
+        if spec.obs_kind == 'pixels':
+            encoder: nn.Module = PixelEncoder(spec.obs_shape, cfg.feature_dim,
+                                              cfg.num_conv_layers, cfg.num_filters)
+            self.modules['decoder'] = PixelDecoder(spec.obs_shape, cfg.feature_dim,
+                                                   cfg.num_conv_layers, cfg.num_filters)
+        else:
+            encoder = StateEncoder(spec.obs_shape[0], cfg.feature_dim, cfg.encoder_hidden_dim,
+                                   spec.obs_mean, spec.obs_std)
+        self.modules['encoder'] = encoder
+        if self.method in PSI_METHODS:
+            self.modules['psi'] = ContextEncoder(
+                cfg.feature_dim, a_dim, cfg.k, self.context_dim, cfg.aggregation,
+                cfg.transition_dim, cfg.context_hidden_dim)
+        if self.method in ('zeus', 'zeus_no_context_loss', 'cadm'):
+            self.modules['transition'] = TransitionModel(
+                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
+        if self.method in ('zeus', 'zeus_no_context_loss'):
+            self.modules['reward'] = RewardModel(
+                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
+        if self.method == 'cadm':
+            self.modules['backward'] = TransitionModel(
+                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
+        policy_in = cfg.feature_dim + self.context_dim
+        self.modules['actor'] = Actor(policy_in, a_dim, cfg.hidden_dim, cfg.actor_log_std_min,
+                                      cfg.actor_log_std_max)
+        self.modules['critic'] = Critic(policy_in, a_dim, cfg.hidden_dim)
+        for module in self.modules.values():
+            module.apply(weight_init)
+        self.modules['encoder_target'] = copy.deepcopy(self.modules['encoder'])
+        self.modules['critic_target'] = copy.deepcopy(self.modules['critic'])
+        for name in ('encoder_target', 'critic_target'):
+            self.modules[name].requires_grad_(False)
+        for module in self.modules.values():
+            module.to(self.device)
+        self.log_alpha = torch.tensor(math.log(cfg.init_temperature), device=self.device,
+                                      requires_grad=True)
+        self.target_entropy = -float(a_dim)
+        self.optimizers = self._make_optimizers()
+
+    def _make_optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        """Adam per group; policy, Q and temperature use the task's beta1 (paper tables)."""
+        cfg, m = self.config, self.modules
+        betas = (float(cfg.adam_beta1), 0.999)
+        opts: dict[str, torch.optim.Optimizer] = {
+            'actor': torch.optim.Adam(m['actor'].parameters(), lr=cfg.actor_lr, betas=betas),
+            'critic': torch.optim.Adam(
+                [*m['critic'].parameters(), *m['encoder'].parameters()], lr=cfg.critic_lr,
+                betas=betas),
+            'alpha': torch.optim.Adam([self.log_alpha], lr=cfg.alpha_lr, betas=betas),
+        }
+        if self.has_representation_step:
+            opts['encoder'] = torch.optim.Adam(m['encoder'].parameters(), lr=cfg.encoder_lr)
+        if 'decoder' in m:
+            opts['decoder'] = torch.optim.Adam(m['decoder'].parameters(), lr=cfg.decoder_lr,
+                                               weight_decay=cfg.decoder_weight_decay)
+        if 'psi' in m:
+            opts['psi'] = torch.optim.Adam(m['psi'].parameters(), lr=cfg.context_lr)
+        models = [p for name in ('transition', 'reward', 'backward') if name in m
+                  for p in m[name].parameters()]
+        if models:
+            opts['model'] = torch.optim.Adam(models, lr=cfg.model_lr)
+        return opts
+
+    # ------------------------------------------------------------------ properties / helpers
+    @property
+    def has_representation_step(self) -> bool:
+        """Whether update() runs a representation step (psi methods and/or pixel autoencoder)."""
+        return 'psi' in self.modules or 'decoder' in self.modules
+
+    @property
+    def alpha(self) -> torch.Tensor:
+        """Current SAC temperature."""
+        return self.log_alpha.exp()
+
+    @property
+    def up_osi_warmup_updates(self) -> int:
+        """UP-OSI: updates during which the policy is conditioned on the true context."""
+        return int(self.config.up_osi_warmup_fraction * self.config.num_updates)
+
+    def uses_true_context(self, step: int) -> bool:
+        """Whether the policy is conditioned on the true context at this update (collectors too).
+
+        True for `oracle` always and for `up_osi` during its warm-up (the paper follows UP-OSI:
+        first condition the universal policy on the true parameters, then on the inferred ones).
+        """
+        return self.method == 'oracle' or (
+            self.method == 'up_osi' and step < self.up_osi_warmup_updates)
+
+    def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
+        """Task-bound actions -> [-1, 1] (what every network sees)."""
+        return (action.float() - self._action_bias) / self._action_scale
+
+    def history_features(self, hist_obs: torch.Tensor, hist_action: torch.Tensor,
+                         hist_reward: torch.Tensor, hist_next_obs: torch.Tensor,
+                         hist_mask: torch.Tensor, *extra_obs: torch.Tensor
+                         ) -> tuple[HistoryFeatures, list[torch.Tensor]]:
+        """Encode a (B, k) history and any extra (B, ...) observations, in one encoder pass.
+
+        Within an episode o'_j of slot j is o_{j+1} of slot j + 1; when the batch shows that for
+        every real slot, only k + 1 frames per history are encoded instead of 2k (the pixel
+        encoder dominates the cost). Otherwise both are encoded as given.
+        """
+        b, k = hist_mask.shape
+        mask = hist_mask.bool()
+        inner = mask[:, :-1]
+        chained = bool(torch.equal(hist_next_obs[:, :-1][inner], hist_obs[:, 1:][inner]))
+        if chained:
+            frames = [hist_obs.flatten(0, 1), hist_next_obs[:, -1], *extra_obs]
+            n_hist = b * k + b
+        else:
+            frames = [hist_obs.flatten(0, 1), hist_next_obs.flatten(0, 1), *extra_obs]
+            n_hist = 2 * b * k
+        feats = self.modules['encoder'](torch.cat(frames, dim=0))
+        feat = feats[:b * k].view(b, k, -1)
+        if chained:
+            # Masked slots get a neighbour's features; psi ignores them whatever they hold.
+            next_feat = torch.cat([feat[:, 1:], feats[b * k:n_hist].unsqueeze(1)], dim=1)
+        else:
+            next_feat = feats[b * k:n_hist].view(b, k, -1)
+        history = HistoryFeatures(feat=feat, action=self.normalize_action(hist_action),
+                                  reward=hist_reward.float(), next_feat=next_feat, mask=mask)
+        return history, list(feats[n_hist:].split(b)) if extra_obs else []
+
+    def _check_batch(self, batch: HistoryBatch, name: str) -> None:
+        """Clear errors for batches that do not fit this agent."""
+        spec, k = self.spec, self.config.k
+        b = batch.batch_size
+        expected = {
+            'obs': (b, *spec.obs_shape), 'next_obs': (b, *spec.obs_shape),
+            'action': (b, spec.action_dim), 'reward': (b, 1), 'not_done': (b, 1),
+            'hist_obs': (b, k, *spec.obs_shape), 'hist_next_obs': (b, k, *spec.obs_shape),
+            'hist_action': (b, k, spec.action_dim), 'hist_reward': (b, k, 1),
+            'hist_mask': (b, k), 'context': (b, spec.num_context_params)}
+        for field, shape in expected.items():
+            found = tuple(getattr(batch, field).shape)
+            if found != shape:
+                raise ValueError(f'{name}.{field} has shape {found}, expected {shape} '
+                                 f'(task {spec.task}, k={k})')
+
+    # ------------------------------------------------------------------ update
+    def update(self, batch: HistoryBatch, pair: HistoryBatch | None, step: int
+               ) -> dict[str, float]:
+        """One training update: representation step, critic, then actor and targets every 2.
+
+        Args:
+            batch: transitions with their histories H1.
+            pair: an independently sampled batch whose histories are H2 (ZeUS context loss);
+                may be None for methods that do not use it.
+            step: index of this update (drives actor/target frequencies, UP-OSI warm-up).
+
+        Returns:
+            Slash-named scalar metrics, e.g. 'loss/critic', 'loss/context', 'loss/dynamics'.
+        """
+        self._check_batch(batch, 'batch')
+        batch = batch.to(self.device)
+        needs_pair = self.method == 'zeus' and self.config.alpha_psi > 0
+        if needs_pair:
+            if pair is None:
+                raise ValueError('method zeus needs a pair batch for the context loss')
+            self._check_batch(pair, 'pair')
+            if pair.batch_size != batch.batch_size:
+                raise ValueError(f'pair batch size {pair.batch_size} != batch size '
+                                 f'{batch.batch_size}')
+            pair = pair.to(self.device)
+        metrics: dict[str, torch.Tensor] = {}
+        context, next_context = self._representation_step(
+            batch, pair if needs_pair else None, step, metrics)
+        self._update_critic(batch, context, next_context, metrics)
+        if step % self.config.actor_update_freq == 0:
+            self._update_actor_and_alpha(batch, context, metrics)
+        if step % self.config.target_update_freq == 0:
+            m = self.modules
+            soft_update_params(m['critic'], m['critic_target'], self.config.critic_tau)
+            soft_update_params(m['encoder'], m['encoder_target'], self.config.encoder_tau)
+        names = list(metrics)
+        values = torch.stack([metrics[n].detach().float() for n in names]).cpu().tolist()
+        return dict(zip(names, values, strict=True))
+
+    def _representation_step(self, batch: HistoryBatch, pair: HistoryBatch | None, step: int,
+                             metrics: dict[str, torch.Tensor]
+                             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Train phi/psi/T/R (and the decoder); return detached contexts for H_t and H_{t+1}."""
+        context = next_context = None
+        if self.has_representation_step:
+            losses = representation_losses(self, batch, pair, metrics)
+            names = [name for name in ('encoder', 'decoder', 'psi', 'model')
+                     if name in self.optimizers]
+            for name in names:
+                self.optimizers[name].zero_grad(set_to_none=True)
+            losses.total.backward()
+            for name in names:
+                self.optimizers[name].step()
+            metrics['loss/representation'] = losses.total
+            context, next_context = losses.context, losses.next_context
+        if self.uses_true_context(step):
+            return batch.context.float(), batch.context.float()
+        if context is None or next_context is None:
+            empty = batch.obs.new_zeros(batch.batch_size, 0, dtype=torch.float32)
+            return empty, empty
+        return context, next_context
+
+    def _update_critic(self, batch: HistoryBatch, context: torch.Tensor,
+                       next_context: torch.Tensor, metrics: dict[str, torch.Tensor]) -> None:
+        """Clipped double-Q TD step on critic + phi (SAC-AE)."""
+        m, cfg = self.modules, self.config
+        with torch.no_grad():
+            next_feat = m['encoder'](batch.next_obs)
+            next_x = torch.cat([next_feat, next_context], dim=-1)
+            sample = squashed_sample(m['actor'](next_x))
+            target_x = torch.cat([m['encoder_target'](batch.next_obs), next_context], dim=-1)
+            next_q = m['critic_target'](target_x, sample.action).min()
+            soft_v = next_q - self.alpha * sample.log_prob
+            target_q = batch.reward + batch.not_done * cfg.discount * soft_v
+        x = torch.cat([m['encoder'](batch.obs), context], dim=-1)
+        q = m['critic'](x, self.normalize_action(batch.action))
+        loss = F.mse_loss(q.q1, target_q) + F.mse_loss(q.q2, target_q)
+        self.optimizers['critic'].zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizers['critic'].step()
+        metrics['loss/critic'] = loss
+        metrics['train/q'] = q.q1.mean()
+
+    def _update_actor_and_alpha(self, batch: HistoryBatch, context: torch.Tensor,
+                                metrics: dict[str, torch.Tensor]) -> None:
+        """Policy step on detached [phi(o), c], then the temperature step."""
+        m = self.modules
+        with torch.no_grad():
+            x = torch.cat([m['encoder'](batch.obs), context], dim=-1)
+        sample = squashed_sample(m['actor'](x))
+        actor_q = m['critic'](x, sample.action).min()
+        actor_loss = (self.alpha.detach() * sample.log_prob - actor_q).mean()
+        self.optimizers['actor'].zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.optimizers['actor'].step()
+        alpha_loss = (self.alpha * (-sample.log_prob - self.target_entropy).detach()).mean()
+        self.optimizers['alpha'].zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.optimizers['alpha'].step()
+        metrics['loss/actor'] = actor_loss
+        metrics['loss/alpha'] = alpha_loss
+        metrics['train/alpha'] = self.alpha.detach()
+        metrics['train/entropy'] = -sample.log_prob.detach().mean()
+
+    # ------------------------------------------------------------------ inference
+    def _as_tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
+        tensor = torch.as_tensor(np.asarray(value) if not torch.is_tensor(value) else value)
+        return tensor.to(self.device, dtype=dtype) if dtype else tensor.to(self.device)
+
+    @torch.no_grad()
+    def encode_context(self, hist_obs: Any, hist_action: Any, hist_reward: Any,
+                       hist_next_obs: Any, hist_mask: Any) -> torch.Tensor:
+        """psi(H) for batched (B, k, ...) or single (k, ...) histories; (B, C) or (C,)."""
+        if self.method == 'oracle':
+            raise ValueError('method oracle has no context encoder: it uses the true context')
+        mask = self._as_tensor(hist_mask).bool()
+        single = mask.dim() == 1
+        obs_dtype = torch.uint8 if self.spec.obs_kind == 'pixels' else torch.float32
+        parts = [self._as_tensor(hist_obs, obs_dtype), self._as_tensor(hist_action, torch.float32),
+                 self._as_tensor(hist_reward, torch.float32).reshape(*mask.shape, 1),
+                 self._as_tensor(hist_next_obs, obs_dtype)]
+        if single:
+            mask, parts = mask.unsqueeze(0), [p.unsqueeze(0) for p in parts]
+        b, k = mask.shape
+        if k != self.config.k:
+            raise ValueError(f'history has {k} slots, this agent uses k={self.config.k}')
+        if self.context_dim == 0 or 'psi' not in self.modules:
+            out = torch.zeros(b, self.context_dim, device=self.device)
+        else:
+            history, _ = self.history_features(*parts, mask)
+            out = self.modules['psi'](history)
+        return out[0] if single else out
+
+    @torch.no_grad()
+    def act(self, obs: Any, context: Any, deterministic: bool = True) -> np.ndarray:
+        """Action(s) in task bounds for one observation (obs_shape) or a batch (B, *obs_shape)."""
+        obs_dtype = torch.uint8 if self.spec.obs_kind == 'pixels' else torch.float32
+        obs_t = self._as_tensor(obs, obs_dtype)
+        single = obs_t.dim() == len(self.spec.obs_shape)
+        if single:
+            obs_t = obs_t.unsqueeze(0)
+        if tuple(obs_t.shape[1:]) != self.spec.obs_shape:
+            raise ValueError(f'obs has shape {tuple(obs_t.shape)}, expected '
+                             f'{self.spec.obs_shape} or (B, *{self.spec.obs_shape})')
+        if context is None:
+            context = torch.zeros(obs_t.shape[0], 0)
+        ctx = self._as_tensor(context, torch.float32).reshape(obs_t.shape[0], -1)
+        if ctx.shape[1] != self.context_dim:
+            raise ValueError(f'context has {ctx.shape[1]} values per sample, expected '
+                             f'context_dim={self.context_dim}')
+        x = torch.cat([self.modules['encoder'](obs_t), ctx], dim=-1)
+        action = squashed_sample(self.modules['actor'](x), deterministic).action
+        action = (action * self._action_scale + self._action_bias).cpu().numpy()
+        return action[0] if single else action
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict[str, Any]:
+        """Network, optimizer and temperature state (tensors and plain data only)."""
+        return {
+            'modules': {name: module.state_dict() for name, module in self.modules.items()},
+            'optimizers': {name: opt.state_dict() for name, opt in self.optimizers.items()},
+            'log_alpha': self.log_alpha.detach().cpu(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any], *, optimizers: bool = True) -> None:
+        """Restore what `state_dict` produced (raises KeyError/RuntimeError on mismatch)."""
+        missing = set(self.modules) - set(state['modules'])
+        if missing:
+            raise KeyError(f'state has no weights for {", ".join(sorted(missing))}')
+        for name, module in self.modules.items():
+            module.load_state_dict(state['modules'][name])
+        with torch.no_grad():
+            self.log_alpha.copy_(state['log_alpha'].to(self.device))
+        if optimizers:
+            for name, opt in self.optimizers.items():
+                if name in state['optimizers']:
+                    opt.load_state_dict(state['optimizers'][name])

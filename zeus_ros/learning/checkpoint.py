@@ -1,0 +1,139 @@
+"""Checkpoints: state_dicts plus plain data, validated on load with errors that name the file.
+
+Layout (a dict of tensors and plain Python data, loadable with torch.load(weights_only=True)):
+  format_version, method, obs_kind, task, k, aggregation, context_dim, spec (AgentSpec.to_dict),
+  config (ZeusConfig.to_dict, resolved), step, extra (plain data), state (ZeusAgent.state_dict).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from zeus_ros.learning.agent import ZeusAgent
+from zeus_ros.learning.config import ZeusConfig, config_from_dict
+from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.learning.spec import AgentSpec
+
+__all__ = ['FORMAT_VERSION', 'LoadedCheckpoint', 'load_checkpoint', 'save_checkpoint']
+
+FORMAT_VERSION = 1
+"""Bump when the layout changes; older files are then refused with a clear message."""
+
+_PLAIN = (str, int, float, bool, type(None))
+
+
+@dataclass(slots=True)
+class LoadedCheckpoint:
+    """A rebuilt agent and what was stored with it."""
+
+    agent: ZeusAgent
+    """The agent with weights (and optimizer states) restored."""
+    config: ZeusConfig
+    """The resolved ZeusConfig it was trained with."""
+    spec: AgentSpec
+    """Task side: shapes, bounds, names, normalisation."""
+    step: int
+    """Update count when saved."""
+    extra: dict[str, Any]
+    """Caller's plain data (e.g. metrics, replay position)."""
+
+
+def _check_plain(value: Any, where: str) -> None:
+    """Refuse anything weights_only loading could not read back (objects, arrays)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            if not isinstance(key, str):
+                raise TypeError(f'{where}: keys must be strings, got {key!r}')
+            _check_plain(item, f'{where}.{key}')
+    elif isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            _check_plain(item, f'{where}[{index}]')
+    elif not isinstance(value, _PLAIN) and not torch.is_tensor(value):
+        raise TypeError(f'{where}: only plain data (str, numbers, bool, None, lists, dicts, '
+                        f'tensors) can be stored, got {type(value).__name__}')
+
+
+def save_checkpoint(path: str | Path, agent: ZeusAgent, *, step: int,
+                    extra: dict[str, Any] | None = None) -> Path:
+    """Write the agent atomically (temp file + rename) so a crash never leaves half a file."""
+    path = Path(path)
+    extra = {} if extra is None else extra
+    _check_plain(extra, 'extra')
+    payload = {
+        'format_version': FORMAT_VERSION,
+        'method': agent.method,
+        'obs_kind': agent.spec.obs_kind,
+        'task': agent.spec.task,
+        'k': agent.config.k,
+        'aggregation': agent.config.aggregation,
+        'context_dim': agent.context_dim,
+        'spec': agent.spec.to_dict(),
+        'config': agent.config.to_dict(),
+        'step': int(step),
+        'extra': extra,
+        'state': agent.state_dict(),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.name}.tmp{os.getpid()}')
+    torch.save(payload, tmp)
+    tmp.replace(path)
+    return path
+
+
+def _fail(path: Path, message: str) -> CheckpointError:
+    return CheckpointError(f'checkpoint {path}: {message}')
+
+
+def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu',
+                    expect_task: str | None = None, expect_obs_kind: str | None = None,
+                    load_optimizers: bool = True) -> LoadedCheckpoint:
+    """Rebuild the agent stored at `path` on `map_location`, validating it on the way.
+
+    Raises:
+        CheckpointError: missing or unreadable file, other format version, task or obs-kind
+            other than expected, or weights that do not fit the stored shapes.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise _fail(path, 'no such file')
+    try:
+        payload = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as error:  # torch raises many types for corrupt / foreign files
+        raise _fail(path, f'unreadable or corrupt ({type(error).__name__}: '
+                    f'{str(error).splitlines()[0] if str(error) else ""})') from None
+    if not isinstance(payload, dict) or 'format_version' not in payload:
+        raise _fail(path, 'not a zeus_ros checkpoint (no format_version)')
+    version = payload['format_version']
+    if version != FORMAT_VERSION:
+        raise _fail(path, f'expected format_version {FORMAT_VERSION}, found {version}')
+    missing = [key for key in ('method', 'obs_kind', 'task', 'spec', 'config', 'step', 'state')
+               if key not in payload]
+    if missing:
+        raise _fail(path, f'missing field(s) {", ".join(missing)}')
+    mismatches = []
+    if expect_task is not None and payload['task'] != expect_task:
+        mismatches.append(f"task: expected '{expect_task}', found '{payload['task']}'")
+    if expect_obs_kind is not None and payload['obs_kind'] != expect_obs_kind:
+        mismatches.append(f"obs_kind: expected '{expect_obs_kind}', "
+                          f"found '{payload['obs_kind']}'")
+    if mismatches:
+        raise _fail(path, '; '.join(mismatches))
+    try:
+        spec = AgentSpec.from_dict(payload['spec'])
+        config = config_from_dict(payload['config'], source=str(path))
+    except (ConfigError, TypeError, ValueError) as error:
+        raise _fail(path, f'invalid stored spec/config ({error})') from None
+    if isinstance(config.alpha_psi, str) or isinstance(config.adam_beta1, str):
+        raise _fail(path, 'stored config is not resolved (alpha_psi / adam_beta1)')
+    agent = ZeusAgent(config, spec, device=map_location)
+    try:
+        agent.load_state_dict(payload['state'], optimizers=load_optimizers)
+    except (KeyError, RuntimeError, ValueError) as error:
+        raise _fail(path, f'weights do not fit the stored shapes ({error})') from None
+    return LoadedCheckpoint(agent=agent, config=config, spec=spec, step=int(payload['step']),
+                            extra=payload.get('extra', {}))

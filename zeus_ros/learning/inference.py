@@ -1,0 +1,207 @@
+"""Deployment logic, in one place: the rolling k-step history and the inference wrapper.
+
+Used by the ROS nodes (context_estimator, policy) and by the in-process collector/evaluator, so
+that what runs on the robot is exactly what runs in evaluation.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from zeus_ros.learning.agent import ZeusAgent
+from zeus_ros.learning.checkpoint import load_checkpoint
+
+__all__ = ['ContextHistory', 'HistoryArrays', 'InferenceAgent']
+
+
+@dataclass(slots=True)
+class HistoryArrays:
+    """One history as arrays, oldest first, missing slots zero-filled at the front."""
+
+    hist_obs: np.ndarray
+    """(k, *obs_shape)."""
+    hist_action: np.ndarray
+    """(k, A) float32."""
+    hist_reward: np.ndarray
+    """(k, 1) float32."""
+    hist_next_obs: np.ndarray
+    """(k, *obs_shape)."""
+    hist_mask: np.ndarray
+    """(k,) bool, True for real transitions."""
+
+
+class ContextHistory:
+    """Rolling history of the last k transitions (o, a, r, o') of the current episode."""
+
+    def __init__(self, k: int, obs_shape: tuple[int, ...], action_dim: int,
+                 obs_dtype: np.dtype | type = np.float32) -> None:
+        if k < 1:
+            raise ValueError(f'k must be >= 1, got {k}')
+        self.k = k
+        self.obs_shape = tuple(obs_shape)
+        self.action_dim = action_dim
+        self.obs_dtype = np.dtype(obs_dtype)
+        self._items: deque[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = deque(maxlen=k)
+
+    def clear(self) -> None:
+        """Start a new episode (a transition never spans a reset)."""
+        self._items.clear()
+
+    def push(self, obs: Any, action: Any, reward: float, next_obs: Any) -> None:
+        """Append (o_t, a_t, r_{t+1}, o_{t+1}); the oldest falls out after k."""
+        obs_a = np.asarray(obs, dtype=self.obs_dtype)
+        next_a = np.asarray(next_obs, dtype=self.obs_dtype)
+        act_a = np.asarray(action, dtype=np.float32).reshape(-1)
+        for name, value in (('obs', obs_a), ('next_obs', next_a)):
+            if value.shape != self.obs_shape:
+                raise ValueError(f'{name} has shape {value.shape}, expected {self.obs_shape}')
+        if act_a.shape != (self.action_dim,):
+            raise ValueError(f'action has {act_a.size} values, expected {self.action_dim}')
+        reward_f = float(reward)
+        if not np.isfinite(reward_f):
+            raise ValueError(f'reward must be finite, got {reward}')
+        self._items.append((obs_a.copy(), act_a.copy(), reward_f, next_a.copy()))
+
+    def arrays(self) -> HistoryArrays:
+        """The five hist_* arrays, front-padded like HistoryBatch."""
+        k, n = self.k, len(self._items)
+        out = HistoryArrays(
+            hist_obs=np.zeros((k, *self.obs_shape), dtype=self.obs_dtype),
+            hist_action=np.zeros((k, self.action_dim), dtype=np.float32),
+            hist_reward=np.zeros((k, 1), dtype=np.float32),
+            hist_next_obs=np.zeros((k, *self.obs_shape), dtype=self.obs_dtype),
+            hist_mask=np.zeros(k, dtype=bool))
+        for slot, (obs, action, reward, next_obs) in enumerate(self._items, start=k - n):
+            out.hist_obs[slot] = obs
+            out.hist_action[slot] = action
+            out.hist_reward[slot, 0] = reward
+            out.hist_next_obs[slot] = next_obs
+            out.hist_mask[slot] = True
+        return out
+
+    def __len__(self) -> int:
+        """Number of real transitions held (0..k)."""
+        return len(self._items)
+
+
+class InferenceAgent:
+    """A trained agent for deployment: context from a history, clipped actions, no training."""
+
+    def __init__(self, agent: ZeusAgent) -> None:
+        self.agent = agent
+        self._low = np.asarray(agent.spec.action_low, dtype=np.float32)
+        self._high = np.asarray(agent.spec.action_high, dtype=np.float32)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path, *, expect_task: str | None = None,
+                        expect_obs_kind: str | None = None,
+                        device: str | torch.device = 'cpu') -> InferenceAgent:
+        """Load and validate a checkpoint (CheckpointError on any mismatch)."""
+        loaded = load_checkpoint(path, map_location=device, expect_task=expect_task,
+                                 expect_obs_kind=expect_obs_kind, load_optimizers=False)
+        return cls(loaded.agent)
+
+    # ---------------------------------------------------------------- what nodes need to know
+    @property
+    def k(self) -> int:
+        """History length."""
+        return self.agent.config.k
+
+    @property
+    def method(self) -> str:
+        """Training method (oracle needs the true context at deployment)."""
+        return self.agent.method
+
+    @property
+    def needs_true_context(self) -> bool:
+        """True for oracle: `context()` then requires the true context."""
+        return self.agent.method == 'oracle'
+
+    @property
+    def obs_kind(self) -> str:
+        """'state' or 'pixels'."""
+        return self.agent.spec.obs_kind
+
+    @property
+    def obs_shape(self) -> tuple[int, ...]:
+        """Observation shape the agent expects."""
+        return self.agent.spec.obs_shape
+
+    @property
+    def obs_dtype(self) -> np.dtype:
+        """uint8 for stacked frames, float32 for state vectors."""
+        return np.dtype(np.uint8 if self.obs_kind == 'pixels' else np.float32)
+
+    @property
+    def action_dim(self) -> int:
+        """Number of action dimensions."""
+        return self.agent.spec.action_dim
+
+    @property
+    def action_low(self) -> np.ndarray:
+        """Lower action bounds."""
+        return self._low.copy()
+
+    @property
+    def action_high(self) -> np.ndarray:
+        """Upper action bounds."""
+        return self._high.copy()
+
+    @property
+    def task(self) -> str:
+        """Task name the agent was trained on."""
+        return self.agent.spec.task
+
+    @property
+    def context_names(self) -> tuple[str, ...]:
+        """Names of the true context parameters."""
+        return self.agent.spec.context_names
+
+    @property
+    def context_dim(self) -> int:
+        """Size of the context vector the policy consumes (0 for no_context)."""
+        return self.agent.context_dim
+
+    def new_history(self) -> ContextHistory:
+        """An empty history with this agent's k, shapes and dtype."""
+        return ContextHistory(self.k, self.obs_shape, self.action_dim, self.obs_dtype)
+
+    # ---------------------------------------------------------------- inference
+    def context(self, history: ContextHistory, true_context: Any = None) -> np.ndarray:
+        """The context vector for the current step: psi(H), or the true context for oracle.
+
+        An empty history (first step of an episode) is valid and gives a finite context.
+        """
+        if self.needs_true_context:
+            if true_context is None:
+                raise ValueError('the oracle policy needs the true context at deployment '
+                                 f'({", ".join(self.context_names)})')
+            values = np.asarray(true_context, dtype=np.float32).reshape(-1)
+            if values.shape != (self.context_dim,):
+                raise ValueError(f'true_context has {values.size} values, expected '
+                                 f'{self.context_dim} ({", ".join(self.context_names)})')
+            return values
+        if self.context_dim == 0:
+            return np.zeros(0, dtype=np.float32)
+        if history.k != self.k:
+            raise ValueError(f'history has k={history.k}, the agent uses k={self.k}')
+        arrays = history.arrays()
+        out = self.agent.encode_context(arrays.hist_obs, arrays.hist_action, arrays.hist_reward,
+                                        arrays.hist_next_obs, arrays.hist_mask)
+        return out.cpu().numpy().astype(np.float32)
+
+    def act(self, obs: Any, context: Any, deterministic: bool = True, noise: float = 0.0,
+            rng: np.random.Generator | None = None) -> np.ndarray:
+        """Action in task bounds; optional Gaussian noise with std noise * half the range."""
+        action = self.agent.act(obs, context, deterministic=deterministic)
+        if noise > 0.0:
+            rng = np.random.default_rng() if rng is None else rng
+            half_range = (self._high - self._low) / 2
+            action = action + noise * half_range * rng.standard_normal(action.shape)
+        return np.clip(action, self._low, self._high).astype(np.float32)

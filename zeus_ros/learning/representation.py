@@ -1,0 +1,159 @@
+"""Representation losses of every method: ZeUS eq. 1, CaDM, UP-OSI and the SAC-AE decoder.
+
+Pure functions over the agent's modules; the agent steps the optimizers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import torch
+import torch.nn.functional as F  # noqa: N812
+
+from zeus_ros.learning.models import (
+    Gaussian,
+    RewardModel,
+    TransitionModel,
+    gaussian_nll,
+    w2_diagonal_gaussians,
+)
+from zeus_ros.learning.utils import safe_norm
+
+if TYPE_CHECKING:
+    from torch import nn
+
+    from zeus_ros.learning.agent import ZeusAgent
+    from zeus_ros.learning.batch import HistoryBatch
+
+__all__ = [
+    'ContextLoss',
+    'RepresentationLosses',
+    'autoencoder_loss',
+    'context_loss',
+    'dynamics_loss',
+    'representation_losses',
+]
+
+
+@dataclass(slots=True)
+class ContextLoss:
+    """The context term of eq. 1 and the two distances it compares."""
+
+    loss: torch.Tensor
+    """MSE(||psi(H1) - psi(H2)||_2, d(c1, c2)), scalar."""
+    task_distance: torch.Tensor
+    """(B,) d(c1, c2) from the learned T and R (no gradient)."""
+    context_distance: torch.Tensor
+    """(B,) ||psi(H1) - psi(H2)||_2 (with gradient into psi)."""
+
+
+@dataclass(slots=True)
+class RepresentationLosses:
+    """What one representation step produced."""
+
+    total: torch.Tensor
+    """Scalar to back-propagate."""
+    context: torch.Tensor | None
+    """Detached psi(H_t), (B, C); None when the method has no psi."""
+    next_context: torch.Tensor | None
+    """Detached psi(H_{t+1}) with H_{t+1} = H_t shifted by the current transition."""
+
+
+def dynamics_loss(pred: Gaussian, target: torch.Tensor, kind: str) -> torch.Tensor:
+    """'gaussian_nll' (fits mu and sigma) or 'mse' (mu only) against a target latent."""
+    if kind == 'gaussian_nll':
+        return gaussian_nll(pred, target)
+    return F.mse_loss(pred.mu, target)
+
+
+def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.Tensor,
+                 action: torch.Tensor, psi1: torch.Tensor, psi2: torch.Tensor, *,
+                 use_sigma: bool = True) -> ContextLoss:
+    """Eq. 1 context loss: distances in psi space should match d computed from T and R.
+
+    d(c1, c2) = |R(s, a, psi1) - R(s, a, psi2)| + W2(T(s, a, psi1), T(s, a, psi2)) on the SAME
+    (s, a) = (phi(o1), a1), with stopped gradients: T and R (and phi) receive nothing from here.
+
+    Args:
+        transition: T.
+        reward: R.
+        feat: phi(o1), (B, F).
+        action: a1 in [-1, 1], (B, A).
+        psi1: psi(H1), (B, C), with gradient.
+        psi2: psi(H2), (B, C), with gradient.
+        use_sigma: include the sigma term of W2 (False when T's sigma is not trained).
+    """
+    with torch.no_grad():
+        feat, p1, p2 = feat.detach(), psi1.detach(), psi2.detach()
+        r_gap = (reward(feat, action, p1) - reward(feat, action, p2)).abs().squeeze(-1)
+        t1, t2 = transition(feat, action, p1), transition(feat, action, p2)
+        if not use_sigma:
+            t2 = Gaussian(mu=t2.mu, sigma=t1.sigma)
+        task_distance = r_gap + w2_diagonal_gaussians(t1, t2)
+    context_distance = safe_norm(psi1 - psi2, dim=-1)
+    return ContextLoss(loss=F.mse_loss(context_distance, task_distance),
+                       task_distance=task_distance, context_distance=context_distance)
+
+
+def autoencoder_loss(decoder: nn.Module, feat: torch.Tensor, obs: torch.Tensor,
+                     latent_lambda: float) -> torch.Tensor:
+    """SAC-AE: reconstruct frames (centred in [-0.5, 0.5]) from phi(o), plus L2 on phi(o)."""
+    target = obs.float() / 255.0 - 0.5
+    reconstruction = F.mse_loss(decoder(feat), target)
+    return reconstruction + latent_lambda * 0.5 * feat.pow(2).sum(-1).mean()
+
+
+def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBatch | None,
+                          metrics: dict[str, torch.Tensor]) -> RepresentationLosses:
+    """Losses of the agent's method on one batch (H1) and, for ZeUS, a pair batch (H2)."""
+    m, cfg = agent.modules, agent.config
+    zero = batch.reward.new_zeros(())
+    if 'psi' not in m:
+        feat = m['encoder'](batch.obs)
+        total = autoencoder_loss(m['decoder'], feat, batch.obs, cfg.decoder_latent_lambda)
+        metrics['loss/reconstruction'] = total
+        return RepresentationLosses(total=total, context=None, next_context=None)
+
+    history, (feat, next_feat) = agent.history_features(
+        batch.hist_obs, batch.hist_action, batch.hist_reward, batch.hist_next_obs,
+        batch.hist_mask, batch.obs, batch.next_obs)
+    psi1 = m['psi'](history)
+    action = agent.normalize_action(batch.action)
+    target_next = next_feat.detach()  # stopped phi(o'): no gradient from the dynamics loss
+    total = zero
+    if agent.method in ('zeus', 'zeus_no_context_loss'):
+        dyn = dynamics_loss(m['transition'](feat, action, psi1), target_next, cfg.dynamics_loss)
+        rew = F.mse_loss(m['reward'](feat, action, psi1), batch.reward.float())
+        total = dyn + rew
+        metrics['loss/dynamics'], metrics['loss/reward'] = dyn, rew
+        if pair is not None:
+            pair_history, _ = agent.history_features(
+                pair.hist_obs, pair.hist_action, pair.hist_reward, pair.hist_next_obs,
+                pair.hist_mask)
+            ctx = context_loss(m['transition'], m['reward'], feat, action, psi1,
+                               m['psi'](pair_history),
+                               use_sigma=cfg.dynamics_loss == 'gaussian_nll')
+            total = total + float(cfg.alpha_psi) * ctx.loss
+            metrics['loss/context'] = ctx.loss
+            metrics['train/task_distance'] = ctx.task_distance.mean()
+            metrics['train/context_distance'] = ctx.context_distance.mean()
+    elif agent.method == 'cadm':
+        forward = dynamics_loss(m['transition'](feat, action, psi1), target_next,
+                                cfg.dynamics_loss)
+        backward = dynamics_loss(m['backward'](next_feat, action, psi1), feat.detach(),
+                                 cfg.dynamics_loss)
+        total = forward + cfg.cadm_beta * backward
+        metrics['loss/dynamics'], metrics['loss/backward_dynamics'] = forward, backward
+    elif agent.method == 'up_osi':
+        total = F.mse_loss(psi1, batch.context.float())
+        metrics['loss/osi'] = total
+    if 'decoder' in m:
+        ae = autoencoder_loss(m['decoder'], feat, batch.obs, cfg.decoder_latent_lambda)
+        total = total + ae
+        metrics['loss/reconstruction'] = ae
+    with torch.no_grad():
+        next_history = history.detach().shifted(feat.detach(), action, batch.reward,
+                                                target_next)
+        next_context = m['psi'](next_history)
+    return RepresentationLosses(total=total, context=psi1.detach(), next_context=next_context)
