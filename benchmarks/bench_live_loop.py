@@ -1,0 +1,189 @@
+"""End-to-end rate of the three-node loop next to the in-process loop doing the same work.
+
+Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
+deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
+live loop runs sim_bridge, context_estimator and policy as separate processes in lockstep. A
+probe subscriber measures observation-to-action latency; /proc gives each node's resident memory.
+
+    source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+import random
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+TASK = 'Cheetah-Run-v0'
+SCHEDULE = {'kind': 'switch', 'every': 100, 'values': [0.6, 1.0, 1.4]}
+
+
+def make_checkpoint(path: Path, obs_kind: str) -> Path:
+    """An untrained checkpoint with the shipped config's network sizes (inference cost only)."""
+    from sim_bridge.registry import make_task
+
+    from zeus_ros.learning.agent import make_agent
+    from zeus_ros.learning.checkpoint import save_checkpoint
+    from zeus_ros.learning.config import load_config
+    from zeus_ros.learning.spec import AgentSpec
+
+    config_file = 'state_cpu.yaml' if obs_kind == 'state' else 'pixels_paper.yaml'
+    config = load_config(REPO / 'params' / 'train' / config_file)
+    task = make_task(TASK)
+    low, high = task.action_bounds
+    shape = (task.state_dim,) if obs_kind == 'state' else (9, 84, 84)
+    spec = AgentSpec(task=TASK, context_names=task.context_names, obs_kind=obs_kind,
+                     obs_shape=shape, action_dim=task.action_dim, action_low=low,
+                     action_high=high,
+                     obs_mean=np.zeros(shape, np.float32) if obs_kind == 'state' else None,
+                     obs_std=np.ones(shape, np.float32) if obs_kind == 'state' else None)
+    task.close()
+    save_checkpoint(path, make_agent(config, spec, device='cpu'), step=0)
+    return path
+
+
+def in_process_rate(checkpoint: Path, steps: int) -> float:
+    """Steps/s of ScheduledEnv + the deployment code in one process (what the nodes do)."""
+    import torch
+    from sim_bridge.env import ScheduledEnv
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+
+    from zeus_ros.learning.frames import FrameStack
+    from zeus_ros.learning.inference import InferenceAgent
+
+    torch.set_num_threads(1)
+    agent = InferenceAgent.from_checkpoint(checkpoint)
+    task = make_task(TASK, seed=0)
+    env = ScheduledEnv(task, schedule_from_config(SCHEDULE, task, 0))
+    history = agent.new_history()
+    frames = FrameStack() if agent.obs_kind == 'pixels' else None
+
+    def observe(result: object, first: bool) -> np.ndarray:
+        if frames is None:
+            return result.observation.state.astype(np.float32)
+        frame = task.render(84, 84)
+        return frames.reset(frame) if first else frames.push(frame)
+
+    result = env.reset()
+    obs = observe(result, True)
+    start = time.perf_counter()
+    for _ in range(steps):
+        action = agent.act(obs, agent.context(history))
+        result = env.step(action)
+        new_obs = observe(result, result.observation.first)
+        if result.observation.first:
+            history.clear()
+        else:
+            history.push(obs, result.applied_action, result.observation.reward, new_obs)
+        obs = new_obs
+    elapsed = time.perf_counter() - start
+    task.close()
+    return steps / elapsed
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of a process in MiB (from /proc)."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024
+    return float('nan')
+
+
+def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
+    """Steps/s, latency percentiles and node memory of the three-node lockstep loop."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from zeus_msgs.msg import Action, StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    domain = random.SystemRandom().randint(1, 100)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(domain))
+    values = '[' + ','.join(str(v) for v in SCHEDULE['values']) + ']'
+    python = [sys.executable, '-m']
+    argvs = {
+        'context_estimator': [*python, 'zeus_ros.nodes.context_estimator_node', '--ros-args',
+                              '-p', f'checkpoint:={checkpoint}'],
+        'policy': [*python, 'zeus_ros.nodes.policy_node', '--ros-args',
+                   '-p', f'checkpoint:={checkpoint}'],
+        'sim_bridge': [*python, 'zeus_ros.nodes.sim_bridge_node', '--ros-args',
+                       '-p', f'task:={TASK}', '-p', f'max_steps:={steps}',
+                       '-p', f'pixels:={"true" if pixels else "false"}',
+                       '-p', 'schedule.kind:=switch', '-p', 'schedule.every:=100',
+                       '-p', f'schedule.values:={values}'],
+    }
+    processes = {name: subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL, start_new_session=True)
+                 for name, argv in argvs.items()}
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    probe = rclpy.create_node('bench_probe', context=context)
+    seen_obs: dict[int, float] = {}
+    seen_act: dict[int, float] = {}
+    probe.create_subscription(StepFeedback, TOPICS.STEP,
+                              lambda m: seen_obs.setdefault(m.step, time.perf_counter()),
+                              step_qos(50))
+    probe.create_subscription(Action, TOPICS.ACTION,
+                              lambda m: seen_act.setdefault(m.step, time.perf_counter()),
+                              step_qos(50))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    memory: dict[str, float] = {}
+    try:
+        deadline = time.monotonic() + 500
+        while processes['sim_bridge'].poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+            if len(seen_obs) == steps // 2 and not memory:
+                memory = {name: rss_mb(p.pid) for name, p in processes.items()}
+    finally:
+        for process in processes.values():
+            process.terminate()
+        for process in processes.values():
+            process.wait(timeout=20)
+        executor.shutdown()
+        probe.destroy_node()
+        rclpy.shutdown(context=context)
+    done = sorted(set(seen_obs) & set(seen_act))
+    if len(done) < 20:
+        raise RuntimeError(f'only {len(done)} steps completed; is the setup built?')
+    latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
+    span = seen_obs[done[-1]] - seen_obs[done[0]]
+    return {'rate': (len(done) - 1) / span, 'p50': float(np.percentile(latency, 50)),
+            'p99': float(np.percentile(latency, 99)), **{f'rss_{k}': v for k, v in memory.items()}}
+
+
+def main() -> None:
+    """Measure state and pixel loops and print one table."""
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--steps', type=int, default=400)
+    parser.add_argument('--pixel-steps', type=int, default=120)
+    args = parser.parse_args()
+    print(f'three-node lockstep loop vs in-process loop, {TASK}')
+    header = (f'{"checkpoint":<10} {"in-proc/s":>9} {"live/s":>8} {"ratio":>6} {"p50 ms":>7} '
+              f'{"p99 ms":>7} {"RSS MiB sim/est/pol":>21}')
+    print(header)
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in ('state', 'pixels'):
+            steps = args.steps if kind == 'state' else args.pixel_steps
+            checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
+            local = in_process_rate(checkpoint, steps)
+            live = live_rate(checkpoint, steps, pixels=kind == 'pixels')
+            memory = '/'.join(f'{live.get(f"rss_{n}", float("nan")):.0f}'
+                              for n in ('sim_bridge', 'context_estimator', 'policy'))
+            print(f'{kind:<10} {local:>9.1f} {live["rate"]:>8.1f} {live["rate"] / local:>6.3f} '
+                  f'{live["p50"]:>7.2f} {live["p99"]:>7.2f} {memory:>21}', flush=True)
+
+
+if __name__ == '__main__':
+    main()
