@@ -30,7 +30,6 @@ SCHEDULE = {'kind': 'switch', 'every': 100, 'values': [0.6, 1.0, 1.4]}
 def make_checkpoint(path: Path, obs_kind: str) -> Path:
     """An untrained checkpoint with the shipped config's network sizes (inference cost only)."""
     from sim_bridge.registry import make_task
-
     from zeus_ros.learning.agent import make_agent
     from zeus_ros.learning.checkpoint import save_checkpoint
     from zeus_ros.learning.config import load_config
@@ -54,10 +53,10 @@ def make_checkpoint(path: Path, obs_kind: str) -> Path:
 def in_process_rate(checkpoint: Path, steps: int) -> float:
     """Steps/s of ScheduledEnv + the deployment code in one process (what the nodes do)."""
     import torch
+
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-
     from zeus_ros.learning.frames import FrameStack
     from zeus_ros.learning.inference import InferenceAgent
 
