@@ -72,6 +72,16 @@ class ContextualTask(abc.ABC):
 
     @property
     @abc.abstractmethod
+    def sim_time(self) -> float:
+        """Physics time of the running episode in seconds (restarts at 0 on reset)."""
+
+    @property
+    @abc.abstractmethod
+    def agent_period(self) -> float:
+        """Simulated seconds one agent step advances (control timestep x action repeat)."""
+
+    @property
+    @abc.abstractmethod
     def context(self) -> dict[str, float]:
         """The context in force now."""
 

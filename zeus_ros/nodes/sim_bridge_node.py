@@ -152,8 +152,9 @@ class SimBridgeNode(Node):
         for name, parameter in self._parameters.items():
             if name.startswith(SCHEDULE_PREFIX) and parameter.type_ != Parameter.Type.NOT_SET:
                 value = parameter.value
-                config[name[len(SCHEDULE_PREFIX):]] = list(value) if isinstance(
-                    value, (list, tuple, np.ndarray)) else value
+                if not isinstance(value, (str, bytes)) and hasattr(value, '__len__'):
+                    value = list(value)  # ROS array parameters come as array.array
+                config[name[len(SCHEDULE_PREFIX):]] = value
         return config or {'kind': 'constant'}
 
     def _control_period(self, task: Any) -> float:

@@ -1,0 +1,122 @@
+"""Cheetah tasks: Cheetah-Run-v0 (torso length, dynamics) and Cheetah-Run-v1 (target velocity).
+
+Torso length L is the half-length of the torso capsule (dm_control default 0.5, fromto
+"-L 0 0 L 0 0"). The legs and head are attached to the torso ends and move with them
+(bthigh at x=-L, fthigh at x=+L, head at x=L+0.1): a longer cheetah, not a longer rod with legs in
+the middle (mtenv only stretched the capsule). Mass follows the geometry: the suite's
+`settotalmass="14"` (which would keep the total at 14 kg and make the legs lighter as the torso
+grows) is replaced by the equivalent constant density, so the default model has exactly the
+suite's masses and a longer torso is heavier.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+import functools
+
+import mujoco
+import numpy as np
+
+from dm_control.utils import rewards
+from sim_bridge.core import ContextSpec
+from sim_bridge.dmc_base import DmcTask, randomize_joints
+from sim_bridge.model_edit import load_suite_spec
+
+__all__ = ['CheetahRunTask', 'CheetahVelocityTask']
+
+_TOTAL_MASS = 14.0  # the suite's settotalmass
+_RUN_SPEED = 10.0  # dm_control cheetah: speed above which the run reward is 1
+_SETTLE_STEPS = 200  # dm_control cheetah: physics steps to settle before an episode
+_CTRL_COST = 0.01  # Cheetah-Run-v1 control cost weight (MELD cheetah_vel)
+_HEAD_OFFSET = 0.1  # head capsule centre is 0.1 beyond the torso end (0.6 for L=0.5)
+
+_OBS_START = 1  # observation skips rootx (translation invariance), as the suite
+
+
+@functools.cache
+def _suite_density() -> float:
+    """Geom density that reproduces `settotalmass=14` for the default cheetah."""
+    spec = load_suite_spec('cheetah.xml', light_textures=True)
+    spec.compiler.settotalmass = -1
+    model = spec.compile()
+    return 1000.0 * _TOTAL_MASS / float(model.body_mass.sum())
+
+
+class _Cheetah(DmcTask):
+    """Suite cheetah with explicit density and torso-length editing."""
+
+    xml_name = 'cheetah.xml'
+    camera = 0  # 'side', tracking the centre of mass (SAC-AE)
+    n_sub_steps = 1  # control timestep == physics timestep (0.01 s)
+    action_repeat = 4
+
+    def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
+        spec.compiler.settotalmass = -1
+        density = _suite_density()
+        for geom in spec.geoms:
+            geom.density = density
+
+    def _edit_spec(self, spec: mujoco.MjSpec, context: Mapping[str, float]) -> None:
+        length = context.get('torso_length', 0.5)
+        spec.geom('torso').fromto = [-length, 0.0, 0.0, length, 0.0, 0.0]
+        spec.body('bthigh').pos = [-length, 0.0, 0.0]
+        spec.body('fthigh').pos = [length, 0.0, 0.0]
+        head = spec.geom('head')
+        head.pos = [length + _HEAD_OFFSET, 0.0, head.pos[2]]
+
+    def _observation(self, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+        return np.concatenate([data.qpos[_OBS_START:], data.qvel]).astype(np.float64)
+
+    @staticmethod
+    def _speed(data: mujoco.MjData) -> float:
+        return float(data.sensor('torso_subtreelinvel').data[0])
+
+    def _initialize_episode(
+        self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator
+    ) -> None:
+        randomize_joints(model, data, rng, unlimited=False)
+        mujoco.mj_step(model, data, nstep=_SETTLE_STEPS)
+        data.time = 0.0
+
+
+class CheetahRunTask(_Cheetah):
+    """Cheetah-Run-v0: run forward; the torso length changes the body."""
+
+    name = 'Cheetah-Run-v0'
+    episode_length = 500
+    specs = (
+        ContextSpec(
+            'torso_length', 0.5, 0.2, 2.0,
+            'half-length of the torso capsule [m]; legs and head move with its ends',
+        ),
+    )
+    model_params = ('torso_length',)
+
+    def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
+        return float(
+            rewards.tolerance(
+                self._speed(data),
+                bounds=(_RUN_SPEED, float('inf')),
+                margin=_RUN_SPEED,
+                value_at_margin=0,
+                sigmoid='linear',
+            )
+        )
+
+
+class CheetahVelocityTask(_Cheetah):
+    """Cheetah-Run-v1: match a target forward speed; the context only changes the reward."""
+
+    name = 'Cheetah-Run-v1'
+    episode_length = 40
+    specs = (
+        ContextSpec(
+            'target_velocity', 1.5, 0.0, 5.0,
+            'forward speed to match [m/s]; reward -|v - target| - 0.01 |a|^2 per control step',
+        ),
+    )
+    model_params = ()
+
+    def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
+        target = self._context['target_velocity']
+        return -abs(self._speed(data) - target) - _CTRL_COST * float(np.dot(action, action))
