@@ -97,7 +97,7 @@ def python_module(module: str, *args: str) -> list[str]:
 
 
 @contextlib.contextmanager
-def test_node(domain_id: int, name: str = 'test_driver') -> Iterator[Any]:
+def driver_node(domain_id: int, name: str = 'test_driver') -> Iterator[Any]:
     """An rclpy node in the test process on its own context and domain; destroyed afterwards."""
     import rclpy
     from rclpy.context import Context

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from live_fixtures import TASK, node, tiny_checkpoint
-from ros_harness import ProcessGroup, spin_until, test_node
+from ros_harness import ProcessGroup, spin_until, driver_node
 
 pytestmark = pytest.mark.ros
 STEPS = 320
@@ -97,7 +97,7 @@ def test_policy_survives_estimator_loss_and_resumes(
     actions: list[int] = []
     estimates: list[int] = []
     diagnostics: list = []
-    with test_node(ros_processes.domain_id) as probe:
+    with driver_node(ros_processes.domain_id) as probe:
         probe.create_subscription(Action, TOPICS.ACTION, lambda m: actions.append(m.step),
                                   step_qos())
         probe.create_subscription(ContextEstimate, TOPICS.CONTEXT,
@@ -137,7 +137,7 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
     ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
     estimates: list[int] = []
     diagnostics: list = []
-    with test_node(ros_processes.domain_id) as probe:
+    with driver_node(ros_processes.domain_id) as probe:
         pub_step = probe.create_publisher(StepFeedback, TOPICS.STEP, step_qos())
         pub_image = probe.create_publisher(Image, TOPICS.IMAGE, step_qos())
         probe.create_subscription(ContextEstimate, TOPICS.CONTEXT,

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from ros_harness import ProcessGroup, python_module, spin_until, test_node
+from ros_harness import ProcessGroup, python_module, spin_until, driver_node
 
 pytestmark = pytest.mark.ros
 
@@ -47,7 +47,7 @@ def drive(group: ProcessGroup, answer: object) -> Seen:
 
     seen = Seen()
     process = start_bridge(group)
-    with test_node(group.domain_id) as node:
+    with driver_node(group.domain_id) as node:
         publisher = node.create_publisher(Action, TOPICS.ACTION, step_qos())
 
         def on_state(msg: StateVector) -> None:

@@ -161,7 +161,7 @@ class SimBridgeNode(Node):
         """Wall-clock period of one agent step in realtime mode."""
         if self.params['control_rate'] > 0:
             return 1.0 / self.params['control_rate']
-        return float(task.control_timestep * task.action_repeat)
+        return float(task.agent_period)
 
     # -- step protocol ----------------------------------------------------------------------
     def _peers_ready(self) -> bool:
