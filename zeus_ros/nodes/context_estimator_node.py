@@ -64,7 +64,6 @@ class ContextEstimatorNode(Node):
         required = ['feedback', 'obs'] + (['truth'] if self.agent.needs_true_context else [])
         self.assembler = StepAssembler(required, self._on_step)
 
-        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
         self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
@@ -76,6 +75,8 @@ class ContextEstimatorNode(Node):
         if self.agent.needs_true_context:
             self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
+        # Publisher last: a peer that sees it knows the subscriptions above already exist.
+        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
         self.create_timer(1.0, self._publish_diagnostics)
         self.get_logger().info(
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '

@@ -90,7 +90,7 @@ class PolicyNode(Node):
         self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
 
         mode = self.params['mode']
-        self._pub = self.create_publisher(Action, TOPICS.ACTION, action_qos(mode))
+        self._pub: Any = None
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
         if obs_kind == 'pixels':
@@ -100,12 +100,28 @@ class PolicyNode(Node):
         if self.needs_context:
             self.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context,
                                      step_qos())
+        # The action publisher appears only once a context source exists: sim_bridge starts
+        # stepping when it sees an action publisher, so step 0 already gets its context.
+        self._waiting_since = time.monotonic()
+        self._ready_timer = self.create_timer(0.05, self._become_ready)
         self.create_timer(0.002, self._check_deadline)
         self.create_timer(1.0, self._publish_diagnostics)
         source = 'random policy' if self.agent is None else \
             f'{self.agent.method} checkpoint for {self.agent.task}'
         self.get_logger().info(f'{source}; {obs_kind} observations, '
                                f'{"waits for" if self.needs_context else "no"} context')
+
+    def _become_ready(self) -> None:
+        if self.needs_context and self.count_publishers(TOPICS.CONTEXT) == 0:
+            if time.monotonic() - self._waiting_since > 5.0:
+                self.get_logger().warning(
+                    f'waiting for a context_estimator publishing on {TOPICS.CONTEXT}')
+                self._waiting_since = time.monotonic()
+            return
+        self._pub = self.create_publisher(Action, TOPICS.ACTION,
+                                          action_qos(self.params['mode']))
+        self._ready_timer.cancel()
+        self.destroy_timer(self._ready_timer)
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_feedback(self, msg: StepFeedback) -> None:
@@ -193,6 +209,8 @@ class PolicyNode(Node):
         self._publish(step, feedback, action, kind)
 
     def _publish(self, step: int, feedback: StepFeedback, action: np.ndarray, kind: str) -> None:
+        if self._pub is None:
+            return
         msg = Action()
         msg.header.stamp = feedback.header.stamp
         msg.header.frame_id = feedback.header.frame_id

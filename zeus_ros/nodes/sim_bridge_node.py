@@ -217,6 +217,11 @@ class SimBridgeNode(Node):
 
     def _advance(self, action: np.ndarray | None, stale: bool = False) -> None:
         """Apply one action (None: the safe action) and publish the next step."""
+        max_steps = self.params['max_steps']
+        if max_steps and self.counts['steps'] > max_steps:
+            # Observation max_steps got its answer: the loop is complete, stop here.
+            self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
+            raise NodeFinished
         result = self.env.step(action)
         if stale and result.status == ActionStatus.TIMEOUT:
             result = result.with_status(ActionStatus.STALE)
@@ -280,10 +285,6 @@ class SimBridgeNode(Node):
             self.get_logger().info(
                 f'step {result.step} episode {result.episode} context {result.observation.context}'
             )
-        max_steps = self.params['max_steps']
-        if max_steps and self.counts['steps'] > max_steps:
-            self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
-            raise NodeFinished
         self._awaiting = result.step
         self._deadline = time.monotonic() + self.params['action_timeout']
 

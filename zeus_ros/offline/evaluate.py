@@ -1,0 +1,342 @@
+"""`zeus eval`: a checkpoint in-process, on the deployment path the nodes use.
+
+Every step goes through ScheduledEnv -> collect.AgentPolicy (InferenceAgent + ContextHistory,
+fed like the context_estimator node) -> action, so evaluation measures what runs on the robot.
+Reported, per split (train / interpolation / extrapolation value lists of the paper):
+  - return per context value, one constant context per episode, next to a random policy;
+  - return under unannounced mid-episode switches, and the adaptation latency: steps after a
+    switch until the per-step reward (mean of the last 5 steps) is back within 10% of its
+    steady value on the new context (the constant-context run's second-half mean);
+  - the Spearman rank correlation between pairwise distances of the mean learned context per
+    value and of the true contexts (paper section 6.3), with both distance heat maps;
+  - the identifiability probe of appendix B.2 (probe.py) on random-policy data.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
+import itertools
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from zeus_ros.offline.collect import AgentPolicy, Policy, random_policy
+from zeus_ros.offline.metrics import format_table, plot_heatmaps, write_csv
+from zeus_ros.offline.probe import ProbeResult, Rollout, probe_context
+
+__all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
+           'evaluate_contexts', 'main', 'run_steps', 'split_values']
+
+SPLITS = ('train', 'interpolation', 'extrapolation')
+RECOVERY_TOLERANCE = 0.10
+"""A switch is absorbed once the reward is within 10% of its steady value on the new context."""
+SMOOTHING = 5
+"""Per-step rewards are averaged over this many steps before the recovery test."""
+
+
+# ---------------------------------------------------------------------- environment side
+def split_values(task: str, split: str) -> list[dict[str, float]]:
+    """The context values of a split of the paper's tables, as one mapping per value."""
+    from sim_bridge.presets import load_preset
+
+    if split not in SPLITS:
+        raise ValueError(f'split must be one of {", ".join(SPLITS)}, got {split!r}')
+    return load_preset(task, split)
+
+
+def _make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any, Any]:
+    from sim_bridge.env import ScheduledEnv
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+
+    task = make_task(task_name, seed=seed)
+    return ScheduledEnv(task, schedule_from_config(schedule, task, seed)), task
+
+
+def _switch_schedule(values: Sequence[dict[str, float]], every: int) -> dict[str, Any]:
+    """Cycle through `values`, switching every `every` steps, unannounced."""
+    return {'kind': 'switch', 'every': int(every), 'values': [dict(v) for v in values]}
+
+
+# ---------------------------------------------------------------------- rollouts
+@dataclass(frozen=True)
+class Trace:
+    """Per-observation record of a run; reward[i] was earned by the action at i - 1."""
+
+    reward: np.ndarray
+    first: np.ndarray
+    context: np.ndarray
+    segment: np.ndarray
+    psi: np.ndarray | None
+    history_length: np.ndarray
+    obs: np.ndarray
+    action: np.ndarray
+
+    def episode_returns(self) -> list[float]:
+        """Return of every complete or partial episode (rewards after each start)."""
+        starts = [*list(np.flatnonzero(self.first)), len(self.reward)]
+        return [float(self.reward[a + 1:b].sum()) for a, b in itertools.pairwise(starts)]
+
+
+def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = '',
+              progress: bool = True) -> Trace:
+    """Drive `env` for `steps` observations with `policy`, as collect.collect does."""
+    from zeus_ros.offline.collect import _record
+
+    cols: dict[str, list[Any]] = {k: [] for k in ('reward', 'first', 'context', 'segment',
+                                                   'psi', 'hist', 'obs', 'action')}
+    es = env.reset()
+    names = task.context_names
+    for n in tqdm(range(steps), desc=desc, unit='step', disable=not progress, leave=False):
+        rec = _record(es, task, pixels=getattr(policy, 'frames', None) is not None)
+        out = policy(es, rec)
+        obs = es.observation
+        cols['reward'].append(0.0 if obs.first else float(obs.reward))
+        cols['first'].append(bool(obs.first))
+        cols['context'].append([obs.context[name] for name in names])
+        cols['segment'].append(int(es.segment))
+        cols['psi'].append(out.context)
+        cols['hist'].append(out.history_length)
+        cols['obs'].append(np.asarray(obs.state, np.float32))
+        cols['action'].append(np.asarray(out.action, np.float32))
+        if n < steps - 1:
+            es = env.step(out.action)
+    psi = None if any(p is None for p in cols['psi']) else np.stack(cols['psi'])
+    return Trace(np.asarray(cols['reward']), np.asarray(cols['first']),
+                 np.asarray(cols['context'], float), np.asarray(cols['segment']), psi,
+                 np.asarray(cols['hist']), np.stack(cols['obs']), np.stack(cols['action']))
+
+
+def _policy(agent: Any, task: Any, seed: int) -> Policy:
+    return random_policy(task, seed) if agent is None else AgentPolicy(agent, noise=0.0,
+                                                                       seed=seed)
+
+
+def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episodes: int = 1,
+                      seed: int = 0, task_name: str | None = None, progress: bool = True,
+                      traces: list[Trace] | None = None) -> list[dict[str, Any]]:
+    """Deterministic episodes at a constant context per value; one row per episode.
+
+    `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
+    """
+    name = agent.task if agent is not None else task_name
+    rows = []
+    for index, value in enumerate(tqdm(values, desc='contexts', disable=not progress)):
+        env, task = _make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
+        try:
+            trace = run_steps(env, task, _policy(agent, task, seed + index),
+                              episodes * task.episode_length + 1, progress=False)
+        finally:
+            task.close()
+        if traces is not None:
+            traces.append(trace)
+        for episode, ret in enumerate(trace.episode_returns()[:episodes]):
+            rows.append({**{f'context/{k}': v for k, v in value.items()},
+                         'episode': episode, 'return': ret})
+    return rows
+
+
+# ---------------------------------------------------------------------- analysis
+def steady_reward(trace: Trace) -> float:
+    """Mean per-step reward of the second half of the first episode (after start-up)."""
+    starts = [*list(np.flatnonzero(trace.first)), len(trace.reward)]
+    rewards = trace.reward[starts[0] + 1:starts[1]]
+    return float(rewards[len(rewards) // 2:].mean())
+
+
+def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
+                         ) -> list[dict[str, Any]]:
+    """One row per mid-episode switch: steps until the smoothed reward is back near steady.
+
+    A switch whose segment ends (next switch or episode end) first is reported censored with
+    the segment length as its latency.
+    """
+    rows = []
+    episode = np.cumsum(trace.first)
+    boundaries = np.flatnonzero(np.diff(trace.segment) != 0) + 1
+    for s in boundaries:
+        if trace.first[s]:
+            continue
+        key = tuple(np.round(trace.context[s], 6))
+        target = steady.get(key)
+        if target is None:
+            continue
+        end = s + 1
+        while end < len(trace.reward) and trace.segment[end] == trace.segment[s] \
+                and episode[end] == episode[s]:
+            end += 1
+        tolerance = RECOVERY_TOLERANCE * max(abs(target), 1e-3)
+        latency, recovered = end - s, False
+        for t in range(s, end):
+            window = trace.reward[max(s, t - SMOOTHING + 1):t + 1]
+            if t - s + 1 >= min(SMOOTHING, end - s) and abs(window.mean() - target) <= tolerance:
+                latency, recovered = t - s, True
+                break
+        rows.append({'step': int(s), 'from': float(trace.context[s - 1][0]),
+                     'to': float(trace.context[s][0]), 'steady_reward': target,
+                     'latency': latency, 'recovered': recovered})
+    return rows
+
+
+def context_rank_correlation(true: np.ndarray, learned: np.ndarray
+                             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """Spearman rho between upper-triangle pairwise distances of true and learned contexts."""
+    from scipy.spatial.distance import pdist, squareform
+    from scipy.stats import spearmanr
+
+    d_true, d_learned = pdist(np.asarray(true, float)), pdist(np.asarray(learned, float))
+    rho = float('nan') if len(d_true) < 2 else float(spearmanr(d_true, d_learned).statistic)
+    return rho, squareform(d_true), squareform(d_learned)
+
+
+def mean_context_per_value(traces: Sequence[Trace], k: int) -> np.ndarray | None:
+    """Mean psi over the steps of each trace whose history was full (None without psi)."""
+    means = []
+    for trace in traces:
+        if trace.psi is None or trace.psi.shape[1] == 0:
+            return None
+        full = trace.history_length >= k
+        means.append(trace.psi[full].mean(0))
+    return np.stack(means)
+
+
+# ---------------------------------------------------------------------- the command
+def random_rollout(task_name: str, values: Sequence[dict[str, float]], steps: int, *,
+                   every: int, seed: int, progress: bool = True) -> Rollout:
+    """Random-policy steps switching through `values` every `every` steps (probe data)."""
+    env, task = _make_env(task_name, _switch_schedule(values, every), seed)
+    try:
+        trace = run_steps(env, task, random_policy(task, seed), steps, desc='probe data',
+                          progress=progress)
+    finally:
+        task.close()
+    return Rollout(obs=trace.obs, action=trace.action, context=trace.context,
+                   first=trace.first, segment=trace.segment)
+
+
+def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
+             episodes: int = 1, switch_every: int = 100, switch_episodes: int = 1,
+             probe_steps: int = 4000, seed: int = 0, out: str | Path | None = None,
+             progress: bool = True) -> dict[str, Any]:
+    """Run the whole evaluation of one checkpoint on one split; write CSV/PNG into `out`."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.metrics import plot_bars, plot_trace
+
+    agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
+    out = Path(out) if out is not None else Path(checkpoint).parent / f'eval_{split}'
+    values = split_values(agent.task, split)
+    name = agent.context_names[0]
+    labels = [', '.join(f'{v:g}' for v in value.values()) for value in values]
+    traces: list[Trace] = []
+    rows = [{'policy': 'agent', **r} for r in evaluate_contexts(
+        agent, values, episodes=episodes, seed=seed, progress=progress, traces=traces)]
+    rows += [{'policy': 'random', **r} for r in evaluate_contexts(
+        None, values, episodes=episodes, seed=seed, task_name=agent.task, progress=False)]
+    steady = {tuple(np.round(list(v.values()), 6)): steady_reward(t)
+              for v, t in zip(values, traces, strict=True)}
+    env, sim = _make_env(agent.task, _switch_schedule(values, switch_every), seed)
+    try:
+        switching = run_steps(env, sim, AgentPolicy(agent, noise=0.0, seed=seed),
+                              switch_episodes * sim.episode_length + 1, desc='switching',
+                              progress=progress)
+    finally:
+        sim.close()
+    switches = adaptation_latencies(switching, steady)
+    learned = mean_context_per_value(traces, agent.k)
+    true = np.asarray([list(v.values()) for v in values], float)
+    rho = float('nan')
+    if learned is not None:
+        rho, d_true, d_learned = context_rank_correlation(true, learned)
+        plot_heatmaps({'true context distance': d_true, 'learned context distance': d_learned},
+                      labels, out / 'context_distances.png',
+                      title=f'{agent.task} {split}: Spearman rho = {rho:.3f}')
+    probe: ProbeResult | None = None
+    if probe_steps > 0:
+        rollout = random_rollout(agent.task, values, probe_steps, every=50, seed=seed + 1,
+                                 progress=progress)
+        probe = probe_context([rollout], k=5, seed=seed, progress=progress)
+    agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
+    random_ret = [r['return'] for r in rows if r['policy'] == 'random']
+    recovered = [s['latency'] for s in switches if s['recovered']]
+    summary = [{
+        'policy': 'agent', 'method': agent.method, 'split': split,
+        'mean_return': float(np.mean(agent_ret)), 'std_return': float(np.std(agent_ret)),
+        'switching_return': float(np.mean(switching.episode_returns()[:switch_episodes])),
+        'switches': len(switches), 'recovered': len(recovered),
+        'mean_latency': float(np.mean(recovered)) if recovered else float('nan'),
+        'spearman': rho,
+        'probe_mse': probe.mse if probe else float('nan'),
+        'probe_mean_mse': probe.baseline_mse if probe else float('nan')},
+        {'policy': 'random', 'method': 'uniform', 'split': split,
+         'mean_return': float(np.mean(random_ret)), 'std_return': float(np.std(random_ret))}]
+    write_csv(out / 'contexts.csv', rows)
+    write_csv(out / 'switches.csv', switches or [{'step': None}])
+    write_csv(out / 'summary.csv', summary)
+    per_value = {policy: [float(np.mean([r['return'] for r in rows if r['policy'] == policy
+                                         and r[f'context/{name}'] == v[name]]))
+                          for v in values] for policy in ('agent', 'random')}
+    plot_bars(labels, per_value, out / 'returns.png', xlabel=name, ylabel='episode return',
+              title=f'{agent.task} {split}: return per context value ({agent.method})')
+    plot_trace(switching.reward, {name: switching.context[:, 0]},
+               marks=[s['step'] for s in switches], path=out / 'switching.png',
+               title=f'per-step reward under switches every {switch_every} steps')
+    return {'out': out, 'summary': summary, 'per_value': per_value, 'values': labels,
+            'switches': switches, 'probe': probe}
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='zeus eval', description='Evaluate a checkpoint in-process on a context split.')
+    parser.add_argument('--checkpoint', type=Path, required=True)
+    parser.add_argument('--task', help='expected task (error if the checkpoint has another)')
+    parser.add_argument('--split', choices=SPLITS, default='train')
+    parser.add_argument('--episodes', type=int, default=1, help='episodes per context value')
+    parser.add_argument('--switch-every', type=int, default=100,
+                        help='steps between unannounced context switches (switching run)')
+    parser.add_argument('--switch-episodes', type=int, default=1,
+                        help='episodes of the switching run')
+    parser.add_argument('--probe-steps', type=int, default=4000,
+                        help='random-policy steps for the identifiability probe (0: skip)')
+    parser.add_argument('--seed', type=int, default=100)
+    parser.add_argument('--out', type=Path, help='output folder (default: next to checkpoint)')
+    parser.add_argument('--no-progress', action='store_true')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus eval`; returns the process exit code."""
+    from zeus_ros.learning.errors import CheckpointError
+
+    args = _build_parser().parse_args(argv)
+    for flag in ('episodes', 'switch_every', 'switch_episodes'):
+        if getattr(args, flag) < 1:
+            print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
+            return 2
+    try:
+        result = evaluate(args.checkpoint, split=args.split, task=args.task,
+                          episodes=args.episodes, switch_every=args.switch_every,
+                          switch_episodes=args.switch_episodes, probe_steps=args.probe_steps,
+                          seed=args.seed, out=args.out, progress=not args.no_progress)
+    except (CheckpointError, ValueError, FileNotFoundError) as error:
+        print(f'zeus eval: {error}', file=sys.stderr)
+        return 2
+    per_value = result['per_value']
+    table = [{'context': label, 'agent': a, 'random': r} for label, a, r in
+             zip(result['values'], per_value['agent'], per_value['random'], strict=True)]
+    print(format_table(table, ['context', 'agent', 'random']))
+    print()
+    print(format_table(result['summary'], ['policy', 'split', 'mean_return', 'std_return',
+                                           'switching_return', 'recovered', 'switches',
+                                           'mean_latency', 'spearman', 'probe_mse',
+                                           'probe_mean_mse']))
+    print(f'\nwrote CSV and PNG to {result["out"]}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

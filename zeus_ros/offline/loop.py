@@ -1,0 +1,150 @@
+"""`zeus loop`: record -> retrain -> redeploy as one command (in-process, no ROS).
+
+Round 0 collects uniform-random steps and trains from scratch; every later round collects with
+the newest checkpoint plus exploration noise (the policy as deployed, via collect.AgentPolicy),
+appends that bag and resumes training on all bags. Layout under --out:
+  bags/bag_NNN (one bag per round)   run/ (the `zeus train` run directory: checkpoints, metrics)
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import signal
+import sys
+from typing import Any
+
+from zeus_ros.offline.collect import (
+    SCHEDULE_HELP,
+    AgentPolicy,
+    collect,
+    next_bag_path,
+    parse_schedule,
+    random_policy,
+)
+from zeus_ros.offline.train import CHECKPOINT, TrainError, apply_overrides, train
+
+__all__ = ['main', 'run_loop']
+
+
+def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: int, *,
+                   seed: int, checkpoint: Path | None, noise: float, pixels: bool,
+                   progress: bool) -> Path:
+    """One collection: random when `checkpoint` is None, else the agent with noise."""
+    from sim_bridge.env import ScheduledEnv
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+    from zeus_ros.offline.bag_writer import StepBagWriter
+
+    task = make_task(task_name, seed=seed)
+    try:
+        env = ScheduledEnv(task, schedule_from_config(schedule, task, seed))
+        policy = random_policy(task, seed)
+        if checkpoint is not None:
+            from zeus_ros.learning.inference import InferenceAgent
+
+            agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task.name)
+            policy = AgentPolicy(agent, noise=noise, seed=seed)
+        bag = next_bag_path(bags, append=True)
+        bags.mkdir(parents=True, exist_ok=True)
+        with StepBagWriter(bag, pixels=pixels) as writer:
+            stats = collect(env, task, policy, writer, steps, progress=progress)
+    finally:
+        task.close()
+    print(f'loop: wrote {stats.steps} steps ({stats.episodes} episode starts) to {bag} '
+          f'in {stats.seconds:.1f} s')
+    return bag
+
+
+def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_steps: int,
+             steps: int, updates: int, noise: float, schedule: dict[str, Any], seed: int,
+             progress: bool = True, evaluate: bool = True) -> list[Any]:
+    """Run the rounds; returns the TrainResult of each. `updates` are per round."""
+    out = Path(out)
+    bags, run = out / 'bags', out / 'run'
+    pixels = config.obs_kind == 'pixels'
+    results = []
+    for index in range(rounds):
+        checkpoint = None if index == 0 else run / CHECKPOINT
+        what = 'random policy' if checkpoint is None else f'{checkpoint} + noise {noise}'
+        count = random_steps if index == 0 else steps
+        print(f'\nloop: round {index + 1}/{rounds}: collect {count} steps with {what}')
+        _collect_round(task, schedule, bags, count, seed=seed + index,
+                       checkpoint=checkpoint, noise=noise, pixels=pixels, progress=progress)
+        total = updates * (index + 1)
+        print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
+        results.append(train([bags], config.replace(num_updates=total), run, task=task,
+                             resume=index > 0, evaluate=evaluate, progress=progress))
+    print(f'\nloop: done: {rounds} round(s); deploy {run / CHECKPOINT}')
+    return results
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='zeus loop', formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Random collection -> train -> collect with the new policy -> retrain '
+        '(resume), appending bags, for N rounds.', epilog=SCHEDULE_HELP)
+    parser.add_argument('--task', required=True, help='task name, e.g. Cheetah-Run-v0')
+    parser.add_argument('--config', type=Path, required=True, help='training config YAML')
+    parser.add_argument('--out', type=Path, required=True, help='folder for bags/ and run/')
+    parser.add_argument('--rounds', type=int, default=2, help='collect+train rounds')
+    parser.add_argument('--random-steps', type=int, default=1500,
+                        help='uniform-random steps of round 1 (paper: 1500 seed steps)')
+    parser.add_argument('--steps', type=int, default=1500,
+                        help='steps collected with the policy in each later round')
+    parser.add_argument('--updates', type=int,
+                        help='updates per round (default: the config num_updates)')
+    parser.add_argument('--noise', type=float, default=0.2,
+                        help='exploration noise, fraction of half the action range')
+    parser.add_argument('--schedule', default='switch:values=train,every=100',
+                        help='context schedule while collecting (default: %(default)s)')
+    parser.add_argument('--method', help='override the config method')
+    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--device', help='override the config device')
+    parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
+    parser.add_argument('--no-progress', action='store_true', help='hide progress bars')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus loop`; returns the process exit code."""
+    from zeus_ros.learning.config import load_config
+    from zeus_ros.learning.errors import CheckpointError, ConfigError
+    from zeus_ros.offline.errors import BagError, IngestError
+
+    args = _build_parser().parse_args(argv)
+    for flag in ('rounds', 'random_steps', 'steps'):
+        if getattr(args, flag) < 1:
+            print(f'zeus loop: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
+            return 2
+    if (args.out / 'run' / CHECKPOINT).exists():
+        print(f'zeus loop: {args.out} already holds a loop run; choose another --out',
+              file=sys.stderr)
+        return 2
+    try:
+        config = apply_overrides(load_config(args.config), method=args.method, seed=args.seed,
+                                 device=args.device)
+        schedule = parse_schedule(args.schedule)
+    except (ConfigError, ValueError) as error:
+        print(f'zeus loop: {error}', file=sys.stderr)
+        return 2
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        run_loop(args.task, config, args.out, rounds=args.rounds,
+                 random_steps=args.random_steps, steps=args.steps,
+                 updates=args.updates or config.num_updates, noise=args.noise,
+                 schedule=schedule, seed=config.seed, progress=not args.no_progress,
+                 evaluate=not args.no_eval)
+    except (TrainError, ConfigError, CheckpointError, BagError, IngestError,
+            ValueError) as error:
+        print(f'zeus loop: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('zeus loop: interrupted; bags and the latest checkpoint are kept in '
+              f'{args.out}', file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

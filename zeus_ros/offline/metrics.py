@@ -1,0 +1,273 @@
+"""Metric tables as CSV and PNG: one place for the files that training and evaluation write.
+
+Rows are plain dicts; a key may be missing from some rows (the actor loss exists only every
+`actor_update_freq` updates, evaluation columns only at evaluation steps), so CSVs hold the
+union of the columns and leave missing cells empty.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    'MetricsLog',
+    'RunningMean',
+    'format_table',
+    'plot_bars',
+    'plot_grouped_lines',
+    'plot_heatmaps',
+    'plot_metric_grid',
+    'plot_trace',
+    'read_csv',
+    'write_csv',
+]
+
+
+def _columns(rows: Iterable[Mapping[str, Any]]) -> list[str]:
+    """Union of the keys of `rows`, in first-seen order."""
+    seen: dict[str, None] = {}
+    for row in rows:
+        for key in row:
+            seen.setdefault(key, None)
+    return list(seen)
+
+
+def _cell(value: Any) -> Any:
+    """Floats written compactly; None and NaN become empty cells."""
+    if value is None:
+        return ''
+    if isinstance(value, float):
+        return '' if math.isnan(value) else f'{value:.6g}'
+    return value
+
+
+def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
+    """Write `rows` (columns = union of their keys) atomically, so readers never see half."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns = _columns(rows)
+    tmp = path.with_name(f'.{path.name}.tmp')
+    with tmp.open('w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({key: _cell(row.get(key)) for key in columns})
+    tmp.replace(path)
+    return path
+
+
+def _parse(text: str) -> Any:
+    """CSV cell back to a number where it is one; empty cells become None."""
+    if text == '':
+        return None
+    try:
+        number = float(text)
+    except ValueError:
+        return text
+    return int(number) if number.is_integer() and '.' not in text and 'e' not in text else number
+
+
+def read_csv(path: str | Path) -> list[dict[str, Any]]:
+    """Rows of a CSV written by `write_csv`, numbers parsed, empty cells left out."""
+    with Path(path).open(newline='') as handle:
+        return [{key: value for key, value in ((k, _parse(v)) for k, v in row.items())
+                 if value is not None} for row in csv.DictReader(handle)]
+
+
+class RunningMean:
+    """Per-key means over a logging window; keys may come and go between updates."""
+
+    def __init__(self) -> None:
+        self._sum: dict[str, float] = {}
+        self._count: dict[str, int] = {}
+
+    def add(self, values: Mapping[str, float]) -> None:
+        """Accumulate one update's metrics."""
+        for key, value in values.items():
+            self._sum[key] = self._sum.get(key, 0.0) + float(value)
+            self._count[key] = self._count.get(key, 0) + 1
+
+    def pop(self) -> dict[str, float]:
+        """The window's means; starts a new window."""
+        means = {key: self._sum[key] / self._count[key] for key in self._sum}
+        self._sum.clear()
+        self._count.clear()
+        return means
+
+
+class MetricsLog:
+    """Rows kept in memory and rewritten to one CSV on every flush (runs log ~100s of rows)."""
+
+    def __init__(self, path: str | Path, rows: list[dict[str, Any]] | None = None) -> None:
+        self.path = Path(path)
+        self.rows: list[dict[str, Any]] = list(rows or [])
+
+    @classmethod
+    def resume(cls, path: str | Path, *, up_to_step: int) -> MetricsLog:
+        """Rows on disk up to `up_to_step` (later ones belong to a lost tail of the run)."""
+        path = Path(path)
+        rows = read_csv(path) if path.is_file() else []
+        return cls(path, [row for row in rows if int(row.get('step', 0)) <= up_to_step])
+
+    def append(self, row: Mapping[str, Any]) -> None:
+        """Add one row (written at the next flush)."""
+        self.rows.append(dict(row))
+
+    def flush(self) -> Path:
+        """Rewrite the CSV with every row."""
+        return write_csv(self.path, self.rows)
+
+
+def _pyplot() -> Any:
+    """Matplotlib with the file-only backend (no display on robots and CI)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_metric_grid(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], path: str | Path,
+                     *, x: str = 'step', title: str = '') -> Path | None:
+    """One small panel per metric key against `x`; None when no key has data."""
+    series = []
+    for key in keys:
+        pairs = [(row[x], row[key]) for row in rows if key in row and x in row
+                 and isinstance(row[key], int | float)]
+        if pairs:
+            series.append((key, *zip(*pairs, strict=True)))
+    if not series:
+        return None
+    plt = _pyplot()
+    cols = min(3, len(series))
+    nrows = math.ceil(len(series) / cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 2.8 * nrows), squeeze=False)
+    for ax, (key, xs, ys) in zip(axes.flat, series, strict=False):
+        ax.plot(xs, ys, lw=1.2)
+        ax.set_title(key, fontsize=9)
+        ax.set_xlabel(x, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(series):]:
+        ax.set_visible(False)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, group: str,
+                       path: str | Path, title: str = '', ylabel: str = '') -> Path | None:
+    """One line of `y` against `x` per distinct `group` value (e.g. return per context)."""
+    groups: dict[Any, list[tuple[float, float]]] = {}
+    for row in rows:
+        if x in row and y in row and group in row:
+            groups.setdefault(row[group], []).append((row[x], row[y]))
+    if not groups:
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    cmap = plt.get_cmap('viridis')
+    keys = sorted(groups, key=lambda g: (not isinstance(g, int | float), g))
+    for index, key in enumerate(keys):
+        points = sorted(groups[key])
+        color = cmap(index / max(len(keys) - 1, 1))
+        ax.plot(*zip(*points, strict=True), marker='o', ms=3, color=color,
+                label=f'{group}={key:g}' if isinstance(key, float) else f'{group}={key}')
+    ax.set_xlabel(x)
+    ax.set_ylabel(ylabel or y)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_heatmaps(matrices: Mapping[str, np.ndarray], labels: Sequence[str], path: str | Path,
+                  *, title: str = '') -> Path:
+    """Side-by-side heat maps of square matrices sharing axis labels (pairwise distances)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(matrices), figsize=(4.6 * len(matrices), 4.0),
+                             squeeze=False)
+    for ax, (name, matrix) in zip(axes.flat, matrices.items(), strict=True):
+        image = ax.imshow(matrix, cmap='magma')
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks(range(len(labels)), labels, rotation=90, fontsize=7)
+        ax.set_yticks(range(len(labels)), labels, fontsize=7)
+        fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _save(fig: Any, path: str | Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def format_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> str:
+    """A fixed-width text table (numbers to 4 significant digits) for the terminal."""
+    def text(value: Any) -> str:
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            return '-'
+        return f'{value:.4g}' if isinstance(value, float) else str(value)
+
+    cells = [[text(row.get(col)) for col in columns] for row in rows]
+    widths = [max([len(col), *(len(r[i]) for r in cells)]) for i, col in enumerate(columns)]
+    lines = ['  '.join(col.rjust(w) for col, w in zip(columns, widths, strict=True))]
+    lines += ['  '.join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
+    return '\n'.join(lines)
+
+
+def plot_bars(labels: Sequence[str], series: Mapping[str, Sequence[float]], path: str | Path,
+              *, xlabel: str = '', ylabel: str = '', title: str = '') -> Path:
+    """Grouped bars: one group per label, one bar per series (e.g. agent vs random)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.6 * len(labels) * len(series)), 3.8))
+    width = 0.8 / max(len(series), 1)
+    for index, (name, values) in enumerate(series.items()):
+        ax.bar(np.arange(len(labels)) + (index - (len(series) - 1) / 2) * width, values,
+               width, label=name)
+    ax.set_xticks(range(len(labels)), labels, fontsize=8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, axis='y')
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_trace(values: Sequence[float], others: Mapping[str, Sequence[float]], *,
+               marks: Sequence[int], path: str | Path, title: str = '') -> Path:
+    """A per-step trace with vertical marks (e.g. context switches) and extra lower panels."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1 + len(others), 1, figsize=(8.0, 2.4 * (1 + len(others))),
+                             sharex=True, squeeze=False)
+    panels = [('per-step reward', values), *others.items()]
+    for ax, (name, ys) in zip(axes[:, 0], panels, strict=True):
+        ax.plot(np.arange(len(ys)), ys, lw=0.9)
+        for mark in marks:
+            ax.axvline(mark, color='tab:red', lw=0.8, alpha=0.6)
+        ax.set_ylabel(name, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel('step')
+    if title:
+        axes[0, 0].set_title(title, fontsize=10)
+    fig.tight_layout()
+    return _save(fig, path)

@@ -1,0 +1,340 @@
+"""`zeus train`: bags -> replay buffer -> agent updates -> checkpoint, metrics CSV and plots.
+
+Training reads bags only. The data decide the observation normalisation; the task registry
+supplies the action bounds (bags carry applied actions, not the bounds). A run directory holds:
+  checkpoint.pt (latest, what --resume continues), final.pt (end of the run), config.yaml
+  (resolved), metrics.csv + losses.png, and with periodic evaluation eval.csv + eval_returns.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+import sys
+import time
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+import yaml
+
+from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_config
+from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
+from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines, plot_metric_grid
+
+__all__ = ['RUN_CONTROL_FIELDS', 'TrainError', 'TrainResult', 'apply_overrides', 'build_spec',
+           'main', 'train']
+
+CHECKPOINT = 'checkpoint.pt'
+FINAL = 'final.pt'
+RUN_CONTROL_FIELDS = frozenset({'num_updates', 'eval_interval', 'eval_episodes',
+                                'checkpoint_interval', 'log_interval', 'device'})
+"""Config fields a resumed run may change: they steer the run, not the networks or losses."""
+SHOWN_LOSSES = ('loss/critic', 'loss/actor', 'loss/context', 'loss/dynamics', 'loss/reward',
+                'loss/osi', 'loss/reconstruction')
+"""Losses shown on the progress bar (those the method has)."""
+
+
+class TrainError(Exception):
+    """A training run cannot start or continue (bad data, task or resume mismatch)."""
+
+
+@dataclass
+class TrainResult:
+    """What one `train` call did."""
+
+    out: Path
+    checkpoint: Path
+    start_step: int
+    step: int
+    seconds: float
+    log: list[dict[str, Any]] = field(default_factory=list)
+    evals: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def updates_per_s(self) -> float:
+        """Updates done by this call per wall-clock second."""
+        return (self.step - self.start_step) / max(self.seconds, 1e-9)
+
+
+def apply_overrides(config: ZeusConfig, *, method: str | None = None,
+                    updates: int | None = None, seed: int | None = None,
+                    device: str | None = None) -> ZeusConfig:
+    """CLI flags win over the config file (validated like the file)."""
+    changes: dict[str, Any] = {}
+    for name, value in (('method', method), ('num_updates', updates), ('seed', seed),
+                        ('device', device)):
+        if value is not None:
+            changes[name] = value
+    return config.replace(**changes) if changes else config
+
+
+def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
+    """The agent's task side: shapes and normalisation from the data, bounds from the registry.
+
+    The action bounds come from the task registry because bags carry applied actions only.
+    """
+    from sim_bridge.registry import make_task
+
+    try:
+        task = make_task(dataset.task)
+    except (KeyError, ValueError) as error:
+        raise TrainError(f'bags name task {dataset.task!r}, which the task registry does not '
+                         f'know ({error}); record with a registered task') from None
+    try:
+        low, high = task.action_bounds
+        if len(low) != dataset.action_dim:
+            raise TrainError(f'bags hold {dataset.action_dim}-d actions but {dataset.task} has '
+                             f'{len(low)} actuators: the bags were not recorded on this task')
+        pixels = config.obs_kind == 'pixels'
+        return AgentSpec(
+            task=dataset.task, context_names=dataset.context_names, obs_kind=config.obs_kind,
+            obs_shape=PIXEL_SHAPE if pixels else (dataset.obs_dim,),
+            action_dim=dataset.action_dim, action_low=low, action_high=high,
+            obs_mean=None if pixels else replay.obs_mean,
+            obs_std=None if pixels else replay.obs_std)
+    finally:
+        task.close()
+
+
+def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
+    old, new = stored.to_dict(), wanted.to_dict()
+    return [f'{key}: checkpoint {old[key]!r}, now {new[key]!r}' for key in old
+            if key not in RUN_CONTROL_FIELDS and old[key] != new[key]]
+
+
+def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
+               device: Any, seed: int) -> tuple[Any, Any]:
+    from zeus_ros.offline.ingest import ingest_bags
+    from zeus_ros.offline.replay import ReplayBuffer
+
+    dataset = ingest_bags(list(bags))
+    if task is not None and dataset.task != task:
+        raise TrainError(f'--task {task} but the bags hold {dataset.task!r} '
+                         f'({", ".join(dataset.report.bags)})')
+    if config.obs_kind == 'pixels' and not dataset.has_frames:
+        raise TrainError('the config trains on pixels but the bags carry no frames: '
+                         'collect with --pixels or use a state config')
+    replay = ReplayBuffer(dataset, history=config.k, pixels=config.obs_kind == 'pixels',
+                          device=device, seed=seed)
+    if len(replay) < config.batch_size:
+        raise TrainError(f'the bags hold {len(replay)} transitions, fewer than one batch '
+                         f'({config.batch_size}); record more steps')
+    return dataset, replay
+
+
+def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: bool
+           ) -> tuple[Any, int]:
+    """A fresh agent, or the one in out/checkpoint.pt after checking it fits this run."""
+    from zeus_ros.learning.agent import make_agent
+    from zeus_ros.learning.checkpoint import load_checkpoint
+    from zeus_ros.learning.utils import set_seed_everywhere
+
+    path = out / CHECKPOINT
+    if not resume:
+        if path.exists():
+            raise TrainError(f'{out} already holds a run ({path}); pass --resume to continue '
+                             'it or choose another --out')
+        return make_agent(config, build_spec(dataset, replay, config)), 0
+    if not path.is_file():
+        raise TrainError(f'--resume: no checkpoint at {path}; start without --resume')
+    try:
+        loaded = load_checkpoint(path, map_location=config.device, expect_task=dataset.task,
+                                 expect_obs_kind=config.obs_kind)
+    except CheckpointError as error:
+        raise TrainError(f'--resume: {error}') from None
+    wanted = resolve_config(config, dataset.task)
+    diffs = _config_differences(loaded.config, wanted)
+    if diffs:
+        raise TrainError(f'--resume: {path} was trained with another config; '
+                         f'differences: {"; ".join(diffs)}. Resume with the same config and '
+                         f'flags (only {", ".join(sorted(RUN_CONTROL_FIELDS))} may change), '
+                         'or train into a new --out')
+    if loaded.spec.obs_shape[0] != (PIXEL_SHAPE[0] if config.obs_kind == 'pixels'
+                                    else dataset.obs_dim):
+        raise TrainError(f'--resume: {path} expects observations of shape '
+                         f'{loaded.spec.obs_shape}, the bags hold {dataset.obs_dim}-d states')
+    agent = loaded.agent
+    run = {name: getattr(wanted, name) for name in RUN_CONTROL_FIELDS}
+    agent.config = loaded.config.replace(**run)
+    set_seed_everywhere(wanted.seed + loaded.step)
+    return agent, loaded.step
+
+
+def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
+          task: str | None = None, resume: bool = False, evaluate: bool = True,
+          progress: bool = True, log: Callable[[str], None] = print) -> TrainResult:
+    """Train (or continue training) an agent on the transitions in `bags`.
+
+    Runs until `config.num_updates` updates in total (a resumed run counts from its
+    checkpoint's step). Checkpoints every `checkpoint_interval` updates and at the end; a
+    Ctrl-C also saves, so no finished update is lost.
+    """
+    from zeus_ros.learning.checkpoint import save_checkpoint
+    from zeus_ros.learning.utils import resolve_device
+
+    out = Path(out)
+    device = resolve_device(config.device)
+    config = config.replace(device=str(device))
+    resume_step = _peek_step(out / CHECKPOINT) if resume else 0
+    dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step)
+    agent, start = _start(out, config, dataset, replay, resume)
+    cfg = agent.config
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'config.yaml').write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
+    log(f'train: {dataset.task}, method {cfg.method}, {len(replay)} transitions in '
+        f'{replay.num_episodes} episodes from {len(dataset.report.bags)} bag(s); '
+        f'updates {start} -> {cfg.num_updates} on {device}')
+    metrics = MetricsLog.resume(out / 'metrics.csv', up_to_step=start) if resume \
+        else MetricsLog(out / 'metrics.csv')
+    evals = MetricsLog.resume(out / 'eval.csv', up_to_step=start) if resume \
+        else MetricsLog(out / 'eval.csv')
+    needs_pair = cfg.method == 'zeus' and float(cfg.alpha_psi) > 0
+    extra = {'bags': [str(b) for b in dataset.report.bags], 'transitions': len(replay)}
+    window = RunningMean()
+    step = start
+    begin = window_start = time.perf_counter()
+    window_steps = 0
+
+    def save(name: str = CHECKPOINT) -> Path:
+        return save_checkpoint(out / name, agent, step=step, extra=extra)
+
+    bar = tqdm(total=cfg.num_updates, initial=start, unit='upd', desc='train',
+               disable=not progress, dynamic_ncols=True)
+    try:
+        while step < cfg.num_updates:
+            batch = replay.sample(cfg.batch_size)
+            pair = replay.sample(cfg.batch_size) if needs_pair else None
+            window.add(agent.update(batch, pair, step))
+            step += 1
+            window_steps += 1
+            bar.update(1)
+            if step % cfg.log_interval == 0 or step == cfg.num_updates:
+                now = time.perf_counter()
+                row = {'step': step, 'time_s': round(now - begin, 3),
+                       'updates_per_s': window_steps / max(now - window_start, 1e-9),
+                       **window.pop()}
+                window_start, window_steps = now, 0
+                metrics.append(row)
+                metrics.flush()
+                bar.set_postfix({key.split('/')[1]: f'{row[key]:.3g}' for key in SHOWN_LOSSES
+                                 if key in row})
+            if evaluate and step % cfg.eval_interval == 0:
+                rows = _evaluate(agent, dataset.task, cfg, step)
+                for row in rows:
+                    evals.append(row)
+                evals.flush()
+                mean = float(np.mean([row['return'] for row in rows]))
+                bar.write(f'eval @ {step}: mean return {mean:.1f} over {len(rows)} episodes')
+                _plot(out, metrics, evals)
+                window_start = time.perf_counter()  # updates/s measures updates only
+            if step % cfg.checkpoint_interval == 0:
+                save()
+    except KeyboardInterrupt:
+        bar.close()
+        save()
+        metrics.flush()
+        log(f'train: interrupted at update {step}; saved {out / CHECKPOINT} (use --resume)')
+        raise
+    bar.close()
+    save()
+    final = save(FINAL)
+    _plot(out, metrics, evals)
+    seconds = time.perf_counter() - begin
+    result = TrainResult(out, final, start, step, seconds, metrics.rows, evals.rows)
+    log(f'train: {step - start} updates in {seconds:.1f} s ({result.updates_per_s:.1f}/s); '
+        f'checkpoints {out / CHECKPOINT}, {final}; metrics {metrics.path}')
+    return result
+
+
+def _peek_step(path: Path) -> int:
+    """Update count of an existing checkpoint (0 when absent): seeds the resumed sampler."""
+    if not path.is_file():
+        return 0
+    import torch
+
+    try:
+        return int(torch.load(path, map_location='cpu', weights_only=True).get('step', 0))
+    except Exception:  # load_checkpoint reports a broken file with a clear message later
+        return 0
+
+
+def _evaluate(agent: Any, task: str, cfg: ZeusConfig, step: int) -> list[dict[str, Any]]:
+    """Periodic evaluation: deterministic episodes at train-split context values."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluate import evaluate_contexts, split_values
+
+    values = split_values(task, 'train')
+    picks = np.linspace(0, len(values) - 1, min(cfg.eval_episodes, len(values)))
+    chosen = [values[round(i)] for i in picks]
+    rows = evaluate_contexts(InferenceAgent(agent), chosen, episodes=1,
+                             seed=cfg.seed + step, progress=False)
+    return [{'step': step, **row} for row in rows]
+
+
+def _plot(out: Path, metrics: MetricsLog, evals: MetricsLog) -> None:
+    keys = [key for key in dict.fromkeys(k for row in metrics.rows for k in row)
+            if key.startswith(('loss/', 'train/')) or key == 'updates_per_s']
+    plot_metric_grid(metrics.rows, keys, out / 'losses.png', title=f'training: {out.name}')
+    if evals.rows:
+        group = next(key for key in evals.rows[0] if key.startswith('context/'))
+        plot_grouped_lines(evals.rows, x='step', y='return', group=group,
+                           path=out / 'eval_returns.png', ylabel='episode return',
+                           title='evaluation return per context value')
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='zeus train', description='Train a ZeUS (or baseline) agent from bags.')
+    parser.add_argument('--bags', nargs='+', required=True,
+                        help='bag directories, .mcap/.db3 files, or folders of bags')
+    parser.add_argument('--config', type=Path, required=True,
+                        help='training config YAML, e.g. params/train/state_cpu.yaml')
+    parser.add_argument('--out', type=Path, required=True, help='run directory, e.g. runs/x')
+    parser.add_argument('--task', help='expected task (error if the bags hold another)')
+    parser.add_argument('--method', choices=METHODS, help='override the config method')
+    parser.add_argument('--updates', type=int,
+                        help='total updates of the run (overrides num_updates; a resumed run '
+                        'counts from its checkpoint step)')
+    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
+    parser.add_argument('--resume', action='store_true',
+                        help='continue from OUT/checkpoint.pt (optimizers and step count)')
+    parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='torch CPU threads (0: torch default)')
+    parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus train`; returns the process exit code."""
+    args = _build_parser().parse_args(argv)
+    from zeus_ros.offline.errors import BagError, IngestError
+
+    try:
+        config = apply_overrides(load_config(args.config), method=args.method,
+                                 updates=args.updates, seed=args.seed, device=args.device)
+    except ConfigError as error:
+        print(f'zeus train: {error}', file=sys.stderr)
+        return 2
+    if args.threads > 0:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    try:
+        train(args.bags, config, args.out, task=args.task, resume=args.resume,
+              evaluate=not args.no_eval, progress=not args.no_progress)
+    except (TrainError, ConfigError, BagError, IngestError) as error:
+        print(f'zeus train: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
