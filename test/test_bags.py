@@ -304,3 +304,20 @@ def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ['bag_000', 'bag_001']
     ds = ingest_bags(tmp_path)
     assert len(ds.report.bags) == 2 and ds.report.steps == 60
+
+
+def test_inline_schedule_form_builds_a_valid_schedule() -> None:
+    """The documented inline forms of --schedule give configs the schedule code accepts."""
+    from sim_bridge.registry import make_task
+    from sim_bridge.schedules import schedule_from_config
+
+    from zeus_ros.offline.collect import parse_schedule
+
+    task = make_task('Cheetah-Run-v0')
+    for text in ('constant', 'constant:value=0.8', 'switch:train:every=100',
+                 'switch:extrapolation:every_episodes=1,order=sample',
+                 'drift:shape=sinusoid,low=0.6,high=1.2,period=500',
+                 'random_walk:low=0.4,high=1.4,step_size=0.02'):
+        schedule_from_config(parse_schedule(text), task, 0).value_at(250, 1)
+    assert parse_schedule('switch:train:every=100') == {
+        'kind': 'switch', 'values': 'train', 'every': 100}

@@ -31,12 +31,14 @@ __all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyOutput', 'collect', '
 SCHEDULE_HELP = """\
 context schedule: a YAML file (as accepted by sim_bridge.schedules.schedule_from_config), or
 the inline form KIND[:PRESET][:KEY=VALUE[,KEY=VALUE...]] where KIND is a schedule kind
-(constant, switch, drift, random_walk), PRESET names a value list under params/ (train,
-interpolation, extrapolation) and KEY=VALUE are the kind's options, e.g.
-  constant                      the task's default context, never changing
-  switch:train:every=100        cycle through the train preset every 100 steps
-  switch:train:every=episode    ... at every episode boundary
-  drift:train:shape=sine,period=500
+(constant, switch, drift, random_walk), PRESET names a value list of params/contexts (train,
+interpolation, extrapolation; it becomes `values`) and KEY=VALUE are the kind's options, e.g.
+  constant                                the task's default context, never changing
+  constant:value=0.8                      one fixed value
+  switch:train:every=100                  cycle through the train preset every 100 steps
+  switch:train:every_episodes=1,order=sample   a sampled train value per episode
+  drift:shape=sinusoid,low=0.6,high=1.2,period=500
+  random_walk:low=0.4,high=1.4,step_size=0.02
 Numbers in VALUE are parsed as YAML scalars (100 -> int, 0.5 -> float)."""
 
 
@@ -86,7 +88,7 @@ def parse_schedule(text: str) -> dict[str, Any]:
     config: dict[str, Any] = {'kind': parts[0]}
     rest = parts[1:]
     if rest and '=' not in rest[0]:
-        config['preset'] = rest.pop(0)
+        config['values'] = rest.pop(0)
     if len(rest) > 1:
         raise ValueError(f'--schedule {text!r}: give options as one KEY=VALUE,KEY=VALUE list')
     for item in rest[0].split(',') if rest and rest[0] else []:
