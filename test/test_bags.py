@@ -310,7 +310,6 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
     """The documented inline forms of --schedule give configs the schedule code accepts."""
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-
     from zeus_ros.offline.collect import parse_schedule
 
     task = make_task('Cheetah-Run-v0')
