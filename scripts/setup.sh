@@ -58,7 +58,7 @@ fi
 #    on (/opt/python/cp311-cp311/...); point them at this interpreter and numpy.
 PY_INCLUDE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
 NP_INCLUDE=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
-grep -rlZ --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null | \
+{ grep -rlZ --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null || true; } | \
   xargs -0 -r sed -i \
     -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NP_INCLUDE#g" \
     -e "s#/opt/python/cp311-cp311/include/python3.11#$PY_INCLUDE#g"

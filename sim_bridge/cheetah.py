@@ -14,10 +14,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 import functools
 
+from dm_control.utils import rewards
 import mujoco
 import numpy as np
 
-from dm_control.utils import rewards
 from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
 from sim_bridge.model_edit import load_suite_spec

@@ -115,7 +115,7 @@ class DmcTask(ContextualTask):
 
     # --- what a concrete task provides -------------------------------------------------------
 
-    def _prepare_spec(self, spec: mujoco.MjSpec) -> None:  # noqa: B027 - optional hook
+    def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
         """Context-independent edits made once (e.g. explicit densities, contact priority)."""
 
     @abc.abstractmethod
@@ -165,18 +165,22 @@ class DmcTask(ContextualTask):
 
     @property
     def context_specs(self) -> tuple[ContextSpec, ...]:
+        """The task's context parameters."""
         return self.specs
 
     @property
     def action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Actuator control ranges of the model."""
         return self._bounds[0].copy(), self._bounds[1].copy()
 
     @property
     def state_dim(self) -> int:
+        """Length of the flattened observation."""
         return self._state_dim
 
     @property
     def context(self) -> dict[str, float]:
+        """The context in force now (a copy)."""
         return dict(self._context)
 
     @property
@@ -190,6 +194,7 @@ class DmcTask(ContextualTask):
         return float(self._current.model.opt.timestep) * self.n_sub_steps * self.action_repeat
 
     def set_context(self, values: Mapping[str, float]) -> None:
+        """Swap in the model compiled for the new context; physical state carries over."""
         new = {**self._context, **validate_context(self.name, self.specs, values)}
         key = self._model_key(new)
         if key != self._model_key(self._context):
@@ -200,6 +205,7 @@ class DmcTask(ContextualTask):
         self._context = new
 
     def reset(self, seed: int | None = None) -> StepResult:
+        """Start an episode: reset the data, randomise the initial pose as the suite does."""
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         model, data = self._current.model, self._current.data
@@ -217,6 +223,7 @@ class DmcTask(ContextualTask):
         )
 
     def step(self, action: np.ndarray) -> StepResult:
+        """Apply the action for `action_repeat` control steps and sum the reward."""
         if self._needs_reset:
             raise RuntimeError(f'{self.name}: call reset() before step() (episode over or new)')
         act = np.asarray(action, dtype=np.float64).reshape(-1)
@@ -243,6 +250,7 @@ class DmcTask(ContextualTask):
         )
 
     def render(self, height: int = 84, width: int = 84) -> np.ndarray:
+        """RGB frame of the current state from the tracking camera."""
         if self._renderer is None:
             spec = load_suite_spec(self.xml_name, light_textures=False)
             self._prepare_spec(spec)
@@ -251,6 +259,7 @@ class DmcTask(ContextualTask):
         return self._renderer.render(self._current.model, self._current.data, height, width)
 
     def close(self) -> None:
+        """Free the renderer (its GL context)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

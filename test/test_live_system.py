@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from live_fixtures import TASK, node, tiny_checkpoint
-from ros_harness import ProcessGroup, spin_until, driver_node
+from ros_harness import ProcessGroup, driver_node, spin_until
 
 pytestmark = pytest.mark.ros
 STEPS = 320

@@ -14,8 +14,8 @@ from zeus_ros.offline import recover
 from zeus_ros.offline.ingest import ingest_bags
 from zeus_ros.offline.recover import STEP_TOPICS
 
-from ros_harness import python_module, spin_until
 from ros_harness import driver_node as ros_node
+from ros_harness import python_module, spin_until
 
 if TYPE_CHECKING:
     from ros_harness import ProcessGroup

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from ros_harness import ProcessGroup, python_module, spin_until, driver_node
+from ros_harness import ProcessGroup, driver_node, python_module, spin_until
 
 pytestmark = pytest.mark.ros
 
