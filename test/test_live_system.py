@@ -157,3 +157,35 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
             probe, lambda: diagnostics_value(diagnostics, 'context_estimator', 'rejected') == 1,
             timeout=10)
     assert 1 not in estimates
+
+
+def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
+        ros_processes: ProcessGroup, tmp_path) -> None:
+    """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays."""
+    from zeus_ros.offline import collect
+    from zeus_ros.offline.ingest import ingest_bags
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    bag_dir = tmp_path / 'live'
+    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
+    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
+    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
+    time.sleep(2.0)
+    sim = ros_processes.start('sim_bridge', node(
+        'sim_bridge', f'task:={TASK}', 'max_steps:=260', 'seed:=5', 'schedule.kind:=switch',
+        'schedule.every:=100', 'schedule.values:=train'))
+    assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
+    time.sleep(1.5)
+    ros_processes.stop(recorder, signal.SIGINT)
+    assert collect.main(['--task', TASK, '--steps', '261', '--seed', '5', '--schedule',
+                         'switch:train:every=100', '--checkpoint', str(checkpoint),
+                         '--noise', '0', '--out', str(tmp_path / 'collect'),
+                         '--no-progress']) == 0
+    live = ingest_bags([bag_dir], strict=True).episodes
+    local = ingest_bags([tmp_path / 'collect'], strict=True).episodes
+    assert len(live) == len(local) == 1
+    for field in ('steps', 'obs', 'action', 'reward', 'first', 'last', 'context', 'segment',
+                  'stamps_ns'):
+        a, b = getattr(live[0], field), getattr(local[0], field)
+        assert a.shape == b.shape, field
+        np.testing.assert_array_equal(a, b, err_msg=field)

@@ -17,8 +17,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from zeus_msgs.msg import ContextEstimate, ContextTruth, StateVector, StepFeedback
 
-from zeus_ros.learning.checkpoint import CheckpointError
-from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.nodes.agent_loader import load_inference_agent
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
@@ -38,6 +37,7 @@ DEFAULTS: dict[str, Any] = {
     'mode': 'lockstep',
     'image_size': 84,
     'device': 'cpu',
+    'torch_threads': 1,
 }
 
 
@@ -47,12 +47,7 @@ class ContextEstimatorNode(Node):
     def __init__(self) -> None:
         super().__init__('context_estimator')
         self.params = declare_and_validate(self, DEFAULTS, required=('checkpoint',))
-        try:
-            self.agent = InferenceAgent.from_checkpoint(
-                self.params['checkpoint'], expect_task=self.params['task'] or None,
-                device=self.params['device'])
-        except CheckpointError as error:
-            raise ValueError(f'context_estimator: {error}') from error
+        self.agent = load_inference_agent('context_estimator', self.params)
         self.history = self.agent.new_history()
         self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
                                           self.params['image_size'])

@@ -17,8 +17,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from zeus_msgs.msg import Action, ContextEstimate, StateVector, StepFeedback
 
-from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.nodes.agent_loader import load_inference_agent
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
@@ -44,6 +44,7 @@ DEFAULTS: dict[str, Any] = {
     'context_timeout': 2.0,
     'image_size': 84,
     'device': 'cpu',
+    'torch_threads': 1,
 }
 
 
@@ -57,12 +58,7 @@ class PolicyNode(Node):
         self.rng = np.random.default_rng(self.params['seed'])
         self.agent: InferenceAgent | None = None
         if self.params['checkpoint']:
-            try:
-                self.agent = InferenceAgent.from_checkpoint(
-                    self.params['checkpoint'], expect_task=self.params['task'] or None,
-                    device=self.params['device'])
-            except CheckpointError as error:
-                raise ValueError(f'policy: {error}') from error
+            self.agent = load_inference_agent('policy', self.params)
             low, high = self.agent.action_low, self.agent.action_high
             obs_kind, obs_shape = self.agent.obs_kind, self.agent.obs_shape
             self.needs_context = self.agent.context_dim > 0

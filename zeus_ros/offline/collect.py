@@ -281,8 +281,13 @@ def main(argv: list[str] | None = None) -> int:
     env = ScheduledEnv(task, schedule)
     policy = random_policy(task, args.seed)
     if args.checkpoint is not None:
+        import torch
+
         from zeus_ros.learning.inference import InferenceAgent
 
+        # One thread, as the policy and estimator nodes run: the same float results (a live
+        # recording and a collection of the same schedule ingest to identical arrays).
+        torch.set_num_threads(1)
         agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name)
         if agent.obs_kind == 'pixels' and not args.pixels:
             print(f'zeus collect: {args.checkpoint} is a pixel agent; add --pixels',
