@@ -122,8 +122,10 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
                        '-p', 'schedule.kind:=switch', '-p', 'schedule.every:=100',
                        '-p', f'schedule.values:={values}'],
     }
-    processes = {name: subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
-                                        stderr=subprocess.DEVNULL, start_new_session=True)
+    log_dir = Path(tempfile.gettempdir()) / 'zeus_bench_logs'
+    log_dir.mkdir(exist_ok=True)
+    processes = {name: subprocess.Popen(argv, env=env, stdout=(log_dir / f'{name}.log').open('w'),
+                                        stderr=subprocess.STDOUT, start_new_session=True)
                  for name, argv in argvs.items()}
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -155,7 +157,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
         rclpy.shutdown(context=context)
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
-        raise RuntimeError(f'only {len(done)} steps completed; is the setup built?')
+        raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
     latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
     span = seen_obs[done[-1]] - seen_obs[done[0]]
     return {'rate': (len(done) - 1) / span, 'p50': float(np.percentile(latency, 50)),

@@ -168,8 +168,10 @@ class SimBridgeNode(Node):
         """True once a policy publishes actions and someone listens to observations."""
         if not self.params['wait_for_peers']:
             return True
-        return (self.count_publishers(TOPICS.ACTION) > 0
-                and self.count_subscribers(TOPICS.STATE) > 0)
+        observers = self.count_subscribers(TOPICS.STATE)
+        if self._pub_image is not None:
+            observers += self.count_subscribers(TOPICS.IMAGE)
+        return self.count_publishers(TOPICS.ACTION) > 0 and observers > 0
 
     def _on_tick(self) -> None:
         now = time.monotonic()
