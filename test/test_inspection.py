@@ -27,7 +27,8 @@ def test_segments_sum_the_reward_earned_under_each_context() -> None:
     first, second = make_log().segments()
     assert (first.context, first.steps, first.total_return) == ((0.6,), 10, 9.0)
     assert first.reward_per_step == 1.0
-    assert (second.first_step, second.total_return, second.context_error) == (10, 20.0, 0.0)
+    assert (second.first_step, second.total_return) == (10, 20.0)
+    assert second.context_error < 1e-6
     assert 'torso_length=1.2' in format_segments([first, second], ('torso_length',))
 
 
