@@ -4,8 +4,12 @@ _zeus_root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 # shellcheck source=/dev/null
 source "$_zeus_root/.venv/bin/activate"
 export AMENT_PREFIX_PATH="$_zeus_root/.venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+# colcon's setup scripts read unset variables: tolerate that even in `set -u` shells.
+case $- in *u*) _zeus_nounset=1; set +u ;; *) _zeus_nounset= ;; esac
 # shellcheck source=/dev/null
 source "$_zeus_root/install/setup.bash"
+[ -n "$_zeus_nounset" ] && set -u
+unset _zeus_nounset
 export PATH="$_zeus_root/install/zeus_ros/lib/zeus_ros:$PATH"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export MUJOCO_GL=${MUJOCO_GL:-egl}
