@@ -14,6 +14,7 @@ __all__ = [
     'StepLog',
     'StepRecord',
     'format_segments',
+    'linear_readout',
     'percentile',
     'plot_inspection',
 ]
@@ -131,6 +132,17 @@ def format_segments(segments: Sequence[SegmentSummary], names: Sequence[str]) ->
     return '\n'.join(lines)
 
 
+def linear_readout(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Least-squares affine map from psi to the true value, applied to psi.
+
+    psi lives in its own learned space; this read-out shows how much of the true context it
+    carries, in the context's own unit, without training anything.
+    """
+    design = np.hstack([estimates.astype(np.float64), np.ones((len(estimates), 1))])
+    weights, *_ = np.linalg.lstsq(design, truth.astype(np.float64), rcond=None)
+    return design @ weights
+
+
 def _projection(points: np.ndarray) -> np.ndarray:
     """First two principal components (zeros for a degenerate cloud)."""
     centered = points - points.mean(0)
@@ -156,15 +168,11 @@ def plot_inspection(log: StepLog, path: Path, title: str = '') -> Path:
     ax.plot(steps, truth, color='black', lw=2, label=f'true {log.context_names[0]}'
             if log.context_names else 'true context')
     with_est = [r for r in records if r.estimate is not None and r.estimate.size]
-    if with_est:
-        est = np.stack([r.estimate for r in with_est])
-        proj = _projection(est)[:, 0]
-        scale = (truth.std() or 1.0) / (proj.std() or 1.0)
-        corr = np.corrcoef(proj, [r.truth[0] for r in with_est])[0, 1] if len(proj) > 2 else 0
-        sign = -1.0 if corr < 0 else 1.0
-        shown = truth.mean() + sign * scale * (proj - proj.mean())
-        ax.plot([r.step for r in with_est], shown, color='tab:blue', lw=1, alpha=0.8,
-                label='psi (1st PC, rescaled)')
+    if len(with_est) > 2:
+        readout = linear_readout(np.stack([r.estimate for r in with_est]),
+                                 np.array([r.truth[0] for r in with_est]))
+        ax.plot([r.step for r in with_est], readout, color='tab:blue', lw=1, alpha=0.8,
+                label='psi, linear read-out (least squares on this run)')
     for s in segments[1:]:
         ax.axvline(s.first_step, color='tab:red', ls='--', lw=0.8)
     ax.set_xlabel('step')
