@@ -236,7 +236,10 @@ class DmcTask(ContextualTask):
         reward = 0.0
         for _ in range(self.action_repeat):
             mujoco.mj_step(model, data, nstep=self.n_sub_steps)
-            mujoco.mj_forward(model, data)  # sensors/kinematics at the new state, as the suite
+            # As the suite's Physics.step: position/velocity stages (kinematics, pos/vel sensors)
+            # at the new state; acceleration-stage sensors (finger touch) and the solver warm
+            # start keep the values of the last sub-step's solve (a full mj_forward would not).
+            mujoco.mj_step1(model, data)
             reward += self._reward(model, data, act)
         self._episode_step += 1
         last = self._episode_step >= self.episode_length

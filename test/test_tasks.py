@@ -1,213 +1,366 @@
-"""The contextual MuJoCo tasks: every context parameter has a measured physical effect."""
+"""Every task's context measurably changes the physics, and the default models match the suite."""
 
 from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+import itertools
+import os
 
 import mujoco
 import numpy as np
 import pytest
 
-from sim_bridge.cheetah import CheetahRunTask, CheetahVelocityTask
 from sim_bridge.dmc_base import DmcTask
-from sim_bridge.finger import FingerSpinTask, fingertip_radius
+from sim_bridge.finger import fingertip_radius
+from sim_bridge.presets import SPLITS, load_preset
 from sim_bridge.registry import TASK_NAMES, make_task
-from sim_bridge.walker import WalkerFootTask, WalkerFrictionTask
+
+os.environ.setdefault('MUJOCO_GL', 'egl')
+
+Build = Callable[..., DmcTask]
+DMC_TASKS = ('Cheetah-Run-v0', 'Cheetah-Run-v1', 'Walker-Walk-v0', 'Walker-Walk-v1',
+             'Finger-Spin-v0')
 
 
-def _body_mass(task: DmcTask, body: str) -> float:
-    return float(task.model.body(body).mass[0])
+@pytest.fixture
+def build() -> Iterator[Build]:
+    """Factory for tasks whose renderers are closed at teardown (EGL contexts are scarce)."""
+    made: list[DmcTask] = []
+
+    def _build(name: str, seed: int | None = 0, **context: float) -> DmcTask:
+        task = make_task(name, seed=seed, context=context or None)
+        assert isinstance(task, DmcTask)
+        made.append(task)
+        return task
+
+    yield _build
+    for task in made:
+        task.close()
 
 
-def _xpos(task: DmcTask, body: str) -> np.ndarray:
-    return task.data.xpos[task.model.body(body).id].copy()
-
-
-def test_longer_torso_moves_the_thighs_apart_and_adds_torso_mass() -> None:
-    """A longer cheetah torso puts the hips further apart and makes the torso heavier."""
-    short = CheetahRunTask(seed=0, context={'torso_length': 0.5})
-    long = CheetahRunTask(seed=0, context={'torso_length': 1.0})
-    for task in (short, long):
-        mujoco.mj_forward(task.model, task.data)
-    gap_short = np.linalg.norm(_xpos(short, 'fthigh') - _xpos(short, 'bthigh'))
-    gap_long = np.linalg.norm(_xpos(long, 'fthigh') - _xpos(long, 'bthigh'))
-    assert gap_short == pytest.approx(1.0)
-    assert gap_long == pytest.approx(2.0)
-    assert _body_mass(long, 'torso') > 1.5 * _body_mass(short, 'torso')
-    assert long.model.body_subtreemass[1] > short.model.body_subtreemass[1]
-
-
-def test_default_cheetah_keeps_the_suite_masses() -> None:
-    """Replacing settotalmass by a density leaves the default cheetah's masses unchanged."""
-    from sim_bridge.model_edit import load_suite_spec
-
-    with pytest.warns(UserWarning, match='settotalmass'):
-        suite = load_suite_spec('cheetah.xml', light_textures=True).compile()
-    ours = CheetahRunTask(seed=0).model
-    np.testing.assert_allclose(ours.body_mass, suite.body_mass, rtol=1e-9)
-    np.testing.assert_allclose(ours.body_inertia, suite.body_inertia, rtol=1e-9)
-
-
-def _slide_after_push(friction: float) -> float:
-    """How far the left foot of a standing walker slides in 0.2 s after a 1.5 m/s push."""
-    task = WalkerFrictionTask(seed=0, context={'friction': friction})
-    task.reset()
+def _forward_at_qpos0(task: DmcTask) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The task's model and data in the reference pose, kinematics computed."""
     model, data = task.model, task.data
-    mujoco.mj_resetData(model, data)  # upright at qpos0, feet on the floor
-    data.qvel[model.joint('rootx').dofadr[0]] = 1.5
+    mujoco.mj_resetData(model, data)
     mujoco.mj_forward(model, data)
+    return model, data
+
+
+def _run(task: DmcTask, actions: np.ndarray) -> tuple[list[np.ndarray], list[float]]:
+    """States and rewards of an episode started with seed 0 and driven by `actions`."""
+    states, rewards = [task.reset(seed=0).state], []
+    for action in actions:
+        result = task.step(action)
+        states.append(result.state)
+        rewards.append(result.reward)
+    return states, rewards
+
+
+# --- Cheetah-Run-v0: torso_length ----------------------------------------------------------------
+
+@pytest.mark.parametrize('length', [0.3, 0.5, 1.5])
+def test_torso_length_sets_the_distance_between_the_thighs(build: Build, length: float) -> None:
+    """The hips sit at the torso ends: bthigh and fthigh are 2 L apart along the body axis."""
+    model, data = _forward_at_qpos0(build('Cheetah-Run-v0', torso_length=length))
+    gap = data.xpos[model.body('fthigh').id] - data.xpos[model.body('bthigh').id]
+    np.testing.assert_allclose(gap, [2 * length, 0.0, 0.0], atol=1e-12)
+
+
+def test_longer_torso_is_heavier_with_more_pitch_inertia(build: Build) -> None:
+    """Torso mass and inertia grow with its length; the legs keep their masses."""
+    models = [build('Cheetah-Run-v0', torso_length=length).model for length in (0.3, 0.5, 1.5)]
+    torso = models[0].body('torso').id
+    masses = [float(m.body_mass[torso]) for m in models]
+    pitch = [float(m.body_inertia[torso].max()) for m in models]
+    assert masses[0] < masses[1] < masses[2]
+    assert pitch[0] < pitch[1] < pitch[2]
+    for leg in ('bthigh', 'bfoot', 'fthigh', 'ffoot'):
+        leg_masses = {float(m.body_mass[m.body(leg).id]) for m in models}
+        assert len(leg_masses) == 1, (leg, leg_masses)
+
+
+def test_torso_subtree_mass_is_the_sum_of_the_body_masses(build: Build) -> None:
+    """body_subtreemass of the torso is the total mass of the recompiled cheetah."""
+    model = build('Cheetah-Run-v0', torso_length=1.4).model
+    torso = model.body('torso').id
+    assert model.body_subtreemass[torso] == pytest.approx(float(model.body_mass[1:].sum()))
+    assert model.body_subtreemass[torso] > 14.0 + 1.0  # heavier than the suite's 14 kg
+
+
+def test_default_cheetah_has_the_suite_masses(build: Build) -> None:
+    """Replacing settotalmass by a density keeps every default body mass of the suite."""
+    from dm_control import suite
+
+    env = suite.load('cheetah', 'run', task_kwargs={'random': 0})
+    np.testing.assert_allclose(
+        build('Cheetah-Run-v0').model.body_mass, env.physics.model.body_mass, rtol=1e-12)
+
+
+# --- Walker-Walk-v0: friction --------------------------------------------------------------------
+
+def _stand_on_floor(task: DmcTask) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The upright walker at qpos0, lowered until both feet just touch the floor."""
+    model, data = _forward_at_qpos0(task)
+    feet = [model.geom(name).id for name in ('left_foot', 'right_foot')]
+    lowest = min(data.geom_xpos[g, 2] - model.geom_size[g, 0] for g in feet)
+    data.qpos[0] = -lowest - 1e-4  # rootz: 0.1 mm penetration, so the contacts exist
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+def _foot_slide(task: DmcTask, push: float = 1.0, steps: int = 40) -> float:
+    """How far the left foot slides in 0.1 s after the standing walker is shoved forward."""
+    model, data = _stand_on_floor(task)
     foot = model.body('left_foot').id
-    start = data.xpos[foot, 0]
-    for _ in range(4):
-        task.step(np.zeros(task.action_dim))
-    return float(data.xpos[foot, 0] - start)
+    start = float(data.xpos[foot, 0])
+    data.qvel[1] = push  # rootx velocity of the whole walker
+    mujoco.mj_step(model, data, nstep=steps)
+    return float(data.xpos[foot, 0]) - start
 
 
-def test_lower_ground_friction_lets_the_walker_slide_further() -> None:
-    """Under the same push a walker on slippery ground slides further than on grippy ground."""
-    slippery, grippy = _slide_after_push(0.05), _slide_after_push(2.0)
-    assert slippery > 0.15
-    assert slippery > 4 * grippy
+def test_lower_friction_lets_a_foot_slide_further(build: Build) -> None:
+    """The same shove slides the foot further on a slipperier floor (monotone in friction)."""
+    slides = [_foot_slide(build('Walker-Walk-v0', friction=mu)) for mu in (0.05, 0.3, 0.7, 1.9)]
+    assert all(a > b for a, b in itertools.pairwise(slides)), slides
+    assert slides[0] > 3 * slides[-1], slides
 
 
-def test_friction_is_the_floor_contact_friction() -> None:
-    """The context value is the friction the solver uses for foot-floor contacts."""
-    task = WalkerFrictionTask(seed=0, context={'friction': 0.3})
-    task.reset()
-    for _ in range(20):
-        task.step(np.zeros(task.action_dim))
-    assert task.data.ncon > 0
-    frictions = task.data.contact.friction[: task.data.ncon, 0]
-    np.testing.assert_allclose(frictions, 0.3)
+@pytest.mark.parametrize('mu', [0.3, 1.9])
+def test_floor_friction_sets_every_foot_contact(build: Build, mu: float) -> None:
+    """Below or above the walker's own 0.7, the contact friction is the context value."""
+    model, data = _stand_on_floor(build('Walker-Walk-v0', friction=mu))
+    assert data.ncon >= 2
+    floor = model.geom('floor').id
+    for contact in data.contact[:data.ncon]:
+        assert floor in (contact.geom1, contact.geom2)
+        assert contact.friction[0] == pytest.approx(mu)
 
 
-def test_longer_feet_are_longer_and_heavier_on_both_sides() -> None:
-    """foot_length changes both foot capsules, their masses and inertias alike."""
-    short = WalkerFootTask(seed=0, context={'foot_length': 0.06})
-    long = WalkerFootTask(seed=0, context={'foot_length': 0.18})
-    for foot in ('left_foot', 'right_foot'):
-        assert short.model.geom(foot).size[1] == pytest.approx(0.06)
-        assert long.model.geom(foot).size[1] == pytest.approx(0.18)
-        assert _body_mass(long, foot) > 1.5 * _body_mass(short, foot)
-        assert long.model.body(foot).inertia.max() > short.model.body(foot).inertia.max()
-    assert _body_mass(long, 'left_foot') == pytest.approx(_body_mass(long, 'right_foot'))
+# --- Walker-Walk-v1: foot_length -----------------------------------------------------------------
+
+@pytest.mark.parametrize('length', [0.03, 0.21])
+def test_foot_length_sets_both_foot_capsules(build: Build, length: float) -> None:
+    """Both foot capsules get the half-length; their radius stays the suite's 0.05."""
+    model = build('Walker-Walk-v1', foot_length=length).model
+    for name in ('left_foot', 'right_foot'):
+        np.testing.assert_allclose(model.geom(name).size[:2], [0.05, length])
 
 
-def test_bigger_finger_changes_the_fingertip_mass_and_the_image() -> None:
-    """finger_size scales the colliding fingertip: its radius, the distal mass and the pixels."""
-    small = FingerSpinTask(seed=3, context={'finger_size': 0.025})
-    big = FingerSpinTask(seed=3, context={'finger_size': 0.35})
-    try:
-        assert small.model.geom('fingertip').size[0] == pytest.approx(0.03)
-        assert big.model.geom('fingertip').size[0] == pytest.approx(fingertip_radius(0.35))
-        assert _body_mass(big, 'distal') > 2 * _body_mass(small, 'distal')
-        small.reset(seed=3)
-        big.reset(seed=3)
-        mujoco.mj_resetData(big.model, big.data)
-        mujoco.mj_resetData(small.model, small.data)
-        for task in (small, big):
-            mujoco.mj_forward(task.model, task.data)
-        image_small, image_big = small.render(), big.render()
-        assert image_small.shape == (84, 84, 3)
-        assert image_small.dtype == np.uint8
-        changed = np.any(image_small != image_big, axis=-1).mean()
-        assert changed > 0.01
-    finally:
-        small.close()
-        big.close()
+def test_longer_feet_are_heavier_and_symmetric(build: Build) -> None:
+    """Foot mass and inertia grow with the length, identically on the left and the right."""
+    masses = []
+    for length in (0.03, 0.1, 0.21):
+        model = build('Walker-Walk-v1', foot_length=length).model
+        left, right = model.body('left_foot').id, model.body('right_foot').id
+        assert model.body_mass[left] == model.body_mass[right]
+        np.testing.assert_array_equal(model.body_inertia[left], model.body_inertia[right])
+        masses.append(float(model.body_mass[left]))
+    assert masses[0] < masses[1] < masses[2]
 
 
-def test_target_velocity_changes_only_the_reward() -> None:
-    """The same motion earns different rewards under different target velocities."""
-    slow = CheetahVelocityTask(seed=5, context={'target_velocity': 0.0})
-    fast = CheetahVelocityTask(seed=5, context={'target_velocity': 3.0})
-    slow.reset()
-    fast.reset()
-    rng = np.random.default_rng(0)
-    for _ in range(5):
-        action = rng.uniform(-1, 1, slow.action_dim)
-        out_slow, out_fast = slow.step(action), fast.step(action)
-        np.testing.assert_array_equal(out_slow.state, out_fast.state)
-        assert out_slow.reward != pytest.approx(out_fast.reward)
+# --- Finger-Spin-v0: finger_size -----------------------------------------------------------------
+
+def test_bigger_finger_grows_the_fingertip_and_the_distal_mass(build: Build) -> None:
+    """The fingertip radius follows the documented map; the distal link gets heavier."""
+    masses = []
+    for size in (0.01, 0.025, 0.5):
+        model = build('Finger-Spin-v0', finger_size=size).model
+        assert model.geom('fingertip').size[0] == pytest.approx(fingertip_radius(size))
+        assert model.site('touchtop').size[0] == pytest.approx(size)
+        masses.append(float(model.body_mass[model.body('distal').id]))
+    assert fingertip_radius(0.025) == pytest.approx(0.03)  # the suite's fingertip at default
+    assert masses[0] < masses[1] < masses[2]
 
 
-def test_mid_episode_context_change_keeps_the_physical_state() -> None:
-    """Switching the geometry mid-episode carries qpos, qvel and time into the new model."""
-    task = CheetahRunTask(seed=1)
-    task.reset()
-    for _ in range(10):
-        task.step(np.full(task.action_dim, 0.5))
+def test_bigger_finger_changes_the_rendered_image(build: Build) -> None:
+    """The same state renders differently once the finger is bigger (it is visible)."""
+    task = build('Finger-Spin-v0')
+    task.reset(seed=0)
+    before = task.render()
+    task.set_context({'finger_size': 0.35})
+    after = task.render()
+    changed = int((before != after).any(axis=-1).sum())
+    assert changed > 100, changed
+
+
+def test_switched_context_renders_like_a_task_built_for_it(build: Build) -> None:
+    """After a switch the frame is exactly that of a fresh task of the new size, same state."""
+    switched = build('Finger-Spin-v0')
+    switched.reset(seed=0)
+    switched.set_context({'finger_size': 0.2})
+    fresh = build('Finger-Spin-v0', finger_size=0.2)
+    fresh.reset(seed=0)
+    fresh.data.qpos[:] = switched.data.qpos
+    fresh.data.qvel[:] = switched.data.qvel
+    mujoco.mj_forward(fresh.model, fresh.data)
+    np.testing.assert_array_equal(switched.render(), fresh.render())
+
+
+# --- Cheetah-Run-v1: target_velocity -------------------------------------------------------------
+
+def test_same_motion_earns_another_reward_under_another_target(build: Build) -> None:
+    """Identical actions give identical states but different rewards for another target."""
+    actions = np.random.default_rng(3).uniform(-1, 1, (20, 6))
+    slow_states, slow_rewards = _run(build('Cheetah-Run-v1', target_velocity=0.5), actions)
+    fast_states, fast_rewards = _run(build('Cheetah-Run-v1', target_velocity=3.0), actions)
+    np.testing.assert_array_equal(np.array(slow_states), np.array(fast_states))
+    assert all(a != b for a, b in zip(slow_rewards, fast_rewards, strict=True))
+
+
+def test_target_reward_is_linear_in_the_target_below_the_speed(build: Build) -> None:
+    """Standing still, raising the target by dv costs exactly dv per control step."""
+    zero = np.zeros((5, 6))
+    _, low = _run(build('Cheetah-Run-v1', target_velocity=1.5), zero)
+    _, high = _run(build('Cheetah-Run-v1', target_velocity=3.0), zero)
+    repeat = build('Cheetah-Run-v1').action_repeat
+    np.testing.assert_allclose(np.subtract(low, high), repeat * 1.5, atol=1e-9)
+
+
+# --- shared behaviour ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize(('name', 'parameter', 'value'), [
+    ('Cheetah-Run-v0', 'torso_length', 1.2),
+    ('Walker-Walk-v1', 'foot_length', 0.18),
+    ('Finger-Spin-v0', 'finger_size', 0.2),
+])
+def test_geometry_switch_mid_episode_keeps_the_physical_state(
+    build: Build, name: str, parameter: str, value: float
+) -> None:
+    """set_context swaps the model but keeps qpos, qvel and time bit for bit."""
+    task = build(name)
+    _run(task, np.random.default_rng(1).uniform(-1, 1, (10, task.action_dim)))
     old_model = task.model
-    qpos, qvel, time = task.data.qpos.copy(), task.data.qvel.copy(), task.data.time
-    task.set_context({'torso_length': 0.8})
+    qpos, qvel, time = task.data.qpos.copy(), task.data.qvel.copy(), task.sim_time
+    task.set_context({parameter: value})
     assert task.model is not old_model
     np.testing.assert_array_equal(task.data.qpos, qpos)
     np.testing.assert_array_equal(task.data.qvel, qvel)
-    assert task.data.time == time
-    assert task.context == {'torso_length': 0.8}
-    assert task.step(np.zeros(task.action_dim)).context == {'torso_length': 0.8}
+    assert task.sim_time == time
+    assert np.isfinite(task.step(np.zeros(task.action_dim)).state).all()
 
 
-def test_returning_to_a_context_reuses_the_compiled_model() -> None:
-    """The LRU cache compiles each geometry once while it stays in the cache."""
-    task = WalkerFootTask(seed=0)
-    task.reset()
+@pytest.mark.parametrize(('name', 'domain', 'suite_task'), [
+    ('Cheetah-Run-v0', 'cheetah', 'run'),
+    ('Walker-Walk-v0', 'walker', 'walk'),
+    ('Finger-Spin-v0', 'finger', 'spin'),
+])
+def test_default_context_matches_the_dm_control_suite(
+    build: Build, name: str, domain: str, suite_task: str
+) -> None:
+    """From the same state and actions, observations and rewards equal dm_control's."""
+    from dm_control import suite
+
+    task = build(name)
+    state = task.reset(seed=0).state
+    env = suite.load(domain, suite_task, task_kwargs={'random': 0})
+    env.reset()
+    with env.physics.reset_context():
+        env.physics.data.qpos[:] = task.data.qpos
+        env.physics.data.qvel[:] = task.data.qvel
+
+    def flat(observation: Mapping[str, np.ndarray]) -> np.ndarray:
+        return np.concatenate([np.ravel(v) for v in observation.values()])
+
+    np.testing.assert_allclose(state, flat(env.task.get_observation(env.physics)), atol=1e-12)
+    for action in np.random.default_rng(2).uniform(-1, 1, (30, task.action_dim)):
+        result = task.step(action)
+        reward = 0.0
+        for _ in range(task.action_repeat):
+            step = env.step(action)
+            reward += step.reward
+        np.testing.assert_allclose(result.state, flat(step.observation), atol=1e-9)
+        assert result.reward == pytest.approx(reward, abs=1e-9)
+    assert task.sim_time == pytest.approx(env.physics.data.time)
+
+
+def test_finger_touch_observation_matches_the_suite_in_contact(build: Build) -> None:
+    """While the tip presses the spinner, the touch readings equal dm_control's after a step."""
+    from dm_control import suite
+
+    task = build('Finger-Spin-v0')
+    task.reset(seed=0)
+    env = suite.load('finger', 'spin', task_kwargs={'random': 0})
+    env.reset()
+    with env.physics.reset_context():
+        env.physics.data.qpos[:] = task.data.qpos
+        env.physics.data.qvel[:] = task.data.qvel
+    ours, theirs = [], []
+    for action in np.random.default_rng(2).uniform(-1, 1, (30, task.action_dim)):
+        ours.append(task.step(action).state[-2:])
+        for _ in range(task.action_repeat):
+            step = env.step(action)
+        theirs.append(step.observation['touch'])
+    assert np.max(theirs) > 1.0  # the episode really has contact
+    np.testing.assert_allclose(ours, theirs, atol=1e-9)
+
+
+def test_returning_to_a_context_reuses_the_compiled_model(build: Build) -> None:
+    """The LRU cache compiles each geometry once while it stays cached."""
+    task = build('Walker-Walk-v1')
+    task.reset(seed=0)
     before = task.cache.compiles
     for value in (0.12, 0.1, 0.12, 0.1):
         task.set_context({'foot_length': value})
     assert task.cache.compiles == before + 1
 
 
-@pytest.mark.parametrize(
-    ('domain', 'cls'),
-    [('cheetah', CheetahRunTask), ('walker', WalkerFrictionTask), ('finger', FingerSpinTask)],
-)
-def test_observation_and_reward_match_dm_control(domain: str, cls: type[DmcTask]) -> None:
-    """At the default context our observation and reward equal the suite's for the same state."""
-    from dm_control import suite
-
-    env = suite.load(domain, {'cheetah': 'run', 'walker': 'walk', 'finger': 'spin'}[domain])
-    env.reset()
-    physics = env.physics
-    task = cls(seed=2)
-    task.reset()
-    rng = np.random.default_rng(0)
-    for _ in range(3):
-        task.step(rng.uniform(-1, 1, task.action_dim))
-    with physics.reset_context():
-        physics.data.qpos[:] = task.data.qpos
-        physics.data.qvel[:] = task.data.qvel
-    expected = np.concatenate(
-        [np.atleast_1d(v).ravel() for v in env.task.get_observation(physics).values()]
-    )
-    np.testing.assert_allclose(task._observation(task.model, task.data), expected, atol=1e-9)
-    assert task._reward(task.model, task.data, np.zeros(task.action_dim)) == pytest.approx(
-        env.task.get_reward(physics)
-    )
+def test_reward_only_context_never_recompiles(build: Build) -> None:
+    """Cheetah-Run-v1 keeps its one model whatever the target velocity."""
+    task = build('Cheetah-Run-v1')
+    model = task.model
+    for value in (0.0, 3.0, 4.0):
+        task.set_context({'target_velocity': value})
+    assert task.model is model and task.cache.compiles == 1
 
 
-def test_episode_ends_after_episode_length_and_needs_a_reset() -> None:
-    """The last observation comes at episode_length; stepping past it is an error."""
-    task = CheetahVelocityTask(seed=0)
-    assert task.reset().first
+def test_episode_ends_after_episode_length_and_needs_a_reset(build: Build) -> None:
+    """Exactly the episode_length-th step is last; stepping past it is an error."""
+    task = build('Cheetah-Run-v1')
+    assert task.reset(seed=0).first
     results = [task.step(np.zeros(task.action_dim)) for _ in range(task.episode_length)]
-    assert [r.last for r in results].count(True) == 1
-    assert results[-1].last
+    assert [r.last for r in results] == [False] * (task.episode_length - 1) + [True]
     with pytest.raises(RuntimeError, match='reset'):
         task.step(np.zeros(task.action_dim))
 
 
-@pytest.mark.parametrize(
-    ('context', 'fragment'),
-    [({'torso_len': 0.5}, 'unknown context parameter'), ({'torso_length': 9.0}, 'outside')],
-)
-def test_bad_context_is_rejected_with_the_reason(context: dict, fragment: str) -> None:
-    """Unknown names and out-of-range values raise ValueError naming the problem."""
-    task = CheetahRunTask(seed=0)
+@pytest.mark.parametrize(('context', 'fragment'), [
+    ({'torso_len': 0.5}, 'unknown context parameter'),
+    ({'torso_length': 9.0}, 'outside'),
+    ({'torso_length': float('nan')}, 'outside'),
+])
+def test_bad_context_is_rejected_with_the_reason(
+    build: Build, context: dict[str, float], fragment: str
+) -> None:
+    """Unknown names, out-of-range and non-finite values raise ValueError naming the problem."""
+    task = build('Cheetah-Run-v0')
     with pytest.raises(ValueError, match=fragment):
         task.set_context(context)
+    assert task.context == {'torso_length': 0.5}
 
 
 def test_unknown_task_name_lists_the_valid_names() -> None:
     """make_task refuses an unknown name and lists the registered ones."""
     with pytest.raises(ValueError, match='Cheetah-Run-v0'):
         make_task('Cheetah-Fly-v0')
-    assert 'Sawyer-Peg-v0' in TASK_NAMES
+    assert set(DMC_TASKS) < set(TASK_NAMES)
+
+
+@pytest.mark.parametrize('split', SPLITS)
+@pytest.mark.parametrize('name', DMC_TASKS)
+def test_every_preset_value_builds_a_valid_model(name: str, split: str) -> None:
+    """Each value of the paper's tables compiles, resets and steps to a finite state."""
+    for context in load_preset(name, split):
+        task = make_task(name, seed=0, context=context)
+        task.reset()
+        result = task.step(np.zeros(task.action_dim))
+        assert np.isfinite(result.state).all() and np.isfinite(result.reward), context
+        assert result.context == context
+
+
+def test_render_is_an_84x84_rgb_uint8_frame(build: Build) -> None:
+    """The default frame is what the pixel encoder expects: 84x84x3 uint8, not blank."""
+    task = build('Walker-Walk-v0')
+    task.reset(seed=0)
+    frame = task.render()
+    assert frame.shape == (84, 84, 3) and frame.dtype == np.uint8
+    assert frame.std() > 1.0
