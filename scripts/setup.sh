@@ -70,6 +70,7 @@ export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
 export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 export LD_LIBRARY_PATH="$VENV/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+mkdir -p "$ROOT/log"
 say "colcon build (zeus_msgs, zeus_ros)"
 colcon --log-base "$ROOT/log" build --base-paths "$ROOT" "$ROOT/msg_defs" \
   --build-base "$ROOT/build" --install-base "$ROOT/install" --symlink-install \
