@@ -169,7 +169,10 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     bag_dir = tmp_path / 'live'
     recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
     ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
-    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
+    # A generous context deadline: under CPU load a late context must be waited for, not
+    # replaced by the newest one, or the two runs would (legitimately) act differently.
+    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
+                                       'context_deadline:=10.0'))
     time.sleep(2.0)
     sim = ros_processes.start('sim_bridge', node(
         'sim_bridge', f'task:={TASK}', 'max_steps:=260', 'seed:=5', 'schedule.kind:=switch',

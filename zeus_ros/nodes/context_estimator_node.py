@@ -14,21 +14,18 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import Image
-from zeus_msgs.msg import ContextEstimate, ContextTruth, StateVector, StepFeedback
+from zeus_msgs.msg import ContextEstimate, ContextTruth, StepFeedback
 
 from zeus_ros.nodes.agent_loader import load_inference_agent
-from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
     RateMeter,
     diagnostics_message,
-    image_qos,
     run_node,
-    stamp_ns,
     step_qos,
 )
-from zeus_ros.nodes.observation import ObservationDecoder
+from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import declare_and_validate
 
 DEFAULTS: dict[str, Any] = {
@@ -56,17 +53,11 @@ class ContextEstimatorNode(Node):
         self._missing_in_episode = 0
         self._rate = RateMeter()
         self._latency_ms: list[float] = []
-        required = ['feedback', 'obs'] + (['truth'] if self.agent.needs_true_context else [])
-        self.assembler = StepAssembler(required, self._on_step)
-
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
-        self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
-        if self.agent.obs_kind == 'pixels':
-            self.create_subscription(Image, TOPICS.IMAGE, self._on_image,
-                                     image_qos(self.params['mode']))
-        else:
-            self.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+        self.inputs = StepInputs(
+            self, self.decoder, self._on_step, self._reject, mode=self.params['mode'],
+            extra_parts=['truth'] if self.agent.needs_true_context else [])
+        self.assembler = self.inputs.assembler
         if self.agent.needs_true_context:
             self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
@@ -81,28 +72,6 @@ class ContextEstimatorNode(Node):
         self.counts['rejected'] += 1
         self.get_logger().warning(f'rejected {topic} for step {step}: {error}',
                                   throttle_duration_sec=2.0)
-
-    def _on_state(self, msg: StateVector) -> None:
-        try:
-            raw = self.decoder.validate(msg)
-        except ValueError as error:
-            self._reject(msg.step, TOPICS.STATE, error)
-            return
-        self.assembler.add(msg.step, 'obs', (time.monotonic(), raw))
-
-    def _on_feedback(self, msg: StepFeedback) -> None:
-        self.assembler.add(msg.step, 'feedback', msg)
-        if self.agent.obs_kind == 'pixels':
-            self._join.feedback(stamp_ns(msg.header.stamp), msg.step)
-
-    def _on_image(self, msg: Image) -> None:
-        # Images carry no step index: the join matches them to a step through the stamp.
-        try:
-            raw = self.decoder.validate(msg)
-        except ValueError as error:
-            self._reject(-1, TOPICS.IMAGE, error)
-            return
-        self._join.image(stamp_ns(msg.header.stamp), (time.monotonic(), raw))
 
     def _on_step(self, parts: StepParts) -> None:
         feedback: StepFeedback = parts.parts['feedback']

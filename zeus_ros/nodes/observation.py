@@ -2,18 +2,28 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+from sensor_msgs.msg import Image
+from zeus_msgs.msg import StateVector, StepFeedback
 
 from zeus_ros.learning.frames import FrameStack
-from zeus_ros.nodes.common import array_from_image
+from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.common import (
+    TOPICS,
+    array_from_image,
+    image_qos,
+    stamp_ns,
+    step_qos,
+)
 
 if TYPE_CHECKING:
-    from sensor_msgs.msg import Image
-    from zeus_msgs.msg import StateVector
+    from rclpy.node import Node
 
-__all__ = ['ObservationDecoder']
+__all__ = ['ObservationDecoder', 'StepInputs']
 
 
 class ObservationDecoder:
@@ -43,3 +53,48 @@ class ObservationDecoder:
         if self.frames is None:
             return raw
         return self.frames.reset(raw) if first else self.frames.push(raw)
+
+
+class StepInputs:
+    """Subscribes a node to StepFeedback and its observation topic; assembles them per step.
+
+    `on_step` receives StepParts with 'feedback' (the StepFeedback) and 'obs' (receipt time,
+    validated raw array), plus any `extra_parts` the node adds itself through `assembler.add`.
+    A message that fails validation goes to `on_reject(step, topic, error)` and is dropped.
+    """
+
+    def __init__(self, node: Node, decoder: ObservationDecoder,
+                 on_step: Callable[[StepParts], None],
+                 on_reject: Callable[[int, str, ValueError], None], *, mode: str,
+                 extra_parts: Sequence[str] = ()) -> None:
+        self.decoder = decoder
+        self.on_reject = on_reject
+        self.assembler = StepAssembler(['feedback', 'obs', *extra_parts], on_step)
+        self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
+        node.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
+        if decoder.obs_kind == 'pixels':
+            node.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(mode))
+        else:
+            node.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+
+    def _on_feedback(self, msg: StepFeedback) -> None:
+        self.assembler.add(msg.step, 'feedback', msg)
+        if self.decoder.obs_kind == 'pixels':
+            self._join.feedback(stamp_ns(msg.header.stamp), msg.step)
+
+    def _on_state(self, msg: StateVector) -> None:
+        try:
+            raw = self.decoder.validate(msg)
+        except ValueError as error:
+            self.on_reject(msg.step, TOPICS.STATE, error)
+            return
+        self.assembler.add(msg.step, 'obs', (time.monotonic(), raw))
+
+    def _on_image(self, msg: Image) -> None:
+        # Images carry no step index: the join matches them to a step through the stamp.
+        try:
+            raw = self.decoder.validate(msg)
+        except ValueError as error:
+            self.on_reject(-1, TOPICS.IMAGE, error)
+            return
+        self._join.image(stamp_ns(msg.header.stamp), (time.monotonic(), raw))

@@ -14,23 +14,20 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import Image
-from zeus_msgs.msg import Action, ContextEstimate, StateVector, StepFeedback
+from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.nodes.agent_loader import load_inference_agent
-from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
     RateMeter,
     action_qos,
     diagnostics_message,
-    image_qos,
     run_node,
-    stamp_ns,
     step_qos,
 )
-from zeus_ros.nodes.observation import ObservationDecoder
+from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import declare_and_validate
 
 DEFAULTS: dict[str, Any] = {
@@ -82,17 +79,13 @@ class PolicyNode(Node):
         self._waiting: tuple[int, Any, np.ndarray, float] | None = None
         self._rate = RateMeter()
         self._started = time.monotonic()
-        self.assembler = StepAssembler(['feedback', 'obs'], self._on_observation)
-        self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
 
         mode = self.params['mode']
         self._pub: Any = None
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
-        if obs_kind == 'pixels':
-            self.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(mode))
-        else:
-            self.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+        self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
+                                 mode=mode)
+        self.assembler = self.inputs.assembler
         if self.needs_context:
             self.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context,
                                      step_qos())
@@ -120,27 +113,10 @@ class PolicyNode(Node):
         self.destroy_timer(self._ready_timer)
 
     # -- inputs ------------------------------------------------------------------------------
-    def _on_feedback(self, msg: StepFeedback) -> None:
-        self.assembler.add(msg.step, 'feedback', msg)
-        if self.decoder.obs_kind == 'pixels':
-            self._join.feedback(stamp_ns(msg.header.stamp), msg.step)
-
-    def _on_state(self, msg: StateVector) -> None:
-        try:
-            self.assembler.add(msg.step, 'obs', self.decoder.validate(msg))
-        except ValueError as error:
-            self._reject(msg.step, error)
-
-    def _on_image(self, msg: Image) -> None:
-        try:
-            self._join.image(stamp_ns(msg.header.stamp), self.decoder.validate(msg))
-        except ValueError as error:
-            self._reject(-1, error)
-
     def _on_context(self, msg: ContextEstimate) -> None:
         context = np.asarray(msg.data, dtype=np.float32)
         if self.agent is not None and context.shape != (self.agent.context_dim,):
-            self._reject(msg.step, ValueError(
+            self._reject(msg.step, TOPICS.CONTEXT, ValueError(
                 f'context has {context.size} values, expected {self.agent.context_dim}'))
             return
         self._newest_context = (time.monotonic(), context)
@@ -152,15 +128,15 @@ class PolicyNode(Node):
             self._waiting = None
             self._act(step, feedback, obs, context, 'fresh')
 
-    def _reject(self, step: int, error: ValueError) -> None:
+    def _reject(self, step: int, topic: str, error: ValueError) -> None:
         self.counts['rejected'] += 1
-        self.get_logger().warning(f'rejected input for step {step}: {error}',
+        self.get_logger().warning(f'rejected {topic} for step {step}: {error}',
                                   throttle_duration_sec=2.0)
 
     # -- acting ------------------------------------------------------------------------------
     def _on_observation(self, parts: StepParts) -> None:
         feedback: StepFeedback = parts.parts['feedback']
-        obs = self.decoder.observation(parts.parts['obs'], feedback.first)
+        obs = self.decoder.observation(parts.parts['obs'][1], feedback.first)
         if self._waiting is not None:  # a newer observation overtook the one still waiting
             self._expire_waiting()
         if not self.needs_context:
