@@ -35,6 +35,7 @@ from zeus_ros.nodes.common import (
     stamp_from_seconds,
     step_qos,
 )
+from zeus_ros.nodes.params import declare_and_validate
 
 MODES = ('lockstep', 'realtime')
 SCHEDULE_PREFIX = 'schedule.'
@@ -106,42 +107,8 @@ class SimBridgeNode(Node):
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
         """Declare every known parameter with its default, then validate them all at once."""
-        for name, default in DEFAULTS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default)
-        params = {name: self.get_parameter(name).value for name in DEFAULTS}
-        known = set(DEFAULTS) | {'use_sim_time', 'start_type_description_service'}
-        unknown = [
-            name for name in self._parameters
-            if name not in known and not name.startswith(SCHEDULE_PREFIX)
-        ]
-        if unknown:
-            raise ValueError(
-                f'sim_bridge: unknown parameter(s) {sorted(unknown)}; known: {sorted(DEFAULTS)} '
-                f'and schedule.* (see params/sim_bridge.yaml)'
-            )
-        for name, default in DEFAULTS.items():
-            value = params[name]
-            if isinstance(default, bool) and not isinstance(value, bool):
-                raise ValueError(
-                    f'sim_bridge: parameter {name} must be true or false, got {value!r}'
-                )
-            if isinstance(default, (int, float)) and not isinstance(default, bool):
-                if not isinstance(value, (int, float)) or isinstance(value, bool):
-                    raise ValueError(
-                        f'sim_bridge: parameter {name} must be a number, got {value!r}'
-                    )
-                if value < 0:
-                    raise ValueError(f'sim_bridge: parameter {name} must be >= 0, got {value}')
-        if params['task'] not in TASK_NAMES:
-            raise ValueError(
-                f'sim_bridge: parameter task={params["task"]!r} is not a task; '
-                f'allowed: {", ".join(TASK_NAMES)}'
-            )
-        if params['mode'] not in MODES:
-            raise ValueError(
-                f'sim_bridge: parameter mode={params["mode"]!r}; allowed: {", ".join(MODES)}'
-            )
+        params = declare_and_validate(self, DEFAULTS, open_prefixes=[SCHEDULE_PREFIX],
+                                      choices={'task': TASK_NAMES, 'mode': MODES})
         if params['action_timeout'] <= 0:
             raise ValueError('sim_bridge: parameter action_timeout must be > 0 seconds')
         return params
