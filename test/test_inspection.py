@@ -18,6 +18,7 @@ def make_log() -> StepLog:
         record.first = step == 0
         record.reward = 0.0 if step == 0 else (1.0 if step < 10 else 2.0)
         record.estimate = np.array([value, -value], np.float32)
+        record.history_length = min(step, 5)
         record.t_observation, record.t_action = float(step), step + 0.002
     return log
 

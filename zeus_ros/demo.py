@@ -21,9 +21,10 @@ from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_CHECKPOINT = REPO / 'checkpoints' / 'cheetah_run_v0_zeus_state.pt'
-# Training values (0.6-1.15) and extrapolation values (0.3-0.55, 1.2), 150 steps each: with
-# 500-step episodes most switches land in the middle of an episode.
-SCHEDULE_VALUES = [0.7, 0.3, 1.1, 0.5, 1.2, 0.6, 0.4, 1.0]
+# Training values (0.7-1.15) alternating with extrapolation values (1.2-1.5), 150 steps each:
+# with 500-step episodes most switches land in the middle of an episode. The shipped checkpoint
+# fails on the shortest torsos (0.3-0.6, see its card), so the demo shows the range it handles.
+SCHEDULE_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
 
 
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeProcess]:

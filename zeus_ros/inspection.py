@@ -167,7 +167,10 @@ def plot_inspection(log: StepLog, path: Path, title: str = '') -> Path:
     truth = np.array([r.truth[0] for r in records]) if records else np.zeros(0)
     ax.plot(steps, truth, color='black', lw=2, label=f'true {log.context_names[0]}'
             if log.context_names else 'true context')
-    with_est = [r for r in records if r.estimate is not None and r.estimate.size]
+    # An empty history (episode start) gives psi of nothing: one constant point that would
+    # dominate the projection, so only estimates from at least one transition are drawn.
+    with_est = [r for r in records if r.estimate is not None and r.estimate.size
+                and r.history_length > 0]
     if len(with_est) > 2:
         readout = linear_readout(np.stack([r.estimate for r in with_est]),
                                  np.array([r.truth[0] for r in with_est]))
