@@ -180,9 +180,9 @@ class SimBridgeNode(Node):
             received, msg = self._newest_action
             if now - received <= max_age:
                 action = np.asarray(msg.data, dtype=np.float64)
-            else:
-                self.counts['stale'] += 1
-        self._advance(action, stale=action is None and self._newest_action is not None)
+        if action is None:  # nothing recent enough: the safe action, counted as stale
+            self.counts['stale'] += 1
+        self._advance(action, stale=action is None)
 
     def _advance(self, action: np.ndarray | None, stale: bool = False) -> None:
         """Apply one action (None: the safe action) and publish the next step."""
