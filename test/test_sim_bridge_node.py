@@ -150,3 +150,33 @@ def test_bad_parameter_fails_at_start_with_a_clear_message(ros_processes: Proces
     assert process.wait(timeout=60) == 2
     log = ros_processes.log_text('sim_bridge')
     assert 'task' in log and 'Cheetah-Fly-v9' in log and 'Walker-Walk-v0' in log
+
+
+def test_realtime_mode_keeps_stepping_and_marks_stale_actions(
+        ros_processes: ProcessGroup) -> None:
+    """Realtime: the clock drives the steps; once actions stop, the safe action is STALE."""
+    from zeus_msgs.msg import Action, StateVector, StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, action_qos, step_qos
+
+    process = ros_processes.start('sim_bridge', python_module(
+        'zeus_ros.nodes.sim_bridge_node', '--ros-args', '-p', 'task:=Cheetah-Run-v0',
+        '-p', 'mode:=realtime', '-p', 'control_rate:=50.0', '-p', 'max_steps:=80'))
+    feedback: dict[int, object] = {}
+    with driver_node(ros_processes.domain_id) as node:
+        publisher = node.create_publisher(Action, TOPICS.ACTION, action_qos('realtime'))
+
+        def on_state(msg: StateVector) -> None:
+            if msg.step < 30:
+                publisher.publish(Action(header=msg.header, step=msg.step, data=[0.1] * 6))
+
+        node.create_subscription(StateVector, TOPICS.STATE, on_state, step_qos())
+        node.create_subscription(StepFeedback, TOPICS.STEP,
+                                 lambda m: feedback.__setitem__(m.step, m), step_qos())
+        assert spin_until(node, lambda: process.poll() is not None, timeout=60), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+    assert max(feedback) >= 79, 'realtime stepping stopped without actions'
+    answered = [feedback[k].action_status for k in range(5, 25) if k in feedback]
+    assert answered.count(1) >= len(answered) // 2, answered
+    late = [feedback[k].action_status for k in range(45, 80) if k in feedback]
+    assert late and set(late) == {5}, late
