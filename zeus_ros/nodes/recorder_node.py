@@ -22,13 +22,9 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
 from zeus_ros.nodes.common import TOPICS, diagnostics_message, run_node, step_qos
+from zeus_ros.offline.durable import DurableBagWriter
 from zeus_ros.offline.errors import BagError
-from zeus_ros.offline.recover import (
-    STEP_TOPICS,
-    DurableBagWriter,
-    stamp_from_cdr,
-    step_from_cdr,
-)
+from zeus_ros.offline.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
 from zeus_ros.offline.schema import MSGTYPES, TOPIC_IMAGE
 
 if TYPE_CHECKING:
