@@ -19,8 +19,18 @@ from zeus_ros.inspect import Inspector, write_csv
 from zeus_ros.inspection import format_segments, percentile, plot_inspection
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_CHECKPOINT = REPO / 'checkpoints' / 'cheetah_run_v0_zeus_state.pt'
+CHECKPOINT_NAME = 'cheetah_run_v0_zeus_state.pt'
+
+
+def default_checkpoint() -> Path:
+    """The shipped checkpoint: in this checkout, else in share/zeus_ros of an ament prefix."""
+    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / CHECKPOINT_NAME]
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            candidates.append(Path(prefix) / 'share' / 'zeus_ros' / 'checkpoints' /
+                              CHECKPOINT_NAME)
+    return next((path for path in candidates if path.is_file()), candidates[0])
+
 # Training values (0.7-1.15) alternating with extrapolation values (1.2-1.5), 150 steps each:
 # with 500-step episodes most switches land in the middle of an episode. The shipped checkpoint
 # fails on the shortest torsos (0.3-0.6, see its card), so the demo shows the range it handles.
@@ -52,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the demo; exit code 1 if a node died."""
     parser = argparse.ArgumentParser(prog='zeus demo', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--checkpoint', type=Path, default=DEFAULT_CHECKPOINT)
+    parser.add_argument('--checkpoint', type=Path, default=None,
+                        help='default: the shipped Cheetah-Run-v0 checkpoint')
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
     parser.add_argument('--steps', type=int, default=2000, help='control steps to run')
@@ -61,7 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')
     parser.add_argument('--out', type=Path, default=Path('out/demo'))
     args = parser.parse_args(argv)
-    checkpoint = None if args.random_policy else args.checkpoint.resolve()
+    checkpoint = None
+    if not args.random_policy:
+        checkpoint = (args.checkpoint or default_checkpoint()).resolve()
     if checkpoint is not None and not checkpoint.is_file():
         print(f'zeus demo: checkpoint {checkpoint} not found; train one (README, "Record -> '
               'retrain -> redeploy") or pass --random-policy', file=sys.stderr)
