@@ -120,7 +120,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
                        '-p', f'task:={TASK}', '-p', f'max_steps:={steps}',
                        '-p', f'pixels:={"true" if pixels else "false"}',
                        '-p', 'schedule.kind:=switch', '-p', 'schedule.every:=100',
-                       '-p', f'schedule.values:={values}'],
+                       '-p', f'schedule.values:={values}', '-p', 'min_observers:=3'],
     }
     log_dir = Path(tempfile.gettempdir()) / 'zeus_bench_logs'
     log_dir.mkdir(exist_ok=True)

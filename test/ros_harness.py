@@ -71,6 +71,15 @@ class ProcessGroup:
         path = LOG_DIR / f'{name}.log'
         return path.read_text(errors='replace') if path.exists() else ''
 
+    def wait_for_log(self, name: str, text: str, timeout: float = 60.0) -> None:
+        """Block until the named process printed `text` (e.g. a readiness line); fail if not."""
+        deadline = time.monotonic() + timeout
+        while text not in self.log_text(name):
+            if time.monotonic() > deadline:
+                raise AssertionError(f'{name} did not print {text!r} within {timeout} s:\n'
+                                     + self.log_text(name)[-2000:])
+            time.sleep(0.05)
+
     def stop(self, process: subprocess.Popen[bytes], sig: int = signal.SIGINT,
              timeout: float = 10.0) -> int:
         """Signal a process group, wait, and kill it if it does not exit in time."""

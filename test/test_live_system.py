@@ -36,8 +36,8 @@ def test_three_nodes_act_on_every_step_and_the_bag_trains(
     recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
     ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
-    time.sleep(2.0)  # the recorder subscribes before the first step is published
-    sim = ros_processes.start('sim_bridge', bridge(STEPS))
+    ros_processes.wait_for_log('recorder', 'recording ')  # subscribed before step 0
+    sim = ros_processes.start('sim_bridge', bridge(STEPS, 'min_observers:=3'))
     assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
@@ -93,7 +93,7 @@ def test_policy_survives_estimator_loss_and_resumes(
     estimator = ros_processes.start('estimator', estimator_argv)
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
                                        'context_deadline:=0.05', 'context_timeout:=1.0'))
-    ros_processes.start('sim_bridge', bridge(0, 'action_timeout:=5.0'))
+    ros_processes.start('sim_bridge', bridge(0, 'action_timeout:=5.0', 'min_observers:=2'))
     actions: list[int] = []
     estimates: list[int] = []
     diagnostics: list = []
@@ -173,10 +173,10 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     # replaced by the newest one, or the two runs would (legitimately) act differently.
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
                                        'context_deadline:=10.0'))
-    time.sleep(2.0)
+    ros_processes.wait_for_log('recorder', 'recording ')  # subscribed before step 0
     sim = ros_processes.start('sim_bridge', node(
         'sim_bridge', f'task:={TASK}', 'max_steps:=260', 'seed:=5', 'schedule.kind:=switch',
-        'schedule.every:=100', 'schedule.values:=train'))
+        'schedule.every:=100', 'schedule.values:=train', 'min_observers:=3'))
     assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
     time.sleep(1.5)
     ros_processes.stop(recorder, signal.SIGINT)

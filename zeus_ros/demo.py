@@ -43,6 +43,9 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeP
     bridge = ['-p', 'task:=Cheetah-Run-v0', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
+    # Every other node and this process's inspector listen to /zeus/step: wait for all of them.
+    observers = 1 + (2 if checkpoint is not None else 1) + (1 if args.record else 0)
+    bridge += ['-p', f'min_observers:={observers}']
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None, bridge))]
     if checkpoint is not None:
         ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', 'task:=Cheetah-Run-v0']

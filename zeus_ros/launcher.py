@@ -169,7 +169,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f'unknown node(s) {unknown}; choose from {list(NODES)}')
     if args.params is not None and not args.params.is_file():
         parser.error(f'params file {args.params} does not exist')
-    nodes = [NodeProcess(name, node_argv(name, args.params)) for name in names]
+    # sim_bridge waits until every other node of the group listens to /zeus/step: none of them
+    # misses step 0, however slowly it starts.
+    observers = ['-p', f'min_observers:={len(names) - 1}']
+    nodes = [NodeProcess(name, node_argv(name, args.params,
+                                         observers if name == 'sim_bridge' else ()))
+             for name in names]
     return run_group(nodes, ros_env(args.domain_id), args.timeout)
 
 

@@ -51,6 +51,7 @@ DEFAULTS: dict[str, Any] = {
     'max_steps': 0,
     'wait_for_peers': True,
     'peer_grace': 0.5,
+    'min_observers': 0,
     'log_every': 0,
 }
 
@@ -93,7 +94,8 @@ class SimBridgeNode(Node):
         from diagnostic_msgs.msg import DiagnosticArray
 
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self.create_subscription(Action, TOPICS.ACTION, self._on_action, action_qos(self.mode))
+        self._sub_action = self.create_subscription(Action, TOPICS.ACTION, self._on_action,
+                                                    action_qos(self.mode))
         self._period = self._control_period(task)
         tick = self._period if self.mode == 'realtime' else 0.005
         self.create_timer(tick, self._on_tick)
@@ -132,13 +134,27 @@ class SimBridgeNode(Node):
 
     # -- step protocol ----------------------------------------------------------------------
     def _peers_ready(self) -> bool:
-        """True once a policy publishes actions and someone listens to observations."""
+        """True once a policy publishes actions, someone observes, and DDS matched them all.
+
+        Graph counts say who was discovered; the matched counts of our own endpoints say whose
+        data path is ready. Starting before they agree would drop step 0 for a late peer (the
+        estimator would miss it and the policy would act on no context). `min_observers` names
+        how many /zeus/step subscribers a launch expects (estimator, policy, recorder, ...), so
+        a peer that is still starting up is waited for rather than missed.
+        """
         if not self.params['wait_for_peers']:
             return True
-        observers = self.count_subscribers(TOPICS.STATE)
+        outputs = [(self._pub_state, TOPICS.STATE), (self._pub_step, TOPICS.STEP)]
         if self._pub_image is not None:
-            observers += self.count_subscribers(TOPICS.IMAGE)
-        return self.count_publishers(TOPICS.ACTION) > 0 and observers > 0
+            outputs.append((self._pub_image, TOPICS.IMAGE))
+        observers = sum(self.count_subscribers(topic) for pub, topic in outputs
+                        if pub is not self._pub_step)
+        matched = all(pub.get_subscription_count() >= self.count_subscribers(topic)
+                      for pub, topic in outputs)
+        actions = self.count_publishers(TOPICS.ACTION)
+        expected = self._pub_step.get_subscription_count() >= self.params['min_observers']
+        return (actions > 0 and observers > 0 and matched and expected
+                and self._sub_action.get_publisher_count() >= actions)
 
     def _on_tick(self) -> None:
         now = time.monotonic()
@@ -146,6 +162,9 @@ class SimBridgeNode(Node):
             if math.isinf(self._start_after) and self._peers_ready():
                 self._start_after = now + self.params['peer_grace']
             if now >= self._start_after:
+                if not self._peers_ready():  # someone appeared during the grace period
+                    self._start_after = math.inf
+                    return
                 self._started = True
                 self._publish(self.env.reset())
             return
