@@ -49,6 +49,8 @@ class ContextualTask(abc.ABC):
     action_repeat: int
     episode_length: int
     """Agent steps per episode (after the action repeat)."""
+    _episode_step: int = 0
+    _needs_reset: bool = True
 
     @property
     @abc.abstractmethod
@@ -110,6 +112,14 @@ class ContextualTask(abc.ABC):
         """Action applied when none usable arrived: zero torque, clipped into the bounds."""
         low, high = self.action_bounds
         return np.clip(np.zeros_like(low), low, high).astype(np.float32)
+
+    def _end_step(self, state: np.ndarray, reward: float) -> StepResult:
+        """Count one agent step and build its StepResult; the episode ends at episode_length."""
+        self._episode_step += 1
+        last = self._episode_step >= self.episode_length
+        self._needs_reset = last
+        return StepResult(state=state, reward=float(reward), first=False, last=last,
+                          context=self.context)
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release renderer resources."""

@@ -241,16 +241,7 @@ class DmcTask(ContextualTask):
             # start keep the values of the last sub-step's solve (a full mj_forward would not).
             mujoco.mj_step1(model, data)
             reward += self._reward(model, data, act)
-        self._episode_step += 1
-        last = self._episode_step >= self.episode_length
-        self._needs_reset = last
-        return StepResult(
-            state=self._observation(model, data),
-            reward=float(reward),
-            first=False,
-            last=last,
-            context=self.context,
-        )
+        return self._end_step(self._observation(model, data), reward)
 
     def render(self, height: int = 84, width: int = 84) -> np.ndarray:
         """RGB frame of the current state from the tracking camera."""

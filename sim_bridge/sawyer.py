@@ -181,16 +181,7 @@ class SawyerPegTask(ContextualTask):
             mujoco.mj_step(model, data, nstep=SUB_STEPS)
             mujoco.mj_forward(model, data)  # kinematics of the new state for reward and state
             reward += peg_reward(data.site_xpos[self._tip], data.site_xpos[self._goal])
-        self._episode_step += 1
-        last = self._episode_step >= self.episode_length
-        self._needs_reset = last
-        return StepResult(
-            state=self._observation(),
-            reward=float(reward),
-            first=False,
-            last=last,
-            context=self.context,
-        )
+        return self._end_step(self._observation(), reward)
 
     def render(self, height: int = 84, width: int = 84) -> np.ndarray:
         """RGB frame from the fixed 'track' camera (arm, table and box in view)."""
