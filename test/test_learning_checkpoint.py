@@ -122,3 +122,24 @@ def test_inference_agent_loads_checkpoint(tmp_path: Path) -> None:
     assert (inference.k, inference.obs_shape, inference.context_dim) == (3, (6,), 3)
     assert inference.context_names == ('gain',) and inference.task == 'Walker-Walk-v0'
     assert np.all(inference.action_low == -1.0) and np.all(inference.action_high == 1.0)
+
+
+@pytest.mark.parametrize('method', ['zeus', 'no_context', 'cadm'])
+def test_deployment_export_acts_like_the_original_and_is_smaller(tmp_path: Path,
+                                                                 method: str) -> None:
+    """The export keeps phi, psi and the actor: same contexts and actions, far fewer bytes."""
+    from zeus_ros.learning.checkpoint import export_for_deployment
+
+    system, agent, path = _trained(tmp_path, method=method)
+    small = export_for_deployment(path, tmp_path / 'deploy.pt')
+    loaded = load_checkpoint(small, expect_task='Walker-Walk-v0')
+    assert loaded.deploy and not load_checkpoint(path).deploy
+    assert loaded.step == 3 and loaded.extra == {'note': 'x', 'n': [1]}
+    b = system.sample(4)
+    args = (b.hist_obs, b.hist_action, b.hist_reward, b.hist_next_obs, b.hist_mask)
+    ctx = agent.encode_context(*args)
+    torch.testing.assert_close(loaded.agent.encode_context(*args), ctx)
+    np.testing.assert_array_equal(loaded.agent.act(b.obs, ctx), agent.act(b.obs, ctx))
+    assert small.stat().st_size < path.stat().st_size / 3
+    stored = torch.load(small, weights_only=True)['state']
+    assert set(stored['modules']) <= {'encoder', 'psi', 'actor'} and not stored['optimizers']

@@ -177,3 +177,59 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
     assert [r.step for r in results] == [30, 60] and results[1].start_step == 30
     assert sorted(p.name for p in (tmp_path / 'bags').iterdir()) == ['bag_000', 'bag_001']
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 60
+
+
+def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,
+                                                  tmp_path: Path) -> None:
+    """`zeus export` writes a small checkpoint + card; training refuses to resume from it."""
+    from zeus_ros.offline.export import main as export_main
+
+    target = tmp_path / 'ship' / 'zeus_s0.pt'
+    assert export_main(['--checkpoint', str(trained.out / 'final.pt'), '--out',
+                        str(target), '--commit', 'abc123']) == 0
+    card = target.with_suffix('.md').read_text()
+    for needle in ('Cheetah-Run-v0', '`zeus`', 'abc123', 'sha256', 'seed | 0',
+                   'transitions from 1 bag(s)', 'Not evaluated yet'):
+        assert needle in card, needle
+    assert 'pytest' in card or 'command' in card  # the recorded command line of this process
+    run = tmp_path / 'resume'
+    run.mkdir()
+    shutil.copy(target, run / 'checkpoint.pt')
+    with pytest.raises(TrainError, match='deployment export'):
+        train([bags], load_config(tiny_config), run, resume=True, progress=False,
+              log=lambda _m: None)
+    assert export_main(['--checkpoint', str(target), '--out', str(target)]) == 2
+
+
+def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture
+                                                             ) -> None:
+    """Two seeds of a method -> per-run evals, a resumable batch, mean ± s.e. tables."""
+    from zeus_ros.learning.checkpoint import save_checkpoint
+    from zeus_ros.offline.evaluate import main
+    from zeus_ros.offline.report import aggregate
+
+    first = load_checkpoint(trained.out / 'final.pt')
+    ships = tmp_path / 'ship'
+    paths = []
+    for seed in (0, 1):
+        first.agent.config = first.config.replace(seed=seed)
+        paths.append(save_checkpoint(ships / f'zeus_s{seed}.pt', first.agent, step=first.step,
+                                     extra=first.extra))
+    out = tmp_path / 'tables'
+    argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '150',
+            '--probe-steps', '0', '--out', str(out), '--no-progress']
+    assert main(argv) == 0
+    runs = out / 'cheetah_run_v0'
+    for seed in (0, 1):
+        assert (runs / f'zeus_s{seed}' / 'eval_interpolation' / '.done').is_file()
+    rows = aggregate(runs)
+    assert len(rows) == 1 and rows[0]['seeds'] == 2 and rows[0]['split'] == 'interpolation'
+    assert rows[0]['mean_return_se'] == pytest.approx(0.0, abs=1e-6)  # same weights twice
+    assert (runs / 'returns.png').is_file() and (runs / 'summary.csv').is_file()
+    assert '| zeus | interpolation | 2 |' in (out / 'tables.md').read_text()
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert '0 evaluation(s) to run' in capsys.readouterr().out
+    assert main(['--checkpoint', str(paths[0]), str(paths[0].with_name('x.pt')),
+                 '--out', str(out)]) == 2

@@ -12,7 +12,9 @@ import sys
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'collect': ('zeus_ros.offline.collect', 'run a task in-process and write bags (no ROS)'),
     'train': ('zeus_ros.offline.train', 'train a checkpoint from bags'),
-    'eval': ('zeus_ros.offline.evaluate', 'evaluate a checkpoint in-process'),
+    'eval': ('zeus_ros.offline.evaluate', 'evaluate checkpoints in-process (+ tables)'),
+    'report': ('zeus_ros.offline.report', 'mean ± s.e. over seeds of evaluations'),
+    'export': ('zeus_ros.offline.export', 'small deployment checkpoint + card'),
     'loop': ('zeus_ros.offline.loop', 'random collection -> train -> collect -> retrain'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
     'inspect': ('zeus_ros.inspect', 'live view of the context topics (subscribe only)'),

@@ -17,6 +17,7 @@ sigma part of the W2 distance in d would be untrained noise. 'mse' fits mu only 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import copy
 import math
 from typing import Any
@@ -387,13 +388,18 @@ class ZeusAgent:
             'log_alpha': self.log_alpha.detach().cpu(),
         }
 
-    def load_state_dict(self, state: dict[str, Any], *, optimizers: bool = True) -> None:
-        """Restore what `state_dict` produced (raises KeyError/RuntimeError on mismatch)."""
-        missing = set(self.modules) - set(state['modules'])
+    def load_state_dict(self, state: dict[str, Any], *, optimizers: bool = True,
+                        only: Sequence[str] | None = None) -> None:
+        """Restore what `state_dict` produced (raises KeyError/RuntimeError on mismatch).
+
+        `only` restores just those modules (a deployment export); the others keep their init.
+        """
+        names = list(self.modules) if only is None else list(only)
+        missing = set(names) - set(state['modules'])
         if missing:
             raise KeyError(f'state has no weights for {", ".join(sorted(missing))}')
-        for name, module in self.modules.items():
-            module.load_state_dict(state['modules'][name])
+        for name in names:
+            self.modules[name].load_state_dict(state['modules'][name])
         with torch.no_grad():
             self.log_alpha.copy_(state['log_alpha'].to(self.device))
         if optimizers:

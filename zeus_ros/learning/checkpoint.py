@@ -3,6 +3,8 @@
 Layout (a dict of tensors and plain Python data, loadable with torch.load(weights_only=True)):
   format_version, method, obs_kind, task, k, aggregation, context_dim, spec (AgentSpec.to_dict),
   config (ZeusConfig.to_dict, resolved), step, extra (plain data), state (ZeusAgent.state_dict).
+A deployment export (`export_for_deployment`) has `deploy: True` and keeps only the networks
+that act and infer the context (DEPLOY_MODULES), no optimizers: ~10x smaller, not resumable.
 """
 
 from __future__ import annotations
@@ -19,10 +21,14 @@ from zeus_ros.learning.config import ZeusConfig, config_from_dict
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import AgentSpec
 
-__all__ = ['FORMAT_VERSION', 'LoadedCheckpoint', 'load_checkpoint', 'save_checkpoint']
+__all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_deployment',
+           'load_checkpoint', 'save_checkpoint']
 
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
+
+DEPLOY_MODULES = ('encoder', 'psi', 'actor')
+"""What acting needs: phi, psi (when the method has one) and the actor."""
 
 _PLAIN = (str, int, float, bool, type(None))
 
@@ -41,6 +47,8 @@ class LoadedCheckpoint:
     """Update count when saved."""
     extra: dict[str, Any]
     """Caller's plain data (e.g. metrics, replay position)."""
+    deploy: bool = False
+    """True for a deployment export: acting networks only, cannot resume training."""
 
 
 def _check_plain(value: Any, where: str) -> None:
@@ -61,10 +69,13 @@ def _check_plain(value: Any, where: str) -> None:
 def save_checkpoint(path: str | Path, agent: ZeusAgent, *, step: int,
                     extra: dict[str, Any] | None = None) -> Path:
     """Write the agent atomically (temp file + rename) so a crash never leaves half a file."""
-    path = Path(path)
-    extra = {} if extra is None else extra
+    return _write(_payload(agent, step=step, extra={} if extra is None else extra), Path(path))
+
+
+def _payload(agent: ZeusAgent, *, step: int, extra: dict[str, Any]) -> dict[str, Any]:
+    """Everything but the weights is plain data; `state` holds the full agent state."""
     _check_plain(extra, 'extra')
-    payload = {
+    return {
         'format_version': FORMAT_VERSION,
         'method': agent.method,
         'obs_kind': agent.spec.obs_kind,
@@ -78,6 +89,10 @@ def save_checkpoint(path: str | Path, agent: ZeusAgent, *, step: int,
         'extra': extra,
         'state': agent.state_dict(),
     }
+
+
+def _write(payload: dict[str, Any], path: Path) -> Path:
+    """torch.save to a temp file + rename, so a crash never leaves half a file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f'.{path.name}.tmp{os.getpid()}')
     torch.save(payload, tmp)
@@ -131,9 +146,29 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
     if isinstance(config.alpha_psi, str) or isinstance(config.adam_beta1, str):
         raise _fail(path, 'stored config is not resolved (alpha_psi / adam_beta1)')
     agent = ZeusAgent(config, spec, device=map_location)
+    deploy = bool(payload.get('deploy', False))
     try:
-        agent.load_state_dict(payload['state'], optimizers=load_optimizers)
+        agent.load_state_dict(payload['state'], optimizers=load_optimizers and not deploy,
+                              only=[m for m in DEPLOY_MODULES if m in agent.modules]
+                              if deploy else None)
     except (KeyError, RuntimeError, ValueError) as error:
         raise _fail(path, f'weights do not fit the stored shapes ({error})') from None
     return LoadedCheckpoint(agent=agent, config=config, spec=spec, step=int(payload['step']),
-                            extra=payload.get('extra', {}))
+                            extra=payload.get('extra', {}), deploy=deploy)
+
+
+def export_for_deployment(source: str | Path, target: str | Path) -> Path:
+    """Write the acting part of `source` to `target` (atomic); returns `target`.
+
+    Raises:
+        CheckpointError: `source` is not a valid checkpoint.
+    """
+    source, target = Path(source), Path(target)
+    loaded = load_checkpoint(source, load_optimizers=False)
+    agent = loaded.agent
+    keep = [name for name in DEPLOY_MODULES if name in agent.modules]
+    payload = _payload(agent, step=loaded.step, extra=loaded.extra)
+    payload['deploy'] = True
+    payload['state'] = {'modules': {name: agent.modules[name].state_dict() for name in keep},
+                        'optimizers': {}, 'log_alpha': agent.log_alpha.detach().cpu()}
+    return _write(payload, target)

@@ -50,6 +50,13 @@ def split_values(task: str, split: str) -> list[dict[str, float]]:
     return load_preset(task, split)
 
 
+def default_switch_every(task: str) -> int:
+    """Steps between switches in the switching run: 100, at most a quarter of an episode."""
+    from sim_bridge.registry import task_class
+
+    return max(1, min(100, int(task_class(task).episode_length) // 4))
+
+
 def _make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any, Any]:
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
@@ -223,10 +230,14 @@ def random_rollout(task_name: str, values: Sequence[dict[str, float]], steps: in
 
 
 def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
-             episodes: int = 1, switch_every: int = 100, switch_episodes: int = 1,
+             episodes: int = 1, switch_every: int | None = None, switch_episodes: int = 1,
              probe_steps: int = 4000, seed: int = 0, out: str | Path | None = None,
              progress: bool = True) -> dict[str, Any]:
-    """Run the whole evaluation of one checkpoint on one split; write CSV/PNG into `out`."""
+    """Run the whole evaluation of one checkpoint on one split; write CSV/PNG into `out`.
+
+    `switch_every` None: every 100 steps, or a quarter episode for shorter episodes (40-step
+    Cheetah-Run-v1 switches every 10 steps).
+    """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.metrics import plot_bars, plot_trace
 
@@ -242,6 +253,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         None, values, episodes=episodes, seed=seed, task_name=agent.task, progress=False)]
     steady = {tuple(np.round(list(v.values()), 6)): steady_reward(t)
               for v, t in zip(values, traces, strict=True)}
+    if switch_every is None:
+        switch_every = default_switch_every(agent.task)
     env, sim = _make_env(agent.task, _switch_schedule(values, switch_every), seed)
     try:
         switching = run_steps(env, sim, AgentPolicy(agent, noise=0.0, seed=seed),
@@ -295,18 +308,27 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='zeus eval', description='Evaluate a checkpoint in-process on a context split.')
-    parser.add_argument('--checkpoint', type=Path, required=True)
+    parser.add_argument('--checkpoint', type=Path, nargs='+', required=True,
+                        help='checkpoint file(s) or folder(s) of them; several (or a folder, or '
+                        '--split all) evaluate each into OUT/<task>/<method>_s<seed>/ and '
+                        'write the tables over seeds (OUT/tables.md)')
     parser.add_argument('--task', help='expected task (error if the checkpoint has another)')
-    parser.add_argument('--split', choices=SPLITS, default='train')
+    parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
+                        help="context split; 'all': every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=1, help='episodes per context value')
-    parser.add_argument('--switch-every', type=int, default=100,
-                        help='steps between unannounced context switches (switching run)')
+    parser.add_argument('--switch-every', type=int,
+                        help='steps between unannounced context switches (switching run; '
+                        'default 100, or a quarter episode for shorter episodes)')
     parser.add_argument('--switch-episodes', type=int, default=1,
                         help='episodes of the switching run')
     parser.add_argument('--probe-steps', type=int, default=4000,
                         help='random-policy steps for the identifiability probe (0: skip)')
     parser.add_argument('--seed', type=int, default=100)
     parser.add_argument('--out', type=Path, help='output folder (default: next to checkpoint)')
+    parser.add_argument('--jobs', type=int, default=1,
+                        help='evaluations in parallel (several checkpoints)')
+    parser.add_argument('--force', action='store_true',
+                        help='re-run evaluations that already finished (several checkpoints)')
     parser.add_argument('--no-progress', action='store_true')
     return parser
 
@@ -316,12 +338,14 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.learning.errors import CheckpointError
 
     args = _build_parser().parse_args(argv)
-    for flag in ('episodes', 'switch_every', 'switch_episodes'):
-        if getattr(args, flag) < 1:
+    for flag in ('episodes', 'switch_every', 'switch_episodes', 'jobs'):
+        if getattr(args, flag) is not None and getattr(args, flag) < 1:
             print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
+    if len(args.checkpoint) > 1 or args.checkpoint[0].is_dir() or args.split == 'all':
+        return _main_many(args)
     try:
-        result = evaluate(args.checkpoint, split=args.split, task=args.task,
+        result = evaluate(args.checkpoint[0], split=args.split, task=args.task,
                           episodes=args.episodes, switch_every=args.switch_every,
                           switch_episodes=args.switch_episodes, probe_steps=args.probe_steps,
                           seed=args.seed, out=args.out, progress=not args.no_progress)
@@ -338,6 +362,31 @@ def main(argv: list[str] | None = None) -> int:
                                            'mean_latency', 'spearman', 'probe_mse',
                                            'probe_mean_mse']))
     print(f'\nwrote CSV and PNG to {result["out"]}')
+    return 0
+
+
+def _main_many(args: argparse.Namespace) -> int:
+    """Several checkpoints (or all splits): evaluate each, then the tables over seeds."""
+    from zeus_ros.learning.errors import CheckpointError
+    from zeus_ros.offline.eval_batch import evaluate_many, find_checkpoints
+    from zeus_ros.offline.report import markdown_table
+
+    if args.out is None:
+        print('zeus eval: several checkpoints (or --split all) need --out', file=sys.stderr)
+        return 2
+    try:
+        checkpoints = find_checkpoints(args.checkpoint)
+        tables = evaluate_many(
+            checkpoints, args.out, splits=None if args.split == 'all' else [args.split],
+            jobs=args.jobs, force=args.force, progress=not args.no_progress,
+            episodes=args.episodes, switch_every=args.switch_every,
+            switch_episodes=args.switch_episodes, probe_steps=args.probe_steps, seed=args.seed)
+    except (CheckpointError, ValueError, FileNotFoundError) as error:
+        print(f'zeus eval: {error}', file=sys.stderr)
+        return 2
+    for task, rows in tables.items():
+        print(f'\n{task}\n{markdown_table(rows)}')
+    print(f'\nwrote per-run CSV/PNG, per-task tables and {args.out / "tables.md"}')
     return 0
 
 

@@ -146,6 +146,9 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
                                  expect_obs_kind=config.obs_kind)
     except CheckpointError as error:
         raise TrainError(f'--resume: {error}') from None
+    if loaded.deploy:
+        raise TrainError(f'--resume: {path} is a deployment export (acting networks only, no '
+                         "critics or optimizers); resume from the run's checkpoint.pt instead")
     wanted = resolve_config(config, dataset.task)
     diffs = _config_differences(loaded.config, wanted)
     if diffs:
@@ -193,7 +196,8 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     evals = MetricsLog.resume(out / 'eval.csv', up_to_step=start) if resume \
         else MetricsLog(out / 'eval.csv')
     needs_pair = cfg.method == 'zeus' and float(cfg.alpha_psi) > 0
-    extra = {'bags': [str(b) for b in dataset.report.bags], 'transitions': len(replay)}
+    extra = {'bags': [str(b) for b in dataset.report.bags], 'transitions': len(replay),
+             **provenance()}
     window = RunningMean()
     step = start
     begin = window_start = time.perf_counter()
@@ -248,6 +252,21 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     log(f'train: {step - start} updates in {seconds:.1f} s ({result.updates_per_s:.1f}/s); '
         f'checkpoints {out / CHECKPOINT}, {final}; metrics {metrics.path}')
     return result
+
+
+def provenance() -> dict[str, str | None]:
+    """The command line and source commit a checkpoint came from (for its card)."""
+    import shlex
+    import subprocess
+
+    command = shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]])
+    try:
+        commit = subprocess.run(['git', 'rev-parse', 'HEAD'], capture_output=True, text=True,
+                                cwd=Path(__file__).resolve().parent, timeout=5, check=True)
+        sha: str | None = commit.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        sha = None
+    return {'command': command, 'code_commit': sha}
 
 
 def _peek_step(path: Path) -> int:

@@ -1,0 +1,142 @@
+"""`zeus eval` on many checkpoints: every split of each, in parallel, then the tables over seeds.
+
+    zeus eval --checkpoint checkpoints/comparison --split all --out out/tables --jobs 2
+
+Each checkpoint is evaluated into <out>/<task>/<method>_s<seed>/eval_<split>/ (the layout of
+experiments/run_one.sh), finished parts are skipped (so an interrupted run resumes), and
+report.write_report then writes per-task summary.csv / table.md / returns.png plus one
+<out>/tables.md holding every task's table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+import multiprocessing
+from pathlib import Path
+import time
+from typing import Any
+
+from tqdm import tqdm
+
+__all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'task_folder']
+
+
+def task_folder(task: str) -> str:
+    """Cheetah-Run-v0 -> cheetah_run_v0 (the experiment folder name)."""
+    return task.lower().replace('-', '_')
+
+
+def find_checkpoints(paths: Iterable[Path]) -> list[Path]:
+    """Files as given, folders searched recursively for *.pt; sorted, without repeats."""
+    found: list[Path] = []
+    for path in paths:
+        if path.is_dir():
+            found += sorted(path.rglob('*.pt'))
+        elif path.is_file():
+            found.append(path)
+        else:
+            raise FileNotFoundError(f'--checkpoint {path}: no such file or folder')
+    unique = list(dict.fromkeys(p.resolve() for p in found))
+    if not unique:
+        raise FileNotFoundError('--checkpoint: no *.pt files found in '
+                                + ', '.join(str(p) for p in paths))
+    return unique
+
+
+@dataclass(frozen=True)
+class EvalJob:
+    """One (checkpoint, split) evaluation and where its results go."""
+
+    checkpoint: Path
+    task: str
+    split: str
+    out: Path
+
+
+def _identify(path: Path) -> tuple[str, str, int]:
+    """(task, method, seed) stored in a checkpoint."""
+    from zeus_ros.learning.checkpoint import load_checkpoint
+
+    loaded = load_checkpoint(path, load_optimizers=False)
+    return loaded.spec.task, loaded.config.method, int(loaded.config.seed)
+
+
+def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
+         force: bool = False) -> tuple[list[EvalJob], list[str]]:
+    """Jobs still to run, and the task folders they belong to (in order of appearance)."""
+    from sim_bridge.presets import load_preset
+
+    owners: dict[Path, Path] = {}
+    jobs, tasks = [], []
+    for path in checkpoints:
+        task, method, seed = _identify(path)
+        run = out / task_folder(task) / f'{method}_s{seed}'
+        if run in owners:
+            raise ValueError(f'{owners[run]} and {path} are both {task} {method} seed {seed}; '
+                             'evaluate them into different --out folders')
+        owners[run] = path
+        if task_folder(task) not in tasks:
+            tasks.append(task_folder(task))
+        wanted = splits or [s for s in ('train', 'interpolation', 'extrapolation')
+                            if _has_split(load_preset, task, s)]
+        for split in wanted:
+            target = run / f'eval_{split}'
+            if force or not (target / '.done').exists():
+                jobs.append(EvalJob(path, task, split, target))
+    return jobs, tasks
+
+
+def _has_split(load_preset: Any, task: str, split: str) -> bool:
+    try:
+        return bool(load_preset(task, split))
+    except (KeyError, ValueError):
+        return False
+
+
+def _run_job(job: EvalJob, protocol: dict[str, Any]) -> tuple[EvalJob, float]:
+    """Worker: one evaluation on one torch thread; writes `.done` with its seconds."""
+    import torch
+
+    from zeus_ros.offline.evaluate import evaluate
+
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    evaluate(job.checkpoint, split=job.split, task=job.task, out=job.out, progress=False,
+             **protocol)
+    seconds = time.perf_counter() - start
+    (job.out / '.done').write_text(f'{seconds:.1f}\n')
+    return job, seconds
+
+
+def evaluate_many(checkpoints: Sequence[Path], out: Path, *, splits: Sequence[str] | None,
+                  jobs: int = 1, force: bool = False, progress: bool = True,
+                  **protocol: Any) -> dict[str, list[dict[str, Any]]]:
+    """Evaluate every checkpoint on `splits` (None: all its task defines); tables per task."""
+    from zeus_ros.offline.report import markdown_table, write_report
+
+    todo, tasks = plan(checkpoints, out, splits, force)
+    print(f'zeus eval: {len(checkpoints)} checkpoint(s), {len(todo)} evaluation(s) to run '
+          f'({jobs} at a time) into {out}')
+    bar = tqdm(total=len(todo), desc='evaluations', unit='eval', disable=not progress)
+    if jobs <= 1:
+        for job in todo:
+            _run_job(job, protocol)
+            bar.update()
+    else:
+        context = multiprocessing.get_context('spawn')
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures = [pool.submit(_run_job, job, protocol) for job in todo]
+            for future in as_completed(futures):
+                future.result()
+                bar.update()
+    bar.close()
+    tables: dict[str, list[dict[str, Any]]] = {}
+    sections = []
+    for name in tasks:
+        folder = out / name
+        tables[name] = write_report(folder, folder, title=name)
+        sections.append(f'## {name}\n\n{markdown_table(tables[name])}\n')
+    (out / 'tables.md').write_text('\n'.join(sections))
+    return tables

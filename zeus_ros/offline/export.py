@@ -1,0 +1,145 @@
+"""`zeus export`: a trained checkpoint -> a small deployment checkpoint plus its card.
+
+    zeus export --checkpoint runs/exp/walker_walk_v0/zeus_s0/run/final.pt \
+        --out checkpoints/comparison/walker_walk_v0/zeus_s0.pt
+
+The export keeps what acting needs (phi, psi, actor: checkpoint.DEPLOY_MODULES), ~10x smaller
+than a training checkpoint; `zeus eval` gives it the same numbers. The card (<out>.md) says what
+it is, how it was made (data, command, seed, commit) and what it scored (the run's eval_<split>
+summaries, when present next to the run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+from pathlib import Path
+import sys
+from typing import Any
+
+__all__ = ['card_text', 'export', 'main']
+
+_SPLITS = ('train', 'interpolation', 'extrapolation')
+
+
+def _fmt(value: str | None, digits: int = 1) -> str:
+    if value in (None, '') or str(value).lower() == 'nan':
+        return '-'
+    return f'{float(value):.{digits}f}'
+
+
+def _eval_rows(evals: Path | None) -> list[tuple[str, dict[str, str], dict[str, str]]]:
+    """(split, agent row, random row) of every finished eval_<split>/summary.csv in `evals`."""
+    rows = []
+    for split in _SPLITS:
+        path = None if evals is None else evals / f'eval_{split}' / 'summary.csv'
+        if path is None or not path.is_file():
+            continue
+        with path.open(newline='') as handle:
+            by_policy = {row['policy']: row for row in csv.DictReader(handle)}
+        if 'agent' in by_policy:
+            rows.append((split, by_policy['agent'], by_policy.get('random', {})))
+    return rows
+
+
+def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
+              commit: str | None) -> str:
+    """The markdown card of an exported checkpoint."""
+    from sim_bridge.presets import load_preset
+
+    config, spec, extra = loaded.config, loaded.spec, loaded.extra
+    train_values = ', '.join(f'{v:g}' for value in load_preset(spec.task, 'train')
+                             for v in value.values())
+    obs = ('proprioceptive state' if spec.obs_kind == 'state' else 'pixels') + \
+        f' {tuple(spec.obs_shape)}'
+    bags = extra.get('bags', [])
+    command = command or extra.get('command') or 'not recorded'
+    commit = commit or extra.get('code_commit') or 'not recorded'
+    digest = hashlib.sha256(pt.read_bytes()).hexdigest()
+    lines = [
+        f'# Card: `{pt.name}`', '',
+        'A deployment export (`zeus export`): encoder, context encoder and actor only; '
+        'it acts and infers the context exactly like the training checkpoint it came from, '
+        'and cannot resume training.', '',
+        '| field | value |', '|---|---|',
+        f'| task | {spec.task} (context: {", ".join(spec.context_names)}; train values '
+        f'{train_values}) |',
+        f'| method | `{config.method}` (alpha_psi = {config.alpha_psi}), k = {config.k}, '
+        f'`{config.aggregation}` aggregation, context dim {loaded.agent.context_dim} |',
+        f'| observations | {obs} |',
+        f'| networks | {config.hidden_dim}-wide actor/critic, {config.model_hidden_dim}-wide '
+        f'T/R, {config.context_hidden_dim}-wide psi, feature dim {config.feature_dim} |',
+        f'| data | {extra.get("transitions", "?")} transitions from {len(bags)} bag(s) |',
+        f'| updates | {loaded.step:,}, batch {config.batch_size} |',
+        f'| seed | {config.seed} |',
+        f'| command | `{command}` |',
+        f'| code commit | `{commit}` |',
+        f'| file | {pt.stat().st_size / 1e6:.2f} MB, sha256 `{digest}` |',
+    ]
+    rows = _eval_rows(evals)
+    if rows:
+        lines += ['', 'Measured (`zeus eval`, one deterministic episode per context value, '
+                  'evaluation seed 100; the switching episode changes the context unannounced; '
+                  'uniform random policy for scale):', '',
+                  '| split | return | random | switching episode | adaptation latency (steps) '
+                  '| Spearman |', '|---|---|---|---|---|---|']
+        for split, agent, random in rows:
+            lines.append(f'| {split} | {_fmt(agent["mean_return"])} | '
+                         f'{_fmt(random.get("mean_return"))} | '
+                         f'{_fmt(agent.get("switching_return"))} | '
+                         f'{_fmt(agent.get("mean_latency"))} | '
+                         f'{_fmt(agent.get("spearman"), 2)} |')
+    else:
+        lines += ['', 'Not evaluated yet: `zeus eval --checkpoint '
+                  f'{pt} --split all --out <folder>`.']
+    return '\n'.join(lines) + '\n'
+
+
+def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
+           command: str | None = None, commit: str | None = None) -> tuple[Path, Path]:
+    """Write the deployment checkpoint and its card; returns (pt, md)."""
+    from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
+
+    export_for_deployment(checkpoint, out)
+    loaded = load_checkpoint(out)
+    card = out.with_suffix('.md')
+    card.write_text(card_text(out, loaded, evals=evals, command=command, commit=commit))
+    return out, card
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus export`; returns the process exit code."""
+    from zeus_ros.learning.errors import CheckpointError
+
+    parser = argparse.ArgumentParser(prog='zeus export', description=__doc__.splitlines()[0])
+    parser.add_argument('--checkpoint', type=Path, required=True, help='training checkpoint')
+    parser.add_argument('--out', type=Path, required=True, help='deployment checkpoint (.pt)')
+    parser.add_argument('--evals', type=Path,
+                        help='folder with eval_<split>/summary.csv for the card (default: the '
+                        "run folder above the checkpoint's, when it has them)")
+    parser.add_argument('--command', help='command that trained it (default: recorded one)')
+    parser.add_argument('--commit', help='source commit it was trained on (default: recorded)')
+    args = parser.parse_args(argv)
+    if args.out.suffix != '.pt':
+        print(f'zeus export: --out {args.out} must end in .pt', file=sys.stderr)
+        return 2
+    if args.out.resolve() == args.checkpoint.resolve():
+        print('zeus export: --out must differ from --checkpoint', file=sys.stderr)
+        return 2
+    evals = args.evals
+    if evals is None and (args.checkpoint.parent.parent / 'eval_train').is_dir():
+        evals = args.checkpoint.parent.parent
+    try:
+        pt, card = export(args.checkpoint, args.out, evals=evals, command=args.command,
+                          commit=args.commit)
+    except CheckpointError as error:
+        print(f'zeus export: {error}', file=sys.stderr)
+        return 2
+    before, after = args.checkpoint.stat().st_size, pt.stat().st_size
+    print(f'zeus export: {pt} ({after / 1e6:.2f} MB, {before / after:.1f}x smaller) and {card}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

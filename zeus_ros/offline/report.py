@@ -1,0 +1,155 @@
+"""`zeus report`: mean and standard error over seeds of `zeus eval` summaries per method, split.
+
+    zeus report runs/exp/walker_walk_v0 --out docs/results/walker_walk_v0
+
+Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
+`experiments/run_one.sh` and of `zeus eval` on several checkpoints), writes summary.csv,
+returns.png and table.md into --out and prints the markdown table (as in docs/results.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+import csv
+from pathlib import Path
+import re
+import sys
+from typing import Any
+
+import numpy as np
+
+__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'write_report']
+
+METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
+"""Columns of an eval summary that are averaged over seeds."""
+RUN_NAME = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
+SPLIT_ORDER = ('train', 'interpolation', 'extrapolation')
+METHOD_ORDER = ('zeus', 'zeus_no_context_loss', 'no_context', 'up_osi', 'cadm', 'oracle')
+
+
+def mean_se(values: list[float]) -> tuple[float, float]:
+    """Mean and standard error of the mean (0 for a single value)."""
+    array = np.asarray(values, dtype=np.float64)
+    se = float(array.std(ddof=1) / np.sqrt(len(array))) if len(array) > 1 else 0.0
+    return float(array.mean()), se
+
+
+def _rank(name: str, order: tuple[str, ...]) -> tuple[int, str]:
+    return (order.index(name) if name in order else len(order), name)
+
+
+def aggregate(folder: Path) -> list[dict[str, Any]]:
+    """One row per (method, split): seeds, then mean and s.e. of every metric with data."""
+    table: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    random_returns: dict[str, list[float]] = defaultdict(list)
+    for summary in sorted(folder.glob('*/eval_*/summary.csv')):
+        match = RUN_NAME.match(summary.parent.parent.name)
+        if match is None or not (summary.parent / '.done').exists():
+            continue
+        with summary.open(newline='') as handle:
+            for row in csv.DictReader(handle):
+                if row['policy'] == 'random':
+                    random_returns[row['split']].append(float(row['mean_return']))
+                    continue
+                key = (match['method'], row['split'])
+                for metric in METRICS:
+                    value = row.get(metric)
+                    if value and value.lower() != 'nan':
+                        table[key][metric].append(float(value))
+                table[key]['seeds'].append(float(match['seed']))
+    rows = []
+    for method, split in sorted(table, key=lambda k: (_rank(k[0], METHOD_ORDER),
+                                                      _rank(k[1], SPLIT_ORDER))):
+        metrics = table[(method, split)]
+        row: dict[str, Any] = {'method': method, 'split': split, 'seeds': len(metrics['seeds'])}
+        for metric in METRICS:
+            if metrics.get(metric):
+                row[metric], row[f'{metric}_se'] = mean_se(metrics[metric])
+        if random_returns.get(split):
+            row['random_return'] = float(np.mean(random_returns[split]))
+        rows.append(row)
+    return rows
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """The results table as markdown (returns to one decimal, Spearman to two)."""
+
+    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
+        if metric not in row:
+            return '-'
+        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
+
+    lines = ['| method | split | seeds | return | return, switching episode | '
+             'adaptation latency (steps) | Spearman | random policy |',
+             '|---|---|---|---|---|---|---|---|']
+    for row in rows:
+        random = f'{row["random_return"]:.1f}' if 'random_return' in row else '-'
+        lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
+                     f'{cell(row, "mean_return", 1)} | {cell(row, "switching_return", 1)} | '
+                     f'{cell(row, "mean_latency", 1)} | {cell(row, "spearman", 2)} | '
+                     f'{random} |')
+    return '\n'.join(lines)
+
+
+def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    methods = sorted({row['method'] for row in rows}, key=lambda m: _rank(m, METHOD_ORDER))
+    splits = sorted({row['split'] for row in rows}, key=lambda s: _rank(s, SPLIT_ORDER))
+    lookup = {(row['method'], row['split']): row for row in rows}
+    fig, ax = plt.subplots(figsize=(7.5, 4))
+    width = 0.8 / max(len(methods), 1)
+    for i, method in enumerate(methods):
+        cells = [lookup.get((method, split), {}) for split in splits]
+        ax.bar(np.arange(len(splits)) + i * width,
+               [c.get('mean_return', np.nan) for c in cells], width,
+               yerr=[c.get('mean_return_se', 0.0) for c in cells], label=method, capsize=3)
+    ax.set_xticks(np.arange(len(splits)) + width * (len(methods) - 1) / 2, splits)
+    ax.set_ylabel('episode return (mean ± s.e. over seeds)')
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict[str, Any]]:
+    """Aggregate `folder`, write summary.csv, table.md and returns.png into `out`."""
+    rows = aggregate(folder)
+    if not rows:
+        raise FileNotFoundError(f'{folder}: no finished evaluations '
+                                '(<method>_s<seed>/eval_<split>/summary.csv with .done)')
+    out.mkdir(parents=True, exist_ok=True)
+    fields = ['method', 'split', 'seeds'] + [f for m in METRICS for f in (m, f'{m}_se')]
+    with (out / 'summary.csv').open('w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=[*fields, 'random_return'])
+        writer.writeheader()
+        writer.writerows(rows)
+    (out / 'table.md').write_text(markdown_table(rows) + '\n')
+    _plot(rows, title or folder.name, out / 'returns.png')
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus report`; returns the process exit code."""
+    parser = argparse.ArgumentParser(prog='zeus report', description=__doc__.splitlines()[0])
+    parser.add_argument('folder', type=Path, help='experiment folder of one task')
+    parser.add_argument('--out', type=Path, required=True, help='folder for CSV, MD and PNG')
+    parser.add_argument('--title', help='plot title (default: the folder name)')
+    args = parser.parse_args(argv)
+    try:
+        rows = write_report(args.folder, args.out, args.title)
+    except FileNotFoundError as error:
+        print(f'zeus report: {error}', file=sys.stderr)
+        return 2
+    print(markdown_table(rows))
+    print(f'\nwrote summary.csv, table.md and returns.png to {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
