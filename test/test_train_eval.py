@@ -233,3 +233,19 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
     assert '0 evaluation(s) to run' in capsys.readouterr().out
     assert main(['--checkpoint', str(paths[0]), str(paths[0].with_name('x.pt')),
                  '--out', str(out)]) == 2
+
+
+def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) -> None:
+    """--resume adds rounds to a finished loop without recollecting or retraining old ones."""
+    from zeus_ros.offline.loop import main as loop_main
+
+    argv = ['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
+            '--random-steps', '300', '--steps', '200', '--updates', '20', '--no-eval',
+            '--no-progress']
+    assert loop_main([*argv, '--rounds', '1']) == 0
+    assert loop_main([*argv, '--rounds', '2']) == 2  # exists: needs --resume
+    assert loop_main([*argv, '--rounds', '2', '--resume']) == 0
+    assert sorted(p.name for p in (tmp_path / 'bags').iterdir()) == ['bag_000', 'bag_001']
+    assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 40
+    assert loop_main([*argv, '--rounds', '2', '--resume']) == 0  # nothing left to do
+    assert len(list((tmp_path / 'bags').iterdir())) == 2

@@ -2,7 +2,10 @@
 
 Round 0 collects uniform-random steps and trains from scratch; every later round collects with
 the newest checkpoint plus exploration noise (the policy as deployed, via collect.AgentPolicy),
-appends that bag and resumes training on all bags. Layout under --out:
+appends that bag and resumes training on all bags. `--resume` continues a stopped or finished
+loop up to --rounds: rounds whose bag exists are not collected again, rounds whose updates are
+in the checkpoint are not trained again (round i always collects with seed + i, so a loop
+extended from 5 to 10 rounds is the 10-round loop). Layout under --out:
   bags/bag_NNN (one bag per round)   run/ (the `zeus train` run directory: checkpoints, metrics)
 """
 
@@ -58,23 +61,34 @@ def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: 
 
 def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_steps: int,
              steps: int, updates: int, noise: float, schedule: dict[str, Any], seed: int,
-             progress: bool = True, evaluate: bool = True) -> list[Any]:
-    """Run the rounds; returns the TrainResult of each. `updates` are per round."""
+             progress: bool = True, evaluate: bool = True, resume: bool = False) -> list[Any]:
+    """Run the rounds; returns the TrainResult of each round trained. `updates` are per round."""
+    from zeus_ros.offline.train import checkpoint_step
+
     out = Path(out)
     bags, run = out / 'bags', out / 'run'
     pixels = config.obs_kind == 'pixels'
+    done_bags = len([p for p in bags.glob('bag_*') if p.is_dir()]) if resume else 0
+    done_updates = checkpoint_step(run / CHECKPOINT) if resume else 0
+    if resume:
+        print(f'loop: resuming {out}: {done_bags} bag(s), checkpoint at update {done_updates}')
     results = []
     for index in range(rounds):
+        total = updates * (index + 1)
+        if index < done_bags and done_updates >= total:
+            continue
         checkpoint = None if index == 0 else run / CHECKPOINT
         what = 'random policy' if checkpoint is None else f'{checkpoint} + noise {noise}'
         count = random_steps if index == 0 else steps
-        print(f'\nloop: round {index + 1}/{rounds}: collect {count} steps with {what}')
-        _collect_round(task, schedule, bags, count, seed=seed + index,
-                       checkpoint=checkpoint, noise=noise, pixels=pixels, progress=progress)
-        total = updates * (index + 1)
+        if index >= done_bags:
+            print(f'\nloop: round {index + 1}/{rounds}: collect {count} steps with {what}')
+            _collect_round(task, schedule, bags, count, seed=seed + index,
+                           checkpoint=checkpoint, noise=noise, pixels=pixels,
+                           progress=progress)
         print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
-                             resume=index > 0, evaluate=evaluate, progress=progress))
+                             resume=index > 0 or done_updates > 0, evaluate=evaluate,
+                             progress=progress))
     print(f'\nloop: done: {rounds} round(s); deploy {run / CHECKPOINT}')
     return results
 
@@ -101,6 +115,8 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--method', help='override the config method')
     parser.add_argument('--seed', type=int, help='override the config seed')
     parser.add_argument('--device', help='override the config device')
+    parser.add_argument('--resume', action='store_true',
+                        help='continue the loop in --out up to --rounds (same flags as before)')
     parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
     parser.add_argument('--no-progress', action='store_true', help='hide progress bars')
     return parser
@@ -117,9 +133,9 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) < 1:
             print(f'zeus loop: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
-    if (args.out / 'run' / CHECKPOINT).exists():
-        print(f'zeus loop: {args.out} already holds a loop run; choose another --out',
-              file=sys.stderr)
+    if (args.out / 'run' / CHECKPOINT).exists() and not args.resume:
+        print(f'zeus loop: {args.out} already holds a loop run; pass --resume to continue it '
+              'or choose another --out', file=sys.stderr)
         return 2
     try:
         config = apply_overrides(load_config(args.config), method=args.method, seed=args.seed,
@@ -134,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
                  random_steps=args.random_steps, steps=args.steps,
                  updates=args.updates or config.num_updates, noise=args.noise,
                  schedule=schedule, seed=config.seed, progress=not args.no_progress,
-                 evaluate=not args.no_eval)
+                 evaluate=not args.no_eval, resume=args.resume)
     except (TrainError, ConfigError, CheckpointError, BagError, IngestError,
             ValueError) as error:
         print(f'zeus loop: {error}', file=sys.stderr)

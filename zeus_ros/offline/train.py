@@ -182,7 +182,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     out = Path(out)
     device = resolve_device(config.device)
     config = config.replace(device=str(device))
-    resume_step = _peek_step(out / CHECKPOINT) if resume else 0
+    resume_step = checkpoint_step(out / CHECKPOINT) if resume else 0
     dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step)
     agent, start = _start(out, config, dataset, replay, resume)
     cfg = agent.config
@@ -269,7 +269,7 @@ def provenance() -> dict[str, str | None]:
     return {'command': command, 'code_commit': sha}
 
 
-def _peek_step(path: Path) -> int:
+def checkpoint_step(path: Path) -> int:
     """Update count of an existing checkpoint (0 when absent): seeds the resumed sampler."""
     if not path.is_file():
         return 0
