@@ -4,7 +4,8 @@
 
 Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
 `experiments/run_one.sh` and of `zeus eval` on several checkpoints), writes summary.csv,
-returns.png and table.md into --out and prints the markdown table (as in docs/results.md).
+returns.png, table.md and runs.csv (every seed's numbers) into --out and prints the markdown
+table (as in docs/results.md).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'write_report']
+__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'per_run', 'write_report']
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
 """Columns of an eval summary that are averaged over seeds."""
@@ -37,6 +38,23 @@ def mean_se(values: list[float]) -> tuple[float, float]:
 
 def _rank(name: str, order: tuple[str, ...]) -> tuple[int, str]:
     return (order.index(name) if name in order else len(order), name)
+
+
+def per_run(folder: Path) -> list[dict[str, Any]]:
+    """One row per finished (run, split): method, seed, split and the agent's metrics."""
+    rows = []
+    for summary in sorted(folder.glob('*/eval_*/summary.csv')):
+        match = RUN_NAME.match(summary.parent.parent.name)
+        if match is None or not (summary.parent / '.done').exists():
+            continue
+        with summary.open(newline='') as handle:
+            for row in csv.DictReader(handle):
+                if row['policy'] == 'agent':
+                    rows.append({'method': match['method'], 'seed': int(match['seed']),
+                                 'split': row['split'],
+                                 **{metric: row.get(metric, '') for metric in METRICS}})
+    return sorted(rows, key=lambda r: (_rank(r['method'], METHOD_ORDER), r['seed'],
+                                       _rank(r['split'], SPLIT_ORDER)))
 
 
 def aggregate(folder: Path) -> list[dict[str, Any]]:
@@ -118,7 +136,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
 
 
 def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict[str, Any]]:
-    """Aggregate `folder`, write summary.csv, table.md and returns.png into `out`."""
+    """Aggregate `folder`, write summary.csv, runs.csv, table.md and returns.png into `out`."""
     rows = aggregate(folder)
     if not rows:
         raise FileNotFoundError(f'{folder}: no finished evaluations '
@@ -129,6 +147,10 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
         writer = csv.DictWriter(handle, fieldnames=[*fields, 'random_return'])
         writer.writeheader()
         writer.writerows(rows)
+    with (out / 'runs.csv').open('w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=['method', 'seed', 'split', *METRICS])
+        writer.writeheader()
+        writer.writerows(per_run(folder))
     (out / 'table.md').write_text(markdown_table(rows) + '\n')
     _plot(rows, title or folder.name, out / 'returns.png')
     return rows
@@ -147,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus report: {error}', file=sys.stderr)
         return 2
     print(markdown_table(rows))
-    print(f'\nwrote summary.csv, table.md and returns.png to {args.out}')
+    print(f'\nwrote summary.csv, runs.csv, table.md and returns.png to {args.out}')
     return 0
 
 
