@@ -1,40 +1,50 @@
 #!/usr/bin/env bash
 # One run of the comparison: the record -> retrain loop from bags for one (task, method, seed),
 # then in-process evaluation on every split the task's preset defines. Same data and update
-# budget for every method: 1,500 random steps, then 4 rounds of 2,000 policy steps with
-# exploration noise 0.2, 2,000 updates per round (10,000 updates). Finished parts are skipped,
-# so rerunning resumes; a lock folder stops two copies of the same run.
-#   usage: bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
+# budget for every method: 1,500 random steps, then ROUNDS-1 rounds of 2,000 policy steps with
+# exploration noise 0.2, 2,000 updates per round (ROUNDS=5: 10,000 updates). A longer run
+# (ROUNDS > 5, folder <task>_<updates>k) starts from a copy of the finished 5-round run and
+# continues it with `zeus loop --resume`, which is the same as running all rounds at once.
+# Finished parts are skipped, so rerunning resumes; a lock folder stops two copies of a run.
+#   usage: [ROUNDS=10] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
 TASK=$1 METHOD=$2 SEED=$3
 ROOT=${4:-runs/exp}
-OUT="$ROOT/$(echo "$TASK" | tr 'A-Z-' 'a-z_')"
+ROUNDS=${ROUNDS:-5}
+BASE="$ROOT/$(echo "$TASK" | tr 'A-Z-' 'a-z_')"
+OUT=$BASE
+if [ "$ROUNDS" != 5 ]; then OUT="${BASE}_$((ROUNDS * 2))k"; fi
 run="$OUT/${METHOD}_s${SEED}"
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 # Collection switches the context every 100 steps (5 times per 500-step episode); the
-# reward-varying family has 40-step episodes, so it switches every 20 steps there (and every
-# 10 steps in the evaluation's switching episode).
-collect_every=100 eval_every=100
-if [ "$TASK" = Cheetah-Run-v1 ]; then collect_every=20 eval_every=10; fi
+# reward-varying family has 40-step episodes, so it switches every 20 steps there (`zeus eval`
+# then switches every 10 steps, a quarter episode).
+collect_every=100
+if [ "$TASK" = Cheetah-Run-v1 ]; then collect_every=20; fi
 mkdir -p "$OUT"
 if ! mkdir "$run.lock" 2>/dev/null; then echo "skip: $run is running elsewhere"; exit 0; fi
 trap 'rmdir "$run.lock"' EXIT
 if [ ! -f "$run/run/final.pt" ] || [ ! -f "$run/.done_train" ]; then
-  rm -rf "$run"
+  resume=()
+  if [ "$OUT" != "$BASE" ] && [ ! -d "$run/run" ] && [ -f "$BASE/${METHOD}_s${SEED}/.done_train" ]; then
+    mkdir -p "$run" && cp -r "$BASE/${METHOD}_s${SEED}/bags" "$BASE/${METHOD}_s${SEED}/run" "$run/"
+    cp "$BASE/${METHOD}_s${SEED}/.done_train" "$run/.done_train_first"
+  fi
+  if [ -d "$run/run" ]; then resume=(--resume); else rm -rf "$run"; fi
   start=$(date +%s)
   zeus loop --task "$TASK" --config params/train/state_cpu.yaml --method "$METHOD" \
-    --seed "$SEED" --out "$run" --rounds 5 --random-steps 1500 --steps 2000 \
+    --seed "$SEED" --out "$run" --rounds "$ROUNDS" --random-steps 1500 --steps 2000 \
     --updates 2000 --noise 0.2 --schedule "switch:train:every=$collect_every" \
-    --no-eval --no-progress > "$run.train.log" 2>&1
+    "${resume[@]}" --no-eval --no-progress >> "$run.train.log" 2>&1
   echo $(( $(date +%s) - start )) > "$run/.done_train"
 fi
 for split in $(python -c "import yaml,sys; p=yaml.safe_load(open('params/contexts/$TASK.yaml')); print(' '.join(s for s in ('train','interpolation','extrapolation') if p.get(s)))"); do
   if [ ! -f "$run/eval_$split/.done" ]; then
     start=$(date +%s)
     zeus eval --checkpoint "$run/run/final.pt" --task "$TASK" --split "$split" \
-      --episodes 1 --switch-every "$eval_every" --switch-episodes 1 --probe-steps 0 \
+      --episodes 1 --switch-episodes 1 --probe-steps 0 \
       --seed 100 --out "$run/eval_$split" --no-progress > "$run.eval_$split.log" 2>&1
     echo $(( $(date +%s) - start )) > "$run/eval_$split/.done"
   fi
