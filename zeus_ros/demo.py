@@ -1,9 +1,10 @@
-"""The live demo: the full system on Cheetah-Run-v0 while the torso length changes unannounced.
+"""The live demo: the full system while the physics changes unannounced (default Cheetah-Run-v0).
 
-sim_bridge switches the torso length mid-episode through training and extrapolation values;
-context_estimator and policy run a trained ZeUS checkpoint; this process watches the topics
-(subscribe only, like `zeus inspect`), then prints the per-segment summary and saves the
-inspection figure and per-step CSV under --out.
+sim_bridge switches the context (torso length by default; --task picks another family) in the
+middle of episodes through training and extrapolation values; context_estimator and policy run
+the task's shipped ZeUS checkpoint; this process watches the topics (subscribe only, like
+`zeus inspect`), then prints the per-segment summary and saves the inspection figure and
+per-step CSV under --out.
 """
 
 from __future__ import annotations
@@ -19,28 +20,49 @@ from zeus_ros.inspect import Inspector, write_csv
 from zeus_ros.inspection import format_segments, percentile, plot_inspection
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
 
-CHECKPOINT_NAME = 'cheetah_run_v0_zeus_state.pt'
+DEMO_CHECKPOINTS = {
+    'Cheetah-Run-v0': 'cheetah_run_v0_zeus_state.pt',
+    'Walker-Walk-v0': 'comparison/walker_walk_v0/zeus_s0.pt',
+    'Walker-Walk-v1': 'comparison/walker_walk_v1/zeus_s0.pt',
+    'Finger-Spin-v0': 'comparison/finger_spin_v0/zeus_s0.pt',
+    'Cheetah-Run-v1': 'comparison/cheetah_run_v1/zeus_s0.pt',
+}
+"""Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
+
+# Cheetah-Run-v0: training values (0.7-1.15) alternating with extrapolation values (1.2-1.5).
+# The shipped checkpoint fails on the shortest torsos (0.3-0.6, see its card), so the demo shows
+# the range it handles. Other tasks alternate their train and extrapolation presets.
+CHEETAH_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
 
 
-def default_checkpoint() -> Path:
-    """The shipped checkpoint: in this checkout, else in share/zeus_ros of an ament prefix."""
-    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / CHECKPOINT_NAME]
+def default_checkpoint(task: str = 'Cheetah-Run-v0') -> Path:
+    """The task's shipped checkpoint: in this checkout, else in share/zeus_ros of a prefix."""
+    name = DEMO_CHECKPOINTS[task]
+    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / name]
     for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
         if prefix:
-            candidates.append(Path(prefix) / 'share' / 'zeus_ros' / 'checkpoints' /
-                              CHECKPOINT_NAME)
+            candidates.append(Path(prefix) / 'share' / 'zeus_ros' / 'checkpoints' / name)
     return next((path for path in candidates if path.is_file()), candidates[0])
 
-# Training values (0.7-1.15) alternating with extrapolation values (1.2-1.5), 150 steps each:
-# with 500-step episodes most switches land in the middle of an episode. The shipped checkpoint
-# fails on the shortest torsos (0.3-0.6, see its card), so the demo shows the range it handles.
-SCHEDULE_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
+
+def schedule_values(task: str) -> list[float]:
+    """Context values the demo cycles through: train and extrapolation, alternating."""
+    if task == 'Cheetah-Run-v0':
+        return list(CHEETAH_VALUES)
+    from sim_bridge.presets import load_preset
+
+    train = [next(iter(v.values())) for v in load_preset(task, 'train')]
+    extra = [next(iter(v.values())) for v in load_preset(task, 'extrapolation')]
+    values = []
+    for index in range(max(len(train), len(extra))):
+        values += [train[index % len(train)], extra[index % len(extra)]]
+    return values
 
 
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeProcess]:
     """The node processes of the demo with their parameters."""
-    values = '[' + ','.join(f'{v}' for v in SCHEDULE_VALUES) + ']'
-    bridge = ['-p', 'task:=Cheetah-Run-v0', '-p', f'max_steps:={args.steps}',
+    values = '[' + ','.join(f'{float(v)}' for v in schedule_values(args.task)) + ']'
+    bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
     # Every other node and this process's inspector listen to /zeus/step: wait for all of them.
@@ -48,13 +70,13 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeP
     bridge += ['-p', f'min_observers:={observers}']
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None, bridge))]
     if checkpoint is not None:
-        ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', 'task:=Cheetah-Run-v0']
+        ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', f'task:={args.task}']
         nodes.append(NodeProcess('context_estimator',
                                  node_argv('context_estimator', None, ckpt)))
         nodes.append(NodeProcess('policy', node_argv('policy', None, ckpt)))
     else:
         nodes.append(NodeProcess('policy', node_argv(
-            'policy', None, ['-p', 'task:=Cheetah-Run-v0', '-p', f'seed:={args.seed}'])))
+            'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}'])))
     if args.record:
         nodes.append(NodeProcess('recorder', node_argv(
             'recorder', None, ['-p', f'output:={args.out / "bag"}'])))
@@ -65,19 +87,24 @@ def main(argv: list[str] | None = None) -> int:
     """Run the demo; exit code 1 if a node died."""
     parser = argparse.ArgumentParser(prog='zeus demo', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--task', choices=sorted(DEMO_CHECKPOINTS), default='Cheetah-Run-v0',
+                        help='task family (default: %(default)s)')
     parser.add_argument('--checkpoint', type=Path, default=None,
-                        help='default: the shipped Cheetah-Run-v0 checkpoint')
+                        help="default: the task's shipped checkpoint (checkpoints/README.md)")
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
     parser.add_argument('--steps', type=int, default=2000, help='control steps to run')
-    parser.add_argument('--every', type=int, default=150, help='steps between switches')
+    parser.add_argument('--every', type=int,
+                        help='steps between switches (default 150; 20 for 40-step episodes)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')
     parser.add_argument('--out', type=Path, default=Path('out/demo'))
     args = parser.parse_args(argv)
+    if args.every is None:
+        args.every = 20 if args.task == 'Cheetah-Run-v1' else 150
     checkpoint = None
     if not args.random_policy:
-        checkpoint = (args.checkpoint or default_checkpoint()).resolve()
+        checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
     if checkpoint is not None and not checkpoint.is_file():
         print(f'zeus demo: checkpoint {checkpoint} not found; train one (README, "Record -> '
               'retrain -> redeploy") or pass --random-policy', file=sys.stderr)
@@ -86,9 +113,9 @@ def main(argv: list[str] | None = None) -> int:
     env = ros_env(domain)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     args.out.mkdir(parents=True, exist_ok=True)
-    print(f'[demo] Cheetah-Run-v0, torso length switching every {args.every} steps through '
-          f'{SCHEDULE_VALUES}; policy: {checkpoint or "random"}; ROS_DOMAIN_ID={domain}',
-          flush=True)
+    print(f'[demo] {args.task}, context switching every {args.every} steps through '
+          f'{schedule_values(args.task)}; policy: {checkpoint or "random"}; '
+          f'ROS_DOMAIN_ID={domain}', flush=True)
     inspector = Inspector()
     supervisor = Supervisor(build_nodes(args, checkpoint), env)
     started = time.monotonic()
