@@ -40,6 +40,14 @@ def _rank(name: str, order: tuple[str, ...]) -> tuple[int, str]:
     return (order.index(name) if name in order else len(order), name)
 
 
+def _seconds(path: Path) -> str:
+    """Wall seconds written into a `.done` marker by the experiment scripts ('' if absent)."""
+    try:
+        return path.read_text().strip()
+    except OSError:
+        return ''
+
+
 def per_run(folder: Path) -> list[dict[str, Any]]:
     """One row per finished (run, split): method, seed, split and the agent's metrics."""
     rows = []
@@ -52,7 +60,9 @@ def per_run(folder: Path) -> list[dict[str, Any]]:
                 if row['policy'] == 'agent':
                     rows.append({'method': match['method'], 'seed': int(match['seed']),
                                  'split': row['split'],
-                                 **{metric: row.get(metric, '') for metric in METRICS}})
+                                 **{metric: row.get(metric, '') for metric in METRICS},
+                                 'train_seconds': _seconds(summary.parents[1] / '.done_train'),
+                                 'eval_seconds': _seconds(summary.parent / '.done')})
     return sorted(rows, key=lambda r: (_rank(r['method'], METHOD_ORDER), r['seed'],
                                        _rank(r['split'], SPLIT_ORDER)))
 
@@ -148,7 +158,8 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
         writer.writeheader()
         writer.writerows(rows)
     with (out / 'runs.csv').open('w', newline='') as handle:
-        writer = csv.DictWriter(handle, fieldnames=['method', 'seed', 'split', *METRICS])
+        writer = csv.DictWriter(handle, fieldnames=['method', 'seed', 'split', *METRICS,
+                                                    'train_seconds', 'eval_seconds'])
         writer.writeheader()
         writer.writerows(per_run(folder))
     (out / 'table.md').write_text(markdown_table(rows) + '\n')
