@@ -188,7 +188,8 @@ def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny
     assert export_main(['--checkpoint', str(trained.out / 'final.pt'), '--out',
                         str(target), '--commit', 'abc123']) == 0
     card = target.with_suffix('.md').read_text()
-    for needle in ('Cheetah-Run-v0', '`zeus`', 'abc123', 'sha256', 'seed | 0',
+    recorded = load_checkpoint(trained.out / 'final.pt').extra['code_commit']
+    for needle in ('Cheetah-Run-v0', '`zeus`', recorded or 'abc123', 'sha256', 'seed | 0',
                    'transitions from 1 bag(s)', 'Not evaluated yet'):
         assert needle in card, needle
     assert 'pytest' in card or 'command' in card  # the recorded command line of this process
@@ -220,7 +221,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
     argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '150',
             '--probe-steps', '0', '--out', str(out), '--no-progress']
     assert main(argv) == 0
-    runs = out / 'cheetah_run_v0'
+    runs = out / f'cheetah_run_v0_{first.step}'
     for seed in (0, 1):
         assert (runs / f'zeus_s{seed}' / 'eval_interpolation' / '.done').is_file()
     rows = aggregate(runs)

@@ -2,10 +2,10 @@
 
     zeus eval --checkpoint checkpoints/comparison --split all --out out/tables --jobs 2
 
-Each checkpoint is evaluated into <out>/<task>/<method>_s<seed>/eval_<split>/ (the layout of
-experiments/run_one.sh), finished parts are skipped (so an interrupted run resumes), and
-report.write_report then writes per-task summary.csv / table.md / returns.png plus one
-<out>/tables.md holding every task's table.
+Each checkpoint is evaluated into <out>/<group>/<method>_s<seed>/eval_<split>/, where the group
+names task and update budget (cheetah_run_v0_10k). Finished parts are skipped, so an interrupted
+run resumes. report.write_report then writes per-group summary.csv / runs.csv / table.md /
+returns.png, and <out>/tables.md holds every group's table.
 """
 
 from __future__ import annotations
@@ -20,12 +20,13 @@ from typing import Any
 
 from tqdm import tqdm
 
-__all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'task_folder']
+__all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'group_name']
 
 
-def task_folder(task: str) -> str:
-    """Cheetah-Run-v0 -> cheetah_run_v0 (the experiment folder name)."""
-    return task.lower().replace('-', '_')
+def group_name(task: str, updates: int) -> str:
+    """Cheetah-Run-v0 after 10,000 updates -> cheetah_run_v0_10k: one table per task and budget."""
+    budget = f'{updates // 1000}k' if updates % 1000 == 0 else str(updates)
+    return f"{task.lower().replace('-', '_')}_{budget}"
 
 
 def find_checkpoints(paths: Iterable[Path]) -> list[Path]:
@@ -55,30 +56,31 @@ class EvalJob:
     out: Path
 
 
-def _identify(path: Path) -> tuple[str, str, int]:
-    """(task, method, seed) stored in a checkpoint."""
+def _identify(path: Path) -> tuple[str, str, int, int]:
+    """(task, method, seed, updates) stored in a checkpoint."""
     from zeus_ros.learning.checkpoint import load_checkpoint
 
     loaded = load_checkpoint(path, load_optimizers=False)
-    return loaded.spec.task, loaded.config.method, int(loaded.config.seed)
+    return loaded.spec.task, loaded.config.method, int(loaded.config.seed), loaded.step
 
 
 def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
          force: bool = False) -> tuple[list[EvalJob], list[str]]:
-    """Jobs still to run, and the task folders they belong to (in order of appearance)."""
+    """Jobs still to run, and the group folders they belong to (in order of appearance)."""
     from sim_bridge.presets import load_preset
 
     owners: dict[Path, Path] = {}
     jobs, tasks = [], []
     for path in checkpoints:
-        task, method, seed = _identify(path)
-        run = out / task_folder(task) / f'{method}_s{seed}'
+        task, method, seed, updates = _identify(path)
+        group = group_name(task, updates)
+        run = out / group / f'{method}_s{seed}'
         if run in owners:
-            raise ValueError(f'{owners[run]} and {path} are both {task} {method} seed {seed}; '
-                             'evaluate them into different --out folders')
+            raise ValueError(f'{owners[run]} and {path} are both {task} {method} seed {seed} '
+                             f'after {updates} updates; evaluate them into different --out')
         owners[run] = path
-        if task_folder(task) not in tasks:
-            tasks.append(task_folder(task))
+        if group not in tasks:
+            tasks.append(group)
         wanted = splits or [s for s in ('train', 'interpolation', 'extrapolation')
                             if _has_split(load_preset, task, s)]
         for split in wanted:

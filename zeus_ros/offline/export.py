@@ -54,8 +54,8 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
     obs = ('proprioceptive state' if spec.obs_kind == 'state' else 'pixels') + \
         f' {tuple(spec.obs_shape)}'
     bags = extra.get('bags', [])
-    command = command or extra.get('command') or 'not recorded'
-    commit = commit or extra.get('code_commit') or 'not recorded'
+    command = extra.get('command') or command or 'not recorded'
+    commit = extra.get('code_commit') or commit or 'not recorded'
     digest = hashlib.sha256(pt.read_bytes()).hexdigest()
     lines = [
         f'# Card: `{pt.name}`', '',
@@ -118,8 +118,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--evals', type=Path,
                         help='folder with eval_<split>/summary.csv for the card (default: the '
                         "run folder above the checkpoint's, when it has them)")
-    parser.add_argument('--command', help='command that trained it (default: recorded one)')
-    parser.add_argument('--commit', help='source commit it was trained on (default: recorded)')
+    parser.add_argument('--command',
+                        help='command that trained it, for checkpoints that did not record one')
+    parser.add_argument('--commit',
+                        help='source commit it was trained on, for checkpoints without one')
     args = parser.parse_args(argv)
     if args.out.suffix != '.pt':
         print(f'zeus export: --out {args.out} must end in .pt', file=sys.stderr)
