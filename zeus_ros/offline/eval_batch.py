@@ -56,25 +56,29 @@ class EvalJob:
     out: Path
 
 
-def _identify(path: Path) -> tuple[str, str, int, int]:
+def _identify(path: Path, expect_task: str | None) -> tuple[str, str, int, int]:
     """(task, method, seed, updates) stored in a checkpoint."""
     from zeus_ros.learning.checkpoint import load_checkpoint
 
-    loaded = load_checkpoint(path, load_optimizers=False)
+    loaded = load_checkpoint(path, load_optimizers=False, expect_task=expect_task)
     return loaded.spec.task, loaded.config.method, int(loaded.config.seed), loaded.step
 
 
 def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
-         force: bool = False) -> tuple[list[EvalJob], list[str]]:
+         force: bool = False, expect_task: str | None = None
+         ) -> tuple[list[EvalJob], list[str]]:
     """Jobs still to run, and the group folders they belong to (in order of appearance)."""
     from sim_bridge.presets import load_preset
 
     owners: dict[Path, Path] = {}
     jobs, tasks = [], []
     for path in checkpoints:
-        task, method, seed, updates = _identify(path)
+        task, method, seed, updates = _identify(path, expect_task)
         group = group_name(task, updates)
         run = out / group / f'{method}_s{seed}'
+        if run in owners and owners[run].parent == path.parent:
+            print(f'zeus eval: skipping {path}: same run and update as {owners[run]}')
+            continue
         if run in owners:
             raise ValueError(f'{owners[run]} and {path} are both {task} {method} seed {seed} '
                              f'after {updates} updates; evaluate them into different --out')
@@ -114,11 +118,12 @@ def _run_job(job: EvalJob, protocol: dict[str, Any]) -> tuple[EvalJob, float]:
 
 def evaluate_many(checkpoints: Sequence[Path], out: Path, *, splits: Sequence[str] | None,
                   jobs: int = 1, force: bool = False, progress: bool = True,
-                  **protocol: Any) -> dict[str, list[dict[str, Any]]]:
+                  expect_task: str | None = None, **protocol: Any
+                  ) -> dict[str, list[dict[str, Any]]]:
     """Evaluate every checkpoint on `splits` (None: all its task defines); tables per task."""
     from zeus_ros.offline.report import markdown_table, write_report
 
-    todo, tasks = plan(checkpoints, out, splits, force)
+    todo, tasks = plan(checkpoints, out, splits, force, expect_task)
     print(f'zeus eval: {len(checkpoints)} checkpoint(s), {len(todo)} evaluation(s) to run '
           f'({jobs} at a time) into {out}')
     bar = tqdm(total=len(todo), desc='evaluations', unit='eval', disable=not progress)

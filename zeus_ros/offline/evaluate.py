@@ -379,6 +379,7 @@ def _main_many(args: argparse.Namespace) -> int:
         tables = evaluate_many(
             checkpoints, args.out, splits=None if args.split == 'all' else [args.split],
             jobs=args.jobs, force=args.force, progress=not args.no_progress,
+            expect_task=args.task,
             episodes=args.episodes, switch_every=args.switch_every,
             switch_episodes=args.switch_episodes, probe_steps=args.probe_steps, seed=args.seed)
     except (CheckpointError, ValueError, FileNotFoundError) as error:
