@@ -1,0 +1,84 @@
+"""Learning curves from the bags: mean reward per step of every collection round, per method.
+
+    python experiments/collection_curves.py runs/exp/walker_walk_v0 --out docs/results/x
+
+Round 1 is the uniform-random warm-up; round r > 1 was collected by the policy after
+2,000 (r - 1) updates plus exploration noise, under the collection schedule. Mean and standard
+error over seeds go to collection.csv and collection.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import defaultdict
+import csv
+from pathlib import Path
+import re
+import warnings
+
+import numpy as np
+
+from zeus_ros.offline.ingest import ingest_bags
+from zeus_ros.offline.report import METHOD_ORDER, mean_se
+
+RUN = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
+
+
+def main() -> None:
+    """Read every finished run's bags; write the per-round table and plot."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('folder', type=Path)
+    parser.add_argument('--out', type=Path, required=True)
+    args = parser.parse_args()
+    per_method: dict[str, list[list[float]]] = defaultdict(list)
+    for done in sorted(args.folder.glob('*_s*/.done_train')):
+        match = RUN.match(done.parent.name)
+        if match is None:
+            continue
+        rounds = []
+        for bag in sorted((done.parent / 'bags').glob('bag_*')):
+            with warnings.catch_warnings():
+                warnings.simplefilter('ignore')
+                episodes = ingest_bags([bag]).episodes
+            rounds.append(float(np.concatenate([e.reward for e in episodes]).mean()))
+        per_method[match['method']].append(rounds)
+    methods = sorted(per_method, key=lambda m: (METHOD_ORDER.index(m)
+                                                if m in METHOD_ORDER else 99, m))
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for method in methods:
+        length = min(len(r) for r in per_method[method])
+        for index in range(length):
+            mean, se = mean_se([r[index] for r in per_method[method]])
+            rows.append({'method': method, 'round': index + 1, 'seeds': len(per_method[method]),
+                         'reward_per_step': mean, 'reward_per_step_se': se})
+    with (args.out / 'collection.csv').open('w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for method in methods:
+        mine = [r for r in rows if r['method'] == method]
+        ax.errorbar([r['round'] for r in mine], [r['reward_per_step'] for r in mine],
+                    yerr=[r['reward_per_step_se'] for r in mine], label=method, capsize=3,
+                    marker='o')
+    ax.set_xticks(range(1, 1 + max((r['round'] for r in rows), default=1)))
+    ax.set_xlabel('collection round (1 = uniform random)')
+    ax.set_ylabel('reward per step (mean ± s.e.)')
+    ax.set_title(f'{args.folder.name}: reward while collecting')
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(args.out / 'collection.png', dpi=110)
+    plt.close(fig)
+    for row in rows:
+        print(f"{row['method']:<22} round {row['round']}: {row['reward_per_step']:.3f} "
+              f"± {row['reward_per_step_se']:.3f}")
+
+
+if __name__ == '__main__':
+    main()
