@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.offline.evaluate import evaluate_contexts
@@ -26,3 +27,41 @@ def test_shipped_checkpoint_scores_well_above_random_on_train_contexts() -> None
         None, VALUES, task_name='Cheetah-Run-v0', progress=False)]
     assert np.mean(trained) > 10 * np.mean(random), (trained, random)
     assert min(trained) > 400, trained
+
+
+ROOT = Path(__file__).resolve().parents[1]
+COMPARISON = ROOT / 'checkpoints' / 'comparison'
+
+
+def test_every_comparison_checkpoint_matches_its_card() -> None:
+    """Each shipped comparison checkpoint is a deployment export whose card names its hash."""
+    import hashlib
+
+    from zeus_ros.learning.checkpoint import load_checkpoint
+
+    paths = sorted(COMPARISON.glob('*/*.pt'))
+    assert len(paths) >= 45, 'expected 5 tasks x 3 methods x 3 seeds at least'
+    for path in paths:
+        card = path.with_suffix('.md').read_text()
+        assert hashlib.sha256(path.read_bytes()).hexdigest() in card, path
+        loaded = load_checkpoint(path)
+        assert loaded.deploy and loaded.spec.task in card and f'`{loaded.config.method}`' in card
+
+
+def test_zeus_eval_reproduces_the_results_table_from_a_shipped_checkpoint(tmp_path: Path) -> None:
+    """`zeus eval` on a comparison checkpoint gives the return recorded in docs/results."""
+    import csv
+
+    import torch
+
+    from zeus_ros.offline.evaluate import evaluate
+
+    torch.set_num_threads(1)
+    result = evaluate(COMPARISON / 'cheetah_run_v0_10k' / 'zeus_s0.pt', split='train',
+                      probe_steps=0, seed=100, out=tmp_path, progress=False)
+    with (ROOT / 'docs' / 'results' / 'cheetah_run_v0_10k' / 'runs.csv').open() as handle:
+        recorded = next(row for row in csv.DictReader(handle) if row['method'] == 'zeus'
+                        and row['seed'] == '0' and row['split'] == 'train')
+    measured = result['summary'][0]['mean_return']
+    # Same machine type: identical; another CPU's float rounding may move a 500-step rollout.
+    assert measured == pytest.approx(float(recorded['mean_return']), rel=0.05)

@@ -22,10 +22,10 @@ from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
 
 DEMO_CHECKPOINTS = {
     'Cheetah-Run-v0': 'cheetah_run_v0_zeus_state.pt',
-    'Walker-Walk-v0': 'comparison/walker_walk_v0/zeus_s0.pt',
-    'Walker-Walk-v1': 'comparison/walker_walk_v1/zeus_s0.pt',
-    'Finger-Spin-v0': 'comparison/finger_spin_v0/zeus_s0.pt',
-    'Cheetah-Run-v1': 'comparison/cheetah_run_v1/zeus_s0.pt',
+    'Walker-Walk-v0': 'comparison/walker_walk_v0_10k/zeus_s0.pt',
+    'Walker-Walk-v1': 'comparison/walker_walk_v1_10k/zeus_s0.pt',
+    'Finger-Spin-v0': 'comparison/finger_spin_v0_10k/zeus_s0.pt',
+    'Cheetah-Run-v1': 'comparison/cheetah_run_v1_10k/zeus_s0.pt',
 }
 """Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
 
