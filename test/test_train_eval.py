@@ -250,3 +250,31 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 40
     assert loop_main([*argv, '--rounds', '2', '--resume']) == 0  # nothing left to do
     assert len(list((tmp_path / 'bags').iterdir())) == 2
+
+
+def _trace(reward: list[float], context: list[float], segment: list[int]) -> Any:
+    from zeus_ros.offline.evaluate import Trace
+
+    n = len(reward)
+    first = np.zeros(n, bool)
+    first[0] = True
+    return Trace(reward=np.asarray(reward, float), first=first,
+                 context=np.asarray(context, float)[:, None], segment=np.asarray(segment),
+                 psi=None, history_length=np.full(n, 5), obs=np.zeros((n, 1)),
+                 action=np.zeros((n, 1)))
+
+
+def test_adaptation_latency_counts_steps_back_to_steady_and_skips_zero_reward() -> None:
+    """Latency = steps until the 10-step mean is within 10% of steady; no latency for r = 0."""
+    from zeus_ros.offline.evaluate import adaptation_latencies
+
+    # 30 steps at context 1 (reward 1), then context 2: 5 bad steps, then reward 2 for 45 steps.
+    reward = [1.0] * 30 + [0.0] * 5 + [2.0] * 45
+    context = [1.0] * 30 + [2.0] * 50
+    segment = [0] * 30 + [1] * 50
+    rows = adaptation_latencies(_trace(reward, context, segment), {(1.0,): 1.0, (2.0,): 2.0})
+    assert len(rows) == 1 and rows[0]['recovered']
+    # First 10-step window within 10% of 2 (inclusive): one bad step left in it, mean 1.8.
+    assert rows[0]['latency'] == 13
+    # A context where the policy's steady reward is 0 has nothing to recover to: skipped.
+    assert adaptation_latencies(_trace(reward, context, segment), {(2.0,): 0.0}) == []

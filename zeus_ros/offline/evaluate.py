@@ -35,6 +35,8 @@ __all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation'
 SPLITS = ('train', 'interpolation', 'extrapolation')
 RECOVERY_TOLERANCE = 0.10
 """A switch is absorbed once the reward is within 10% of its steady value on the new context."""
+NEGLIGIBLE_REWARD = 1e-3
+"""Steady per-step rewards below this (in magnitude) give no adaptation latency: see below."""
 SMOOTHING = 10
 """Per-step rewards are averaged over this many steps (about one cheetah stride, so the gait's
 own oscillation is not read as a disturbance) before the recovery test; latencies are >= 9."""
@@ -162,7 +164,9 @@ def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
     """One row per mid-episode switch: steps until the smoothed reward is back near steady.
 
     A switch whose segment ends (next switch or episode end) first is reported censored with
-    the segment length as its latency.
+    the segment length as its latency. A switch to a context where the policy's steady reward
+    is negligible (|r| < 1e-3 per step, e.g. a finger that never spins) is skipped: there is
+    nothing to recover to, and a reward that stays 0 would read as instant recovery.
     """
     rows = []
     episode = np.cumsum(trace.first)
@@ -172,7 +176,7 @@ def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
             continue
         key = tuple(np.round(trace.context[s], 6))
         target = steady.get(key)
-        if target is None:
+        if target is None or abs(target) < NEGLIGIBLE_REWARD:
             continue
         end = s + 1
         while end < len(trace.reward) and trace.segment[end] == trace.segment[s] \
@@ -180,7 +184,7 @@ def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
             end += 1
         if end - s < SMOOTHING:
             continue  # cut off by the end of the run: too short to judge
-        tolerance = RECOVERY_TOLERANCE * max(abs(target), 1e-3)
+        tolerance = RECOVERY_TOLERANCE * abs(target)
         latency, recovered = end - s, False
         for t in range(s, end):
             window = trace.reward[max(s, t - SMOOTHING + 1):t + 1]
