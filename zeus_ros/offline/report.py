@@ -4,8 +4,8 @@
 
 Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
 `experiments/run_one.sh` and of `zeus eval` on several checkpoints), writes summary.csv,
-returns.png, table.md and runs.csv (every seed's numbers) into --out and prints the markdown
-table (as in docs/results.md).
+returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into --out and prints
+the markdown table (as in docs/results.md).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'per_run', 'write_report']
+__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'per_run', 'wall_time_table',
+           'write_report']
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
 """Columns of an eval summary that are averaged over seeds."""
@@ -62,6 +63,9 @@ def per_run(folder: Path) -> list[dict[str, Any]]:
                                  'split': row['split'],
                                  **{metric: row.get(metric, '') for metric in METRICS},
                                  'train_seconds': _seconds(summary.parents[1] / '.done_train'),
+                                 # a longer run resumed from a shorter one: that one's seconds
+                                 'earlier_train_seconds': _seconds(
+                                     summary.parents[1] / '.done_train_first'),
                                  'eval_seconds': _seconds(summary.parent / '.done')})
     return sorted(rows, key=lambda r: (_rank(r['method'], METHOD_ORDER), r['seed'],
                                        _rank(r['split'], SPLIT_ORDER)))
@@ -120,6 +124,29 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     return '\n'.join(lines)
 
 
+def wall_time_table(runs: list[dict[str, Any]]) -> str:
+    """Markdown: per method and seed, training seconds + evaluation seconds (all splits).
+
+    A run resumed from a shorter one shows both training pieces (earlier + this one).
+    """
+    cells: dict[str, dict[int, str]] = defaultdict(dict)
+    evals: dict[tuple[str, int], float] = defaultdict(float)
+    for run in runs:
+        evals[(run['method'], run['seed'])] += float(run['eval_seconds'] or 0)
+    for run in runs:
+        train = str(run['train_seconds'] or '?')
+        if run.get('earlier_train_seconds'):
+            train = f'({run["earlier_train_seconds"]} + {train})'
+        cells[run['method']][run['seed']] = f'{train} + {evals[(run["method"], run["seed"])]:.0f}'
+    seeds = sorted({run['seed'] for run in runs})
+    lines = ['| method | ' + ' | '.join(f'seed {s}' for s in seeds) + ' |',
+             '|---|' + '---|' * len(seeds)]
+    for method in sorted(cells, key=lambda m: _rank(m, METHOD_ORDER)):
+        lines.append(f'| {method} | ' + ' | '.join(cells[method].get(s, '-') for s in seeds)
+                     + ' |')
+    return '\n'.join(lines)
+
+
 def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
     import matplotlib
 
@@ -159,9 +186,12 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
         writer.writerows(rows)
     with (out / 'runs.csv').open('w', newline='') as handle:
         writer = csv.DictWriter(handle, fieldnames=['method', 'seed', 'split', *METRICS,
-                                                    'train_seconds', 'eval_seconds'])
+                                                    'train_seconds', 'earlier_train_seconds',
+                                                    'eval_seconds'])
         writer.writeheader()
-        writer.writerows(per_run(folder))
+        runs = per_run(folder)
+        writer.writerows(runs)
+    (out / 'wall_times.md').write_text(wall_time_table(runs) + '\n')
     (out / 'table.md').write_text(markdown_table(rows) + '\n')
     _plot(rows, title or folder.name, out / 'returns.png')
     return rows
@@ -180,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus report: {error}', file=sys.stderr)
         return 2
     print(markdown_table(rows))
-    print(f'\nwrote summary.csv, runs.csv, table.md and returns.png to {args.out}')
+    print(f'\nwrote summary.csv, runs.csv, table.md, wall_times.md and returns.png to {args.out}')
     return 0
 
 

@@ -1,0 +1,62 @@
+"""`zeus report` over an experiment folder laid out as experiments/run_one.sh writes it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from zeus_ros.offline.metrics import read_csv, write_csv
+from zeus_ros.offline.report import aggregate, main, wall_time_table
+
+
+def _run(folder: Path, name: str, returns: dict[str, float], *, train: int,
+         earlier: int | None = None) -> None:
+    """One finished run: eval_<split>/summary.csv + .done markers with wall seconds."""
+    run = folder / name
+    run.mkdir(parents=True)
+    (run / '.done_train').write_text(f'{train}\n')
+    if earlier is not None:
+        (run / '.done_train_first').write_text(f'{earlier}\n')
+    for split, value in returns.items():
+        write_csv(run / f'eval_{split}' / 'summary.csv', [
+            {'policy': 'agent', 'split': split, 'mean_return': value,
+             'switching_return': value - 1, 'mean_latency': 12, 'spearman': 0.5},
+            {'policy': 'random', 'split': split, 'mean_return': 20.0}])
+        (run / f'eval_{split}' / '.done').write_text('7\n')
+
+
+def test_report_means_standard_errors_and_wall_times(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    """Mean ± s.e. over seeds, unfinished evals left out, resumed runs show both pieces."""
+    folder = tmp_path / 'exp'
+    _run(folder, 'zeus_s0', {'train': 100.0, 'extrapolation': 50.0}, train=300, earlier=400)
+    _run(folder, 'zeus_s1', {'train': 200.0, 'extrapolation': 70.0}, train=310)
+    _run(folder, 'no_context_s0', {'train': 90.0}, train=120)
+    (folder / 'no_context_s0' / 'eval_train' / '.done').unlink()  # still running: left out
+
+    rows = aggregate(folder)
+    assert [(r['method'], r['split'], r['seeds']) for r in rows] == [
+        ('zeus', 'train', 2), ('zeus', 'extrapolation', 2)]
+    assert rows[0]['mean_return'] == pytest.approx(150.0)
+    assert rows[0]['mean_return_se'] == pytest.approx(50.0)  # std(ddof=1) / sqrt(2)
+
+    out = tmp_path / 'report'
+    assert main([str(folder), '--out', str(out)]) == 0
+    assert '| zeus | train | 2 | 150.0 ± 50.0 |' in capsys.readouterr().out
+    runs = read_csv(out / 'runs.csv')
+    assert {(r['seed'], r['split'], r['train_seconds']) for r in runs} == {
+        (0, 'train', 300), (0, 'extrapolation', 300), (1, 'train', 310),
+        (1, 'extrapolation', 310)}
+    table = (out / 'wall_times.md').read_text()
+    assert '| zeus | (400 + 300) + 14 | 310 + 14 |' in table
+    assert table == wall_time_table(runs) + '\n'
+    assert (out / 'returns.png').stat().st_size > 0
+
+
+def test_report_on_a_folder_without_evaluations_fails_clearly(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture
+                                                              ) -> None:
+    """No finished evaluation: exit 2 and a message naming the folder and the layout."""
+    assert main([str(tmp_path), '--out', str(tmp_path / 'out')]) == 2
+    assert 'no finished evaluations' in capsys.readouterr().err
