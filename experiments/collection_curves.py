@@ -19,7 +19,7 @@ import warnings
 import numpy as np
 
 from zeus_ros.offline.ingest import ingest_bags
-from zeus_ros.offline.report import METHOD_ORDER, mean_se
+from zeus_ros.offline.report import mean_se, method_order_key
 
 RUN = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
 
@@ -42,8 +42,7 @@ def main() -> None:
                 episodes = ingest_bags([bag]).episodes
             rounds.append(float(np.concatenate([e.reward for e in episodes]).mean()))
         per_method[match['method']].append(rounds)
-    methods = sorted(per_method, key=lambda m: (METHOD_ORDER.index(m)
-                                                if m in METHOD_ORDER else 99, m))
+    methods = sorted(per_method, key=method_order_key)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for method in methods:

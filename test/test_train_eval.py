@@ -282,3 +282,18 @@ def test_adaptation_latency_counts_steps_back_to_steady_and_skips_zero_reward() 
     assert rows[0]['latency'] == 13
     # A context where the policy's steady reward is 0 has nothing to recover to: skipped.
     assert adaptation_latencies(_trace(reward, context, segment), {(2.0,): 0.0}) == []
+
+
+def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
+    """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / 'experiments' / 'context_scale.py'
+    spec = importlib.util.spec_from_file_location('context_scale', path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    row = module.context_scale(trained.out / 'final.pt', 'interpolation')
+    assert row['method'] == 'zeus' and row['split'] == 'interpolation'
+    assert row['spread'] > 0 and row['noise'] >= 0 and row['norm'] > 0
+    assert np.isfinite([row['spread'], row['noise'], row['norm']]).all()

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'per_run', 'wall_time_table',
+__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'method_order_key', 'per_run',
+           'wall_time_table',
            'write_report']
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
@@ -39,6 +40,11 @@ def mean_se(values: list[float]) -> tuple[float, float]:
 
 def _rank(name: str, order: tuple[str, ...]) -> tuple[int, str]:
     return (order.index(name) if name in order else len(order), name)
+
+
+def method_order_key(method: str) -> tuple[int, str]:
+    """Sort key that lists methods as every table does: zeus first, oracle last."""
+    return _rank(method, METHOD_ORDER)
 
 
 def _seconds(path: Path) -> str:
