@@ -35,6 +35,8 @@ SEED = re.compile(r'_s(?P<seed>\d+)\.pt$')
 def context_scale(path: Path, split: str) -> dict[str, float | str] | None:
     """Spread, noise and norm of psi for one checkpoint (None without a context encoder)."""
     agent = InferenceAgent.from_checkpoint(path)
+    if agent.context_dim == 0 or agent.needs_true_context:
+        return None  # no learned context: no_context, oracle
     values = split_values(agent.task, split)
     traces: list = []
     evaluate_contexts(agent, values, episodes=1, seed=100, progress=False, traces=traces)
