@@ -162,7 +162,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
     methods = sorted({row['method'] for row in rows}, key=lambda m: _rank(m, METHOD_ORDER))
     splits = sorted({row['split'] for row in rows}, key=lambda s: _rank(s, SPLIT_ORDER))
     lookup = {(row['method'], row['split']): row for row in rows}
-    fig, ax = plt.subplots(figsize=(7.5, 4))
+    fig, ax = plt.subplots(figsize=(9, 4))
     width = 0.8 / max(len(methods), 1)
     for i, method in enumerate(methods):
         cells = [lookup.get((method, split), {}) for split in splits]
@@ -172,7 +172,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
     ax.set_xticks(np.arange(len(splits)) + width * (len(methods) - 1) / 2, splits)
     ax.set_ylabel('episode return (mean ± s.e. over seeds)')
     ax.set_title(title)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(1.0, 1.0))  # never over a bar
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
