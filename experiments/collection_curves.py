@@ -11,17 +11,14 @@ from __future__ import annotations
 
 import argparse
 from collections import defaultdict
-import csv
 from pathlib import Path
-import re
 import warnings
 
 import numpy as np
 
 from zeus_ros.offline.ingest import ingest_bags
-from zeus_ros.offline.report import mean_se, method_order_key
-
-RUN = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
+from zeus_ros.offline.metrics import write_csv
+from zeus_ros.offline.report import RUN_NAME, mean_se, method_order_key
 
 
 def main() -> None:
@@ -32,7 +29,7 @@ def main() -> None:
     args = parser.parse_args()
     per_method: dict[str, list[list[float]]] = defaultdict(list)
     for done in sorted(args.folder.glob('*_s*/.done_train')):
-        match = RUN.match(done.parent.name)
+        match = RUN_NAME.match(done.parent.name)
         if match is None:
             continue
         rounds = []
@@ -51,10 +48,7 @@ def main() -> None:
             mean, se = mean_se([r[index] for r in per_method[method]])
             rows.append({'method': method, 'round': index + 1, 'seeds': len(per_method[method]),
                          'reward_per_step': mean, 'reward_per_step_se': se})
-    with (args.out / 'collection.csv').open('w', newline='') as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.out / 'collection.csv', rows)
     import matplotlib
 
     matplotlib.use('Agg')

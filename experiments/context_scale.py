@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 from collections import defaultdict
 from pathlib import Path
-import re
 
 import numpy as np
 from scipy.spatial.distance import pdist
@@ -27,9 +26,7 @@ from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.offline.eval_batch import find_checkpoints
 from zeus_ros.offline.evaluate import evaluate_contexts, mean_context_per_value, split_values
 from zeus_ros.offline.metrics import write_csv
-from zeus_ros.offline.report import mean_se, method_order_key
-
-SEED = re.compile(r'_s(?P<seed>\d+)\.pt$')
+from zeus_ros.offline.report import RUN_NAME, mean_se, method_order_key
 
 
 def context_scale(path: Path, split: str) -> dict[str, float | str] | None:
@@ -44,7 +41,7 @@ def context_scale(path: Path, split: str) -> dict[str, float | str] | None:
     if means is None:
         return None
     noise = np.mean([t.psi[t.history_length >= agent.k].std(0).mean() for t in traces])
-    seed = SEED.search(path.name)
+    seed = RUN_NAME.match(path.stem)  # <method>_s<seed>.pt, as export_all names them
     return {'checkpoint': str(path), 'method': agent.method,
             'seed': int(seed['seed']) if seed else -1, 'split': split,
             'spread': float(pdist(means).mean()), 'noise': float(noise),

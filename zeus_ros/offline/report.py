@@ -20,9 +20,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['METRICS', 'aggregate', 'markdown_table', 'mean_se', 'method_order_key', 'per_run',
-           'wall_time_table',
-           'write_report']
+__all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'markdown_table', 'mean_se', 'method_order_key',
+           'per_run', 'wall_time_table', 'write_report']
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
 """Columns of an eval summary that are averaged over seeds."""
@@ -73,7 +72,7 @@ def per_run(folder: Path) -> list[dict[str, Any]]:
                                  'earlier_train_seconds': _seconds(
                                      summary.parents[1] / '.done_train_first'),
                                  'eval_seconds': _seconds(summary.parent / '.done')})
-    return sorted(rows, key=lambda r: (_rank(r['method'], METHOD_ORDER), r['seed'],
+    return sorted(rows, key=lambda r: (method_order_key(r['method']), r['seed'],
                                        _rank(r['split'], SPLIT_ORDER)))
 
 
@@ -97,7 +96,7 @@ def aggregate(folder: Path) -> list[dict[str, Any]]:
                         table[key][metric].append(float(value))
                 table[key]['seeds'].append(float(match['seed']))
     rows = []
-    for method, split in sorted(table, key=lambda k: (_rank(k[0], METHOD_ORDER),
+    for method, split in sorted(table, key=lambda k: (method_order_key(k[0]),
                                                       _rank(k[1], SPLIT_ORDER))):
         metrics = table[(method, split)]
         row: dict[str, Any] = {'method': method, 'split': split, 'seeds': len(metrics['seeds'])}
@@ -147,7 +146,7 @@ def wall_time_table(runs: list[dict[str, Any]]) -> str:
     seeds = sorted({run['seed'] for run in runs})
     lines = ['| method | ' + ' | '.join(f'seed {s}' for s in seeds) + ' |',
              '|---|' + '---|' * len(seeds)]
-    for method in sorted(cells, key=lambda m: _rank(m, METHOD_ORDER)):
+    for method in sorted(cells, key=method_order_key):
         lines.append(f'| {method} | ' + ' | '.join(cells[method].get(s, '-') for s in seeds)
                      + ' |')
     return '\n'.join(lines)
@@ -159,7 +158,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    methods = sorted({row['method'] for row in rows}, key=lambda m: _rank(m, METHOD_ORDER))
+    methods = sorted({row['method'] for row in rows}, key=method_order_key)
     splits = sorted({row['split'] for row in rows}, key=lambda s: _rank(s, SPLIT_ORDER))
     lookup = {(row['method'], row['split']): row for row in rows}
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -179,7 +178,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
 
 
 def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict[str, Any]]:
-    """Aggregate `folder`, write summary.csv, runs.csv, table.md and returns.png into `out`."""
+    """Aggregate `folder`; write summary.csv, runs.csv, table.md, wall_times.md, returns.png."""
     rows = aggregate(folder)
     if not rows:
         raise FileNotFoundError(f'{folder}: no finished evaluations '
