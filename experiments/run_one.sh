@@ -6,13 +6,16 @@
 # (ROUNDS > 5, folder <task>_<updates>k) starts from a copy of the finished 5-round run and
 # continues it with `zeus loop --resume`, which is the same as running all rounds at once.
 # Finished parts are skipped, so rerunning resumes; a lock folder stops two copies of a run.
-#   usage: [ROUNDS=10] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
+# CONFIG (default params/train/state_cpu.yaml) picks the training config (a variant goes in its
+# own OUT_ROOT); EVAL=0 skips the evaluation (run `zeus eval` over the checkpoints later).
+#   usage: [ROUNDS=10] [CONFIG=...] [EVAL=0] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
 TASK=$1 METHOD=$2 SEED=$3
 ROOT=${4:-runs/exp}
 ROUNDS=${ROUNDS:-5}
+CONFIG=${CONFIG:-params/train/state_cpu.yaml}
 BASE="$ROOT/$(echo "$TASK" | tr 'A-Z-' 'a-z_')"
 OUT=$BASE
 if [ "$ROUNDS" != 5 ]; then OUT="${BASE}_$((ROUNDS * 2))k"; fi
@@ -34,12 +37,13 @@ if [ ! -f "$run/run/final.pt" ] || [ ! -f "$run/.done_train" ]; then
   fi
   if [ -d "$run/run" ]; then resume=(--resume); else rm -rf "$run"; fi
   start=$(date +%s)
-  zeus loop --task "$TASK" --config params/train/state_cpu.yaml --method "$METHOD" \
+  zeus loop --task "$TASK" --config "$CONFIG" --method "$METHOD" \
     --seed "$SEED" --out "$run" --rounds "$ROUNDS" --random-steps 1500 --steps 2000 \
     --updates 2000 --noise 0.2 --schedule "switch:train:every=$collect_every" \
     "${resume[@]}" --no-eval --no-progress >> "$run.train.log" 2>&1
   echo $(( $(date +%s) - start )) > "$run/.done_train"
 fi
+if [ "${EVAL:-1}" = 0 ]; then echo "done: $run (train $(cat "$run/.done_train") s)"; exit 0; fi
 for split in $(python -c "import yaml,sys; p=yaml.safe_load(open('params/contexts/$TASK.yaml')); print(' '.join(s for s in ('train','interpolation','extrapolation') if p.get(s)))"); do
   if [ ! -f "$run/eval_$split/.done" ]; then
     start=$(date +%s)

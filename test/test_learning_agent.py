@@ -68,7 +68,7 @@ def test_context_dims_per_method() -> None:
     spec = SyntheticSystem().spec()
     dims = {m: make_agent(_config(m), spec).context_dim for m in METHODS}
     assert dims == {'zeus': 4, 'zeus_no_context_loss': 4, 'no_context': 0, 'up_osi': 1,
-                    'cadm': 4, 'oracle': 1}
+                    'cadm': 4, 'oracle': 1, 'oracle_sac': 1}
 
 
 def test_zeus_requires_pair_batch() -> None:

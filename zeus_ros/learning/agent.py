@@ -1,13 +1,16 @@
 """The agent: owns the networks, optimizers and target nets of every method, and updates them.
 
-Who trains what (one place to read it):
+What each method builds and where its context comes from is the registry (methods.py). Who
+trains what (one place to read it):
 - phi is trained by the critic loss (SAC-AE), by the representation losses of the method (eq. 1
   for ZeUS: gradients reach phi through phi(o_t) and through the history features), and for
   pixels by the SAC-AE autoencoder loss. Dynamics targets phi(o') are always stopped.
-- psi is trained ONLY by its method's objective (ZeUS: eq. 1; CaDM: forward + beta * backward
-  dynamics; UP-OSI: regression on the true context). Actor and critic see psi(H) detached, so
-  the methods differ only in how the context space is learned.
-- the actor sees [phi(o), psi(H)] detached (SAC-AE/drqv2: the encoder is trained via the critic).
+- psi is trained by its method's objective (ZeUS: dynamics + reward + eq. 1; CaDM: forward +
+  beta * backward dynamics; UP-OSI: regression on the true context) and, with
+  `critic_context_grad`, also by the critic's TD loss. The actor always sees psi detached.
+- the context (psi, or the true one for the oracles) is standardised at the actor/critic input
+  by one ContextNormalizer when `context_norm: running`.
+- the actor sees [phi(o), c] detached (SAC-AE/drqv2: the encoder is trained via the critic).
 - T and R get no gradient from the context loss: d(c1, c2) is computed under no_grad.
 
 The dynamics loss is the Gaussian NLL of mtrl (dynamics_loss='gaussian_nll'): its optimum in mu
@@ -29,8 +32,9 @@ import torch.nn.functional as F  # noqa: N812
 
 from zeus_ros.learning.batch import HistoryBatch
 from zeus_ros.learning.config import ZeusConfig, resolve_config
-from zeus_ros.learning.context import ContextEncoder, HistoryFeatures
+from zeus_ros.learning.context import ContextEncoder, ContextNormalizer, HistoryFeatures
 from zeus_ros.learning.encoders import PixelDecoder, PixelEncoder, StateEncoder
+from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
 from zeus_ros.learning.models import RewardModel, TransitionModel
 from zeus_ros.learning.representation import representation_losses
 from zeus_ros.learning.sac import Actor, Critic, squashed_sample
@@ -44,7 +48,8 @@ from zeus_ros.learning.utils import (
 
 __all__ = ['PSI_METHODS', 'ZeusAgent', 'make_agent']
 
-PSI_METHODS = frozenset({'zeus', 'zeus_no_context_loss', 'up_osi', 'cadm'})
+PSI_METHODS = frozenset(name for name, spec in METHOD_REGISTRY.items()
+                        if spec.context_source == 'psi')
 """Methods whose context comes from the learned encoder psi(H)."""
 
 
@@ -69,11 +74,13 @@ class ZeusAgent:
         self.config = config
         self.spec = spec
         self.method = config.method
+        self.method_spec = method_spec(config.method)
         self.device = resolve_device(config.device) if device is None else torch.device(device)
         cfg, a_dim = config, spec.action_dim
-        if self.method == 'no_context':
+        source = self.method_spec.context_source
+        if source == 'none':
             self.context_dim = 0
-        elif self.method in ('up_osi', 'oracle'):
+        elif source == 'true' or self.method == 'up_osi':
             if spec.num_context_params == 0:
                 raise ValueError(f'method {self.method!r} needs named context parameters')
             self.context_dim = spec.num_context_params
@@ -94,25 +101,23 @@ class ZeusAgent:
             encoder = StateEncoder(spec.obs_shape[0], cfg.feature_dim, cfg.encoder_hidden_dim,
                                    spec.obs_mean, spec.obs_std)
         self.modules['encoder'] = encoder
-        if self.method in PSI_METHODS:
+        if source == 'psi':
             self.modules['psi'] = ContextEncoder(
                 cfg.feature_dim, a_dim, cfg.k, self.context_dim, cfg.aggregation,
                 cfg.transition_dim, cfg.context_hidden_dim)
-        if self.method in ('zeus', 'zeus_no_context_loss', 'cadm'):
-            self.modules['transition'] = TransitionModel(
-                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
-        if self.method in ('zeus', 'zeus_no_context_loss'):
-            self.modules['reward'] = RewardModel(
-                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
-        if self.method == 'cadm':
-            self.modules['backward'] = TransitionModel(
-                cfg.feature_dim, a_dim, self.context_dim, cfg.model_hidden_dim)
+        for name in self.method_spec.models:
+            model_class = RewardModel if name == 'reward' else TransitionModel
+            self.modules[name] = model_class(cfg.feature_dim, a_dim, self.context_dim,
+                                             cfg.model_hidden_dim)
         policy_in = cfg.feature_dim + self.context_dim
         self.modules['actor'] = Actor(policy_in, a_dim, cfg.hidden_dim, cfg.actor_log_std_min,
                                       cfg.actor_log_std_max)
         self.modules['critic'] = Critic(policy_in, a_dim, cfg.hidden_dim)
         for module in self.modules.values():
             module.apply(weight_init)
+        if cfg.context_norm == 'running' and self.context_dim > 0:
+            self.modules['context_norm'] = ContextNormalizer(self.context_dim,
+                                                             cfg.context_norm_momentum)
         self.modules['encoder_target'] = copy.deepcopy(self.modules['encoder'])
         self.modules['critic_target'] = copy.deepcopy(self.modules['critic'])
         for name in ('encoder_target', 'critic_target'):
@@ -151,8 +156,9 @@ class ZeusAgent:
     # ------------------------------------------------------------------ properties / helpers
     @property
     def has_representation_step(self) -> bool:
-        """Whether update() runs a representation step (psi methods and/or pixel autoencoder)."""
-        return 'psi' in self.modules or 'decoder' in self.modules
+        """Whether update() runs a representation step (psi, models or pixel autoencoder)."""
+        return ('psi' in self.modules or 'decoder' in self.modules
+                or bool(self.method_spec.models))
 
     @property
     def alpha(self) -> torch.Tensor:
@@ -170,8 +176,13 @@ class ZeusAgent:
         True for `oracle` always and for `up_osi` during its warm-up (the paper follows UP-OSI:
         first condition the universal policy on the true parameters, then on the inferred ones).
         """
-        return self.method == 'oracle' or (
+        return self.method_spec.context_source == 'true' or (
             self.method == 'up_osi' and step < self.up_osi_warmup_updates)
+
+    def policy_context(self, context: torch.Tensor) -> torch.Tensor:
+        """The context as actor and critic see it: standardised when `context_norm: running`."""
+        norm = self.modules.get('context_norm')
+        return context if norm is None else norm(context)
 
     def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
         """Task-bound actions -> [-1, 1] (what every network sees)."""
@@ -240,7 +251,7 @@ class ZeusAgent:
         """
         self._check_batch(batch, 'batch')
         batch = batch.to(self.device)
-        needs_pair = self.method == 'zeus' and self.config.alpha_psi > 0
+        needs_pair = self.method_spec.context_loss and self.config.alpha_psi > 0
         if needs_pair:
             if pair is None:
                 raise ValueError('method zeus needs a pair batch for the context loss')
@@ -252,7 +263,9 @@ class ZeusAgent:
         metrics: dict[str, torch.Tensor] = {}
         context, next_context = self._representation_step(
             batch, pair if needs_pair else None, step, metrics)
-        self._update_critic(batch, context, next_context, metrics)
+        if 'context_norm' in self.modules:
+            self.modules['context_norm'].update(context)
+        self._update_critic(batch, context, next_context, step, metrics)
         if step % self.config.actor_update_freq == 0:
             self._update_actor_and_alpha(batch, context, metrics)
         if step % self.config.target_update_freq == 0:
@@ -287,23 +300,35 @@ class ZeusAgent:
         return context, next_context
 
     def _update_critic(self, batch: HistoryBatch, context: torch.Tensor,
-                       next_context: torch.Tensor, metrics: dict[str, torch.Tensor]) -> None:
-        """Clipped double-Q TD step on critic + phi (SAC-AE)."""
+                       next_context: torch.Tensor, step: int,
+                       metrics: dict[str, torch.Tensor]) -> None:
+        """Clipped double-Q TD step on critic + phi (SAC-AE), and on psi when configured."""
         m, cfg = self.modules, self.config
         with torch.no_grad():
             next_feat = m['encoder'](batch.next_obs)
-            next_x = torch.cat([next_feat, next_context], dim=-1)
+            next_c = self.policy_context(next_context)
+            next_x = torch.cat([next_feat, next_c], dim=-1)
             sample = squashed_sample(m['actor'](next_x))
-            target_x = torch.cat([m['encoder_target'](batch.next_obs), next_context], dim=-1)
+            target_x = torch.cat([m['encoder_target'](batch.next_obs), next_c], dim=-1)
             next_q = m['critic_target'](target_x, sample.action).min()
             soft_v = next_q - self.alpha * sample.log_prob
             target_q = batch.reward + batch.not_done * cfg.discount * soft_v
-        x = torch.cat([m['encoder'](batch.obs), context], dim=-1)
+        psi_trained = (cfg.critic_context_grad and 'psi' in m
+                       and not self.uses_true_context(step))
+        if psi_trained:  # psi(H_t) again, with its graph, so the TD error reaches psi
+            history, _ = self.history_features(batch.hist_obs, batch.hist_action,
+                                               batch.hist_reward, batch.hist_next_obs,
+                                               batch.hist_mask)
+            context = m['psi'](history)
+            self.optimizers['psi'].zero_grad(set_to_none=True)
+        x = torch.cat([m['encoder'](batch.obs), self.policy_context(context)], dim=-1)
         q = m['critic'](x, self.normalize_action(batch.action))
         loss = F.mse_loss(q.q1, target_q) + F.mse_loss(q.q2, target_q)
         self.optimizers['critic'].zero_grad(set_to_none=True)
         loss.backward()
         self.optimizers['critic'].step()
+        if psi_trained:
+            self.optimizers['psi'].step()
         metrics['loss/critic'] = loss
         metrics['train/q'] = q.q1.mean()
 
@@ -312,7 +337,7 @@ class ZeusAgent:
         """Policy step on detached [phi(o), c], then the temperature step."""
         m = self.modules
         with torch.no_grad():
-            x = torch.cat([m['encoder'](batch.obs), context], dim=-1)
+            x = torch.cat([m['encoder'](batch.obs), self.policy_context(context)], dim=-1)
         sample = squashed_sample(m['actor'](x))
         actor_q = m['critic'](x, sample.action).min()
         actor_loss = (self.alpha.detach() * sample.log_prob - actor_q).mean()
@@ -337,8 +362,9 @@ class ZeusAgent:
     def encode_context(self, hist_obs: Any, hist_action: Any, hist_reward: Any,
                        hist_next_obs: Any, hist_mask: Any) -> torch.Tensor:
         """psi(H) for batched (B, k, ...) or single (k, ...) histories; (B, C) or (C,)."""
-        if self.method == 'oracle':
-            raise ValueError('method oracle has no context encoder: it uses the true context')
+        if self.method_spec.context_source == 'true':
+            raise ValueError(f'method {self.method} has no context encoder: it uses the true '
+                             'context')
         mask = self._as_tensor(hist_mask).bool()
         single = mask.dim() == 1
         obs_dtype = torch.uint8 if self.spec.obs_kind == 'pixels' else torch.float32
@@ -374,7 +400,7 @@ class ZeusAgent:
         if ctx.shape[1] != self.context_dim:
             raise ValueError(f'context has {ctx.shape[1]} values per sample, expected '
                              f'context_dim={self.context_dim}')
-        x = torch.cat([self.modules['encoder'](obs_t), ctx], dim=-1)
+        x = torch.cat([self.modules['encoder'](obs_t), self.policy_context(ctx)], dim=-1)
         action = squashed_sample(self.modules['actor'](x), deterministic).action
         action = (action * self._action_scale + self._action_bias).cpu().numpy()
         return action[0] if single else action

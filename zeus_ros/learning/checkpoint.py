@@ -17,7 +17,7 @@ from typing import Any
 import torch
 
 from zeus_ros.learning.agent import ZeusAgent
-from zeus_ros.learning.config import ZeusConfig, config_from_dict
+from zeus_ros.learning.config import ZeusConfig, config_from_dict, upgrade_stored_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import AgentSpec
 
@@ -27,7 +27,7 @@ __all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_d
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
 
-DEPLOY_MODULES = ('encoder', 'psi', 'actor')
+DEPLOY_MODULES = ('encoder', 'psi', 'context_norm', 'actor')
 """What acting needs: phi, psi (when the method has one) and the actor."""
 
 _PLAIN = (str, int, float, bool, type(None))
@@ -140,7 +140,7 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
         raise _fail(path, '; '.join(mismatches))
     try:
         spec = AgentSpec.from_dict(payload['spec'])
-        config = config_from_dict(payload['config'], source=str(path))
+        config = config_from_dict(upgrade_stored_config(payload['config']), source=str(path))
     except (ConfigError, TypeError, ValueError) as error:
         raise _fail(path, f'invalid stored spec/config ({error})') from None
     if isinstance(config.alpha_psi, str) or isinstance(config.adam_beta1, str):

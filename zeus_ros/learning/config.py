@@ -15,20 +15,37 @@ from typing import Any
 import yaml
 
 from zeus_ros.learning.errors import ConfigError
+from zeus_ros.learning.methods import METHODS
 
 __all__ = [
     'AGGREGATIONS',
     'ALPHA_PSI_BY_TASK',
+    'CONTEXT_LOSSES',
+    'CONTEXT_NORMS',
+    'EXPLORATIONS',
+    'LEGACY_CONFIG',
     'METHODS',
     'REWARD_VARYING_TASKS',
     'ZeusConfig',
     'config_from_dict',
     'load_config',
     'resolve_config',
+    'upgrade_stored_config',
 ]
 
-METHODS = ('zeus', 'zeus_no_context_loss', 'no_context', 'up_osi', 'cadm', 'oracle')
-"""Methods behind the one agent interface (see agent.py for what each trains)."""
+CONTEXT_NORMS = ('none', 'running')
+"""How the context is scaled at the actor/critic input (one normaliser for every method)."""
+
+CONTEXT_LOSSES = ('paper', 'scale_free')
+"""Form of eq. 1's context loss: as written, or distances matched up to a batch-wise scale."""
+
+EXPLORATIONS = ('stochastic', 'noise')
+"""How a trained policy collects: sampling the SAC policy (Algorithm 1) or its mode + noise."""
+
+LEGACY_CONFIG: dict[str, Any] = {'context_norm': 'none', 'context_loss': 'paper',
+                                 'critic_context_grad': False, 'exploration': 'noise'}
+"""Values of the fields added with the method registry, for checkpoints written before them
+(whose 'oracle' was plain SAC on the true context, now 'oracle_sac')."""
 
 AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
 """Operators that combine the k per-transition encodings of psi."""
@@ -67,6 +84,21 @@ class ZeusConfig:
     """Width of the two hidden layers of psi's per-transition MLP."""
     alpha_psi: float | str = 'auto'
     """Weight of the context loss (eq. 1); 'auto' = the paper's per-task value."""
+    context_loss: str = 'scale_free'
+    """'paper': MSE(||psi1 - psi2||, d) as eq. 1 writes it, which psi can satisfy by shrinking
+    towards a constant (d is computed at psi itself); 'scale_free': both distance vectors divided
+    by their batch mean before the MSE, so only the pattern of distances counts, not their size."""
+    context_norm: str = 'running'
+    """'running': standardise the context (psi or the true one) at the actor/critic input with
+    running statistics of the training batches; 'none': feed it raw (the paper)."""
+    context_norm_momentum: float = 0.01
+    """Update rate of the running context statistics."""
+    critic_context_grad: bool = True
+    """Let the critic's TD loss train psi too (psi then encodes what matters for value);
+    False: psi is trained by its method's objective only and reaches actor and critic detached."""
+    exploration: str = 'stochastic'
+    """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
+    paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
     cadm_beta: float = 0.5
     """CaDM backward-dynamics loss weight (paper's CaDM table: 0.5)."""
     up_osi_warmup_fraction: float = 0.01
@@ -146,6 +178,12 @@ class ZeusConfig:
         _check_choice('obs_kind', self.obs_kind, ('state', 'pixels'))
         _check_choice('aggregation', self.aggregation, AGGREGATIONS)
         _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
+        _check_choice('context_loss', self.context_loss, CONTEXT_LOSSES)
+        _check_choice('context_norm', self.context_norm, CONTEXT_NORMS)
+        _check_choice('exploration', self.exploration, EXPLORATIONS)
+        if not isinstance(self.critic_context_grad, bool):
+            raise ConfigError(f'critic_context_grad must be true or false, '
+                              f'got {self.critic_context_grad!r}')
         for name in ('k', 'context_dim', 'transition_dim', 'context_hidden_dim', 'feature_dim',
                      'num_conv_layers', 'num_filters', 'encoder_hidden_dim', 'hidden_dim',
                      'model_hidden_dim', 'batch_size', 'num_updates', 'eval_interval',
@@ -160,7 +198,8 @@ class ZeusConfig:
         for name in ('actor_lr', 'critic_lr', 'encoder_lr', 'decoder_lr', 'context_lr',
                      'model_lr', 'alpha_lr', 'init_temperature'):
             _check_float(name, getattr(self, name), low=0.0, low_open=True)
-        for name in ('critic_tau', 'encoder_tau', 'discount', 'up_osi_warmup_fraction'):
+        for name in ('critic_tau', 'encoder_tau', 'discount', 'up_osi_warmup_fraction',
+                     'context_norm_momentum'):
             _check_float(name, getattr(self, name), low=0.0, high=1.0)
         for name in ('cadm_beta', 'decoder_latent_lambda', 'decoder_weight_decay'):
             _check_float(name, getattr(self, name), low=0.0)
@@ -229,6 +268,16 @@ def config_from_dict(data: dict[str, Any], *, source: str = 'config') -> ZeusCon
         return ZeusConfig(**values)
     except ConfigError as error:
         raise ConfigError(f'{source}: {error}') from None
+
+
+def upgrade_stored_config(data: dict[str, Any]) -> dict[str, Any]:
+    """A stored config from before the method registry, with the values it was trained with."""
+    if not isinstance(data, dict) or 'context_norm' in data:
+        return data
+    upgraded = {**LEGACY_CONFIG, **data}
+    if upgraded.get('method') == 'oracle':
+        upgraded['method'] = 'oracle_sac'
+    return upgraded
 
 
 def load_config(path: str | Path) -> ZeusConfig:

@@ -16,7 +16,7 @@ from torch import nn
 from zeus_ros.learning.config import AGGREGATIONS
 from zeus_ros.learning.utils import mlp
 
-__all__ = ['ContextEncoder', 'HistoryFeatures', 'aggregate']
+__all__ = ['ContextEncoder', 'ContextNormalizer', 'HistoryFeatures', 'aggregate']
 
 
 @dataclass(slots=True)
@@ -112,3 +112,34 @@ class ContextEncoder(nn.Module):
         x = torch.cat([history.feat, history.action, history.reward, history.next_feat], dim=-1)
         codes = torch.tanh(self.transition(x))
         return self.head(aggregate(codes, history.mask, self.aggregation))
+
+
+class ContextNormalizer(nn.Module):
+    """Standardises a context at the actor/critic input with running batch statistics.
+
+    One normaliser for every context source (psi or the true context): a context whose spread
+    is 1e-3 next to features of order 1 is invisible to the policy, whatever method made it.
+    Statistics move only in training (`update`), are saved with the weights and frozen at
+    deployment; gradients pass through the (fixed) affine map.
+    """
+
+    def __init__(self, dim: int, momentum: float = 0.01, eps: float = 1e-10) -> None:
+        super().__init__()
+        self.momentum = momentum
+        self.eps = eps
+        self.register_buffer('mean', torch.zeros(dim))
+        self.register_buffer('var', torch.ones(dim))
+        self.register_buffer('count', torch.zeros((), dtype=torch.long))
+
+    @torch.no_grad()
+    def update(self, context: torch.Tensor) -> None:
+        """Move the statistics towards those of a (B, dim) batch (the first batch sets them)."""
+        mean, var = context.mean(0), context.var(0, unbiased=False)
+        rate = 1.0 if int(self.count) == 0 else self.momentum
+        self.mean.lerp_(mean, rate)
+        self.var.lerp_(var, rate)
+        self.count += 1
+
+    def forward(self, context: torch.Tensor) -> torch.Tensor:
+        """(B, dim) standardised context."""
+        return (context - self.mean) / torch.sqrt(self.var + self.eps)

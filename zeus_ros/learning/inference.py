@@ -121,7 +121,7 @@ class InferenceAgent:
     @property
     def needs_true_context(self) -> bool:
         """True for oracle: `context()` then requires the true context."""
-        return self.agent.method == 'oracle'
+        return self.agent.method_spec.context_source == 'true'
 
     @property
     def obs_kind(self) -> str:

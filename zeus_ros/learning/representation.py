@@ -69,7 +69,7 @@ def dynamics_loss(pred: Gaussian, target: torch.Tensor, kind: str) -> torch.Tens
 
 def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.Tensor,
                  action: torch.Tensor, psi1: torch.Tensor, psi2: torch.Tensor, *,
-                 use_sigma: bool = True) -> ContextLoss:
+                 use_sigma: bool = True, scale_free: bool = False) -> ContextLoss:
     """Eq. 1 context loss: distances in psi space should match d computed from T and R.
 
     d(c1, c2) = |R(s, a, psi1) - R(s, a, psi2)| + W2(T(s, a, psi1), T(s, a, psi2)) on the SAME
@@ -83,6 +83,9 @@ def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.T
         psi1: psi(H1), (B, C), with gradient.
         psi2: psi(H2), (B, C), with gradient.
         use_sigma: include the sigma term of W2 (False when T's sigma is not trained).
+        scale_free: divide both distance vectors by their batch mean first, so the loss asks
+            for the pattern of distances and psi cannot satisfy it by shrinking (d is computed
+            at psi, so the paper's form is solved by psi = constant, where both sides are 0).
     """
     with torch.no_grad():
         feat, p1, p2 = feat.detach(), psi1.detach(), psi2.detach()
@@ -92,7 +95,13 @@ def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.T
             t2 = Gaussian(mu=t2.mu, sigma=t1.sigma)
         task_distance = r_gap + w2_diagonal_gaussians(t1, t2)
     context_distance = safe_norm(psi1 - psi2, dim=-1)
-    return ContextLoss(loss=F.mse_loss(context_distance, task_distance),
+    if scale_free:
+        eps = 1e-8
+        loss = F.mse_loss(context_distance / (context_distance.mean() + eps),
+                          task_distance / (task_distance.mean() + eps))
+    else:
+        loss = F.mse_loss(context_distance, task_distance)
+    return ContextLoss(loss=loss,
                        task_distance=task_distance, context_distance=context_distance)
 
 
@@ -109,6 +118,9 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
     """Losses of the agent's method on one batch (H1) and, for ZeUS, a pair batch (H2)."""
     m, cfg = agent.modules, agent.config
     zero = batch.reward.new_zeros(())
+    objective = agent.method_spec.objective
+    if agent.method_spec.context_source == 'true' and objective != 'none':
+        return _true_context_losses(agent, batch, metrics)
     if 'psi' not in m:
         feat = m['encoder'](batch.obs)
         total = autoencoder_loss(m['decoder'], feat, batch.obs, cfg.decoder_latent_lambda)
@@ -122,7 +134,7 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
     action = agent.normalize_action(batch.action)
     target_next = next_feat.detach()  # stopped phi(o'): no gradient from the dynamics loss
     total = zero
-    if agent.method in ('zeus', 'zeus_no_context_loss'):
+    if objective == 'zeus':
         dyn = dynamics_loss(m['transition'](feat, action, psi1), target_next, cfg.dynamics_loss)
         rew = F.mse_loss(m['reward'](feat, action, psi1), batch.reward.float())
         total = dyn + rew
@@ -133,19 +145,20 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
                 pair.hist_mask)
             ctx = context_loss(m['transition'], m['reward'], feat, action, psi1,
                                m['psi'](pair_history),
-                               use_sigma=cfg.dynamics_loss == 'gaussian_nll')
+                               use_sigma=cfg.dynamics_loss == 'gaussian_nll',
+                               scale_free=cfg.context_loss == 'scale_free')
             total = total + float(cfg.alpha_psi) * ctx.loss
             metrics['loss/context'] = ctx.loss
             metrics['train/task_distance'] = ctx.task_distance.mean()
             metrics['train/context_distance'] = ctx.context_distance.mean()
-    elif agent.method == 'cadm':
+    elif objective == 'cadm':
         forward = dynamics_loss(m['transition'](feat, action, psi1), target_next,
                                 cfg.dynamics_loss)
         backward = dynamics_loss(m['backward'](next_feat, action, psi1), feat.detach(),
                                  cfg.dynamics_loss)
         total = forward + cfg.cadm_beta * backward
         metrics['loss/dynamics'], metrics['loss/backward_dynamics'] = forward, backward
-    elif agent.method == 'up_osi':
+    elif objective == 'up_osi':
         total = F.mse_loss(psi1, batch.context.float())
         metrics['loss/osi'] = total
     if 'decoder' in m:
@@ -157,3 +170,28 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
                                                 target_next)
         next_context = m['psi'](next_history)
     return RepresentationLosses(total=total, context=psi1.detach(), next_context=next_context)
+
+
+def _true_context_losses(agent: ZeusAgent, batch: HistoryBatch,
+                         metrics: dict[str, torch.Tensor]) -> RepresentationLosses:
+    """The oracle's auxiliary losses: ZeUS's dynamics + reward models on the true context.
+
+    Same models, same losses and the same gradient paths into phi as ZeUS, with psi(H)
+    replaced by the true context (normalised like every context), so oracle - zeus isolates
+    knowing the context from the architecture.
+    """
+    m, cfg = agent.modules, agent.config
+    both = m['encoder'](torch.cat([batch.obs, batch.next_obs], dim=0))
+    feat, next_feat = both.split(batch.batch_size)
+    context = agent.policy_context(batch.context.float()).detach()
+    action = agent.normalize_action(batch.action)
+    dyn = dynamics_loss(m['transition'](feat, action, context), next_feat.detach(),
+                        cfg.dynamics_loss)
+    rew = F.mse_loss(m['reward'](feat, action, context), batch.reward.float())
+    total = dyn + rew
+    metrics['loss/dynamics'], metrics['loss/reward'] = dyn, rew
+    if 'decoder' in m:
+        ae = autoencoder_loss(m['decoder'], feat, batch.obs, cfg.decoder_latent_lambda)
+        total = total + ae
+        metrics['loss/reconstruction'] = ae
+    return RepresentationLosses(total=total, context=None, next_context=None)

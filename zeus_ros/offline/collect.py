@@ -200,11 +200,26 @@ class AgentPolicy:
     estimator node sees), and cleared at episode starts.
     """
 
-    def __init__(self, agent: InferenceAgent, *, noise: float, seed: int) -> None:
+    def __init__(self, agent: InferenceAgent, *, noise: float, seed: int,
+                 stochastic: bool = False,
+                 frozen_context: np.ndarray | None = None) -> None:
+        """Wrap `agent`; options for training collection and for diagnostics.
+
+        `stochastic` samples the SAC policy (seeded torch RNG) instead of taking its mode;
+        `frozen_context` replaces the live context at every step (the value-of-adaptation
+        diagnostic: what the policy earns when it cannot follow the context).
+        """
+        import torch
+
         from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
 
         self.agent = agent
         self.noise = noise
+        self.stochastic = stochastic
+        if stochastic:
+            torch.manual_seed(seed)
+        self.frozen_context = (None if frozen_context is None
+                               else np.asarray(frozen_context, np.float32))
         self.rng = np.random.default_rng(seed)
         self.history = agent.new_history()
         self.frames = FrameStack() if agent.obs_kind == 'pixels' else None
@@ -230,7 +245,10 @@ class AgentPolicy:
         truth = es.observation.context
         true_ctx = np.asarray([truth[n] for n in self.agent.context_names], np.float32)
         psi = self.agent.context(self.history, true_context=true_ctx)
-        action = self.agent.act(obs, psi, deterministic=True, noise=self.noise, rng=self.rng)
+        if self.frozen_context is not None:
+            psi = self.frozen_context
+        action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
+                                rng=self.rng)
         return PolicyOutput(action, None if self.agent.needs_true_context else psi,
                             len(self.history))
 

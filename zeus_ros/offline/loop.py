@@ -32,8 +32,8 @@ __all__ = ['main', 'run_loop']
 
 def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: int, *,
                    seed: int, checkpoint: Path | None, noise: float, pixels: bool,
-                   progress: bool) -> Path:
-    """One collection: random when `checkpoint` is None, else the agent with noise."""
+                   progress: bool, stochastic: bool = False) -> Path:
+    """One collection: random without a checkpoint, else the agent (sampled, or mode + noise)."""
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
@@ -47,7 +47,8 @@ def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: 
             from zeus_ros.learning.inference import InferenceAgent
 
             agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task.name)
-            policy = AgentPolicy(agent, noise=noise, seed=seed)
+            policy = AgentPolicy(agent, noise=0.0 if stochastic else noise, seed=seed,
+                                 stochastic=stochastic)
         bag = next_bag_path(bags, append=True)
         bags.mkdir(parents=True, exist_ok=True)
         with StepBagWriter(bag, pixels=pixels) as writer:
@@ -78,13 +79,15 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
         if index < done_bags and done_updates >= total:
             continue
         checkpoint = None if index == 0 else run / CHECKPOINT
-        what = 'random policy' if checkpoint is None else f'{checkpoint} + noise {noise}'
+        stochastic = config.exploration == 'stochastic'
+        how = 'sampled (stochastic SAC policy)' if stochastic else f'+ noise {noise}'
+        what = 'random policy' if checkpoint is None else f'{checkpoint} {how}'
         count = random_steps if index == 0 else steps
         if index >= done_bags:
             print(f'\nloop: round {index + 1}/{rounds}: collect {count} steps with {what}')
             _collect_round(task, schedule, bags, count, seed=seed + index,
                            checkpoint=checkpoint, noise=noise, pixels=pixels,
-                           progress=progress)
+                           progress=progress, stochastic=stochastic)
         print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
                              resume=index > 0 or done_updates > 0, evaluate=evaluate,
@@ -109,7 +112,9 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--updates', type=int,
                         help='updates per round (default: the config num_updates)')
     parser.add_argument('--noise', type=float, default=0.2,
-                        help='exploration noise, fraction of half the action range')
+                        help='exploration noise, fraction of half the action range (with the '
+                        "config's exploration: noise; exploration: stochastic samples the "
+                        'SAC policy instead)')
     parser.add_argument('--schedule', default='switch:values=train,every=100',
                         help='context schedule while collecting (default: %(default)s)')
     parser.add_argument('--method', help='override the config method')

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from zeus_ros.learning.methods import METHODS
+
 __all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'markdown_table', 'mean_se', 'method_order_key',
            'per_run', 'wall_time_table', 'write_report']
 
@@ -27,7 +29,7 @@ METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
 """Columns of an eval summary that are averaged over seeds."""
 RUN_NAME = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
 SPLIT_ORDER = ('train', 'interpolation', 'extrapolation')
-METHOD_ORDER = ('zeus', 'zeus_no_context_loss', 'no_context', 'up_osi', 'cadm', 'oracle')
+METHOD_ORDER = METHODS
 
 
 def mean_se(values: list[float]) -> tuple[float, float]:
