@@ -48,7 +48,7 @@ for split in $(python -c "import yaml,sys; p=yaml.safe_load(open('params/context
   if [ ! -f "$run/eval_$split/.done" ]; then
     start=$(date +%s)
     zeus eval --checkpoint "$run/run/final.pt" --task "$TASK" --split "$split" \
-      --episodes 1 --switch-episodes 1 --probe-steps 0 \
+      --switch-episodes 1 --probe-steps 0 \
       --seed 100 --out "$run/eval_$split" --no-progress > "$run.eval_$split.log" 2>&1
     echo $(( $(date +%s) - start )) > "$run/eval_$split/.done"
   fi

@@ -140,7 +140,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--task', TASK,
                  '--split', 'interpolation', '--switch-every', '120', '--probe-steps', '0',
-                 '--out', str(out), '--no-progress'])
+                 '--episodes', '1', '--out', str(out), '--no-progress'])
     assert code == 0
     for name in ('contexts.csv', 'summary.csv', 'switches.csv', 'returns.png',
                  'context_distances.png', 'switching.png'):
@@ -154,8 +154,37 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
     assert summary['agent']['recovered'] <= summary['agent']['switches']
     assert 'random' in summary
     contexts = read_csv(out / 'contexts.csv')
-    assert {row['policy'] for row in contexts} == {'agent', 'random'}
+    assert {row['policy'] for row in contexts} == {'agent', 'random', 'frozen_other',
+                                                   'frozen_mean'}
     assert 'spearman' in capsys.readouterr().out
+
+
+def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture
+                                                                ) -> None:
+    """--values: any torso lengths, several episodes each; live vs frozen on the same seeds."""
+    from zeus_ros.offline.evaluate import main
+
+    out = tmp_path / 'eval'
+    code = main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.65,1.4',
+                 '--episodes', '2', '--probe-steps', '0', '--out', str(out), '--no-progress'])
+    assert code == 0
+    contexts = read_csv(out / 'contexts.csv')
+    for policy in ('agent', 'frozen_other', 'frozen_mean', 'random'):
+        mine = [row for row in contexts if row['policy'] == policy]
+        assert sorted((row['context/torso_length'], row['episode']) for row in mine) == [
+            (0.65, 0), (0.65, 1), (1.4, 0), (1.4, 1)], policy
+    summary = {row['policy']: row for row in read_csv(out / 'summary.csv')}['agent']
+    assert summary['split'] == 'custom' and summary['episodes'] == 2
+    assert summary['sensitivity'] >= 0.0 and summary['spread_noise'] > 0.0
+    live = np.mean([r['return'] for r in contexts if r['policy'] == 'agent'])
+    frozen = np.mean([r['return'] for r in contexts if r['policy'] == 'frozen_mean'])
+    assert summary['adaptation_value_mean'] == pytest.approx(live - frozen, abs=1e-3)
+    printed = capsys.readouterr().out
+    assert 'sensitivity' in printed and 'frozen_other' in printed
+    assert main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.6,abc',
+                 '--out', str(out)]) == 2
+    assert 'could not convert' in capsys.readouterr().err
 
 
 def test_probe_beats_predicting_the_mean() -> None:
@@ -223,7 +252,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
                                      extra=first.extra))
     out = tmp_path / 'tables'
     argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '150',
-            '--probe-steps', '0', '--out', str(out), '--no-progress']
+            '--probe-steps', '0', '--episodes', '1', '--out', str(out), '--no-progress']
     assert main(argv) == 0
     runs = out / f'cheetah_run_v0_{first.step}'
     for seed in (0, 1):

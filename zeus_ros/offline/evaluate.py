@@ -9,7 +9,10 @@ Reported, per split (train / interpolation / extrapolation value lists of the pa
     steady value on the new context (the constant-context run's second-half mean);
   - the Spearman rank correlation between pairwise distances of the mean learned context per
     value and of the true contexts (paper section 6.3), with both distance heat maps;
-  - the identifiability probe of appendix B.2 (probe.py) on random-policy data.
+  - the identifiability probe of appendix B.2 (probe.py) on random-policy data;
+  - the adaptation diagnostics of diagnostics.py: context sensitivity, spread / noise of the
+    context, and the value of adaptation (return with the context live minus frozen, paired).
+`--values` evaluates any values of the task's context parameters instead of a preset split.
 """
 
 from __future__ import annotations
@@ -30,7 +33,8 @@ from zeus_ros.offline.metrics import format_table, plot_heatmaps, write_csv
 from zeus_ros.offline.probe import ProbeResult, Rollout, probe_context
 
 __all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
-           'evaluate_contexts', 'main', 'run_steps', 'split_values']
+           'evaluate_contexts', 'main', 'parse_values', 'run_steps', 'split_values',
+           'switching_order']
 
 SPLITS = ('train', 'interpolation', 'extrapolation')
 RECOVERY_TOLERANCE = 0.10
@@ -122,24 +126,31 @@ def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = ''
                  np.asarray(cols['hist']), np.stack(cols['obs']), np.stack(cols['action']))
 
 
-def _policy(agent: Any, task: Any, seed: int) -> Policy:
-    return random_policy(task, seed) if agent is None else AgentPolicy(agent, noise=0.0,
-                                                                       seed=seed)
+def _policy(agent: Any, task: Any, seed: int, frozen: np.ndarray | None = None) -> Policy:
+    if agent is None:
+        return random_policy(task, seed)
+    return AgentPolicy(agent, noise=0.0, seed=seed, frozen_context=frozen)
 
 
 def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episodes: int = 1,
                       seed: int = 0, task_name: str | None = None, progress: bool = True,
-                      traces: list[Trace] | None = None) -> list[dict[str, Any]]:
+                      traces: list[Trace] | None = None,
+                      frozen: Sequence[np.ndarray] | None = None) -> list[dict[str, Any]]:
     """Deterministic episodes at a constant context per value; one row per episode.
 
     `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
+    The environment of value i is seeded with seed + i, so two calls with the same seed meet
+    the same initial states (paired comparisons); `frozen[i]` replaces the live context of
+    value i at every step.
     """
     name = agent.task if agent is not None else task_name
     rows = []
     for index, value in enumerate(tqdm(values, desc='contexts', disable=not progress)):
         env, task = _make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
         try:
-            trace = run_steps(env, task, _policy(agent, task, seed + index),
+            policy = _policy(agent, task, seed + index,
+                             None if frozen is None else frozen[index])
+            trace = run_steps(env, task, policy,
                               episodes * task.episode_length + 1, progress=False)
         finally:
             task.close()
@@ -233,21 +244,66 @@ def random_rollout(task_name: str, values: Sequence[dict[str, float]], steps: in
                    first=trace.first, segment=trace.segment)
 
 
+def parse_values(text: str, names: Sequence[str]) -> list[dict[str, float]]:
+    """'0.5,0.8' (one context parameter) or 'a=1:b=2,a=3:b=4' -> one mapping per value."""
+    values = []
+    for item in (part.strip() for part in text.split(',')):
+        if not item:
+            continue
+        try:
+            if '=' not in item:
+                if len(names) != 1:
+                    raise ValueError(f'this task has {len(names)} context parameters '
+                                     f'({", ".join(names)}): write name=value:name=value')
+                values.append({names[0]: float(item)})
+                continue
+            pairs = dict(pair.split('=', 1) for pair in item.split(':'))
+            value = {name: float(pairs.pop(name)) for name in names}
+        except KeyError as missing:
+            raise ValueError(f'--values {item!r}: no value for {missing}') from None
+        except ValueError as error:
+            raise ValueError(f'--values {item!r}: {error}') from None
+        if pairs:
+            raise ValueError(f'--values {item!r}: unknown parameter(s) {", ".join(pairs)}; '
+                             f'this task has {", ".join(names)}')
+        values.append(value)
+    if not values:
+        raise ValueError('--values: give at least one value, e.g. --values 0.5,0.8')
+    bad = [v for v in values if not all(np.isfinite(list(v.values())))]
+    if bad:
+        raise ValueError(f'--values: not finite: {bad[0]}')
+    return values
+
+
+def switching_order(values: Sequence[dict[str, float]], seed: int) -> list[dict[str, float]]:
+    """The split's values in a seeded shuffled order (no neighbour-to-neighbour sweep)."""
+    order = np.random.default_rng(seed).permutation(len(values))
+    return [dict(values[i]) for i in order]
+
+
 def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
-             episodes: int = 1, switch_every: int | None = None, switch_episodes: int = 1,
+             episodes: int = 3, switch_every: int | None = None, switch_episodes: int = 1,
              probe_steps: int = 4000, seed: int = 0, out: str | Path | None = None,
-             progress: bool = True) -> dict[str, Any]:
+             progress: bool = True, values: Sequence[dict[str, float]] | None = None,
+             diagnostics: bool = True) -> dict[str, Any]:
     """Run the whole evaluation of one checkpoint on one split; write CSV/PNG into `out`.
 
+    `values` replaces the split's preset values (then `split` only labels the outputs).
     `switch_every` None: every 100 steps, or a quarter episode for shorter episodes (40-step
     Cheetah-Run-v1 switches every 10 steps).
     """
     from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.diagnostics import (
+        context_sensitivity,
+        frozen_contexts,
+        policy_contexts,
+        spread_over_noise,
+    )
     from zeus_ros.offline.metrics import plot_bars, plot_trace
 
     agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
     out = Path(out) if out is not None else Path(checkpoint).parent / f'eval_{split}'
-    values = split_values(agent.task, split)
+    values = split_values(agent.task, split) if values is None else list(values)
     name = agent.context_names[0]
     labels = [', '.join(f'{v:g}' for v in value.values()) for value in values]
     traces: list[Trace] = []
@@ -259,7 +315,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
               for v, t in zip(values, traces, strict=True)}
     if switch_every is None:
         switch_every = default_switch_every(agent.task)
-    env, sim = _make_env(agent.task, _switch_schedule(values, switch_every), seed)
+    env, sim = _make_env(agent.task, _switch_schedule(switching_order(values, seed),
+                                                      switch_every), seed)
     try:
         switching = run_steps(env, sim, AgentPolicy(agent, noise=0.0, seed=seed),
                               switch_episodes * sim.episode_length + 1, desc='switching',
@@ -280,6 +337,19 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         rollout = random_rollout(agent.task, values, probe_steps, every=50, seed=seed + 1,
                                  progress=progress)
         probe = probe_context([rollout], k=5, seed=seed, progress=progress)
+    nan = float('nan')
+    sensitivity, (_, _, spread_noise) = nan, (nan, nan, nan)
+    adaptation = {'other': nan, 'mean': nan}
+    frozen = frozen_contexts(agent, traces, values) if diagnostics else None
+    if diagnostics:
+        sensitivity = context_sensitivity(agent, traces, values)
+        spread_noise = spread_over_noise([policy_contexts(t, agent) for t in traces])[2]
+    live = np.asarray([r['return'] for r in rows if r['policy'] == 'agent'])
+    for kind, contexts in (frozen or {}).items():
+        frozen_rows = evaluate_contexts(agent, values, episodes=episodes, seed=seed,
+                                        progress=False, frozen=contexts)
+        rows += [{'policy': f'frozen_{kind}', **r} for r in frozen_rows]
+        adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
     agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
     random_ret = [r['return'] for r in rows if r['policy'] == 'random']
     recovered = [s['latency'] for s in switches if s['recovered']]
@@ -291,15 +361,19 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         'mean_latency': float(np.mean(recovered)) if recovered else float('nan'),
         'spearman': rho,
         'probe_mse': probe.mse if probe else float('nan'),
-        'probe_mean_mse': probe.baseline_mse if probe else float('nan')},
+        'probe_mean_mse': probe.baseline_mse if probe else float('nan'),
+        'sensitivity': sensitivity, 'spread_noise': spread_noise,
+        'adaptation_value_other': adaptation['other'],
+        'adaptation_value_mean': adaptation['mean'], 'episodes': episodes},
         {'policy': 'random', 'method': 'uniform', 'split': split,
          'mean_return': float(np.mean(random_ret)), 'std_return': float(np.std(random_ret))}]
     write_csv(out / 'contexts.csv', rows)
     write_csv(out / 'switches.csv', switches or [{'step': None}])
     write_csv(out / 'summary.csv', summary)
+    policies = ['agent', *(f'frozen_{kind}' for kind in frozen or {}), 'random']
     per_value = {policy: [float(np.mean([r['return'] for r in rows if r['policy'] == policy
                                          and r[f'context/{name}'] == v[name]]))
-                          for v in values] for policy in ('agent', 'random')}
+                          for v in values] for policy in policies}
     plot_bars(labels, per_value, out / 'returns.png', xlabel=name, ylabel='episode return',
               title=f'{agent.task} {split}: return per context value ({agent.method})')
     plot_trace(switching.reward, {name: switching.context[:, 0]},
@@ -319,7 +393,12 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--task', help='expected task (error if the checkpoint has another)')
     parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
                         help="context split; 'all': every split the task's preset defines")
-    parser.add_argument('--episodes', type=int, default=1, help='episodes per context value')
+    parser.add_argument('--values',
+                        help="any values of the task's context parameters instead of a split, "
+                        "e.g. '0.5,0.8,1.3' (one parameter) or 'x=0.1:y=0.2,x=0.3:y=0.1'; "
+                        "outputs are labelled split 'custom'")
+    parser.add_argument('--episodes', type=int, default=3,
+                        help='episodes per context value (each from other initial states)')
     parser.add_argument('--switch-every', type=int,
                         help='steps between unannounced context switches (switching run; '
                         'default 100, or a quarter episode for shorter episodes)')
@@ -346,10 +425,21 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
+    if args.values is not None and args.split == 'all':
+        print('zeus eval: --values replaces the split: drop --split all', file=sys.stderr)
+        return 2
     if len(args.checkpoint) > 1 or args.checkpoint[0].is_dir() or args.split == 'all':
         return _main_many(args)
     try:
-        result = evaluate(args.checkpoint[0], split=args.split, task=args.task,
+        values = None
+        if args.values is not None:
+            from zeus_ros.learning.inference import InferenceAgent
+
+            names = InferenceAgent.from_checkpoint(args.checkpoint[0],
+                                                   expect_task=args.task).context_names
+            values = parse_values(args.values, names)
+        result = evaluate(args.checkpoint[0], split='custom' if values else args.split,
+                          task=args.task, values=values,
                           episodes=args.episodes, switch_every=args.switch_every,
                           switch_episodes=args.switch_episodes, probe_steps=args.probe_steps,
                           seed=args.seed, out=args.out, progress=not args.no_progress)
@@ -357,14 +447,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus eval: {error}', file=sys.stderr)
         return 2
     per_value = result['per_value']
-    table = [{'context': label, 'agent': a, 'random': r} for label, a, r in
-             zip(result['values'], per_value['agent'], per_value['random'], strict=True)]
-    print(format_table(table, ['context', 'agent', 'random']))
+    table = [{'context': label, **{policy: returns[i] for policy, returns in per_value.items()}}
+             for i, label in enumerate(result['values'])]
+    print(format_table(table, ['context', *per_value]))
     print()
     print(format_table(result['summary'], ['policy', 'split', 'mean_return', 'std_return',
                                            'switching_return', 'recovered', 'switches',
                                            'mean_latency', 'spearman', 'probe_mse',
                                            'probe_mean_mse']))
+    print()
+    print(format_table(result['summary'][:1], ['sensitivity', 'spread_noise',
+                                               'adaptation_value_other',
+                                               'adaptation_value_mean']))
     print(f'\nwrote CSV and PNG to {result["out"]}')
     return 0
 
@@ -380,8 +474,15 @@ def _main_many(args: argparse.Namespace) -> int:
         return 2
     try:
         checkpoints = find_checkpoints(args.checkpoint)
+        values, splits = None, None if args.split == 'all' else [args.split]
+        if args.values is not None:
+            from zeus_ros.learning.inference import InferenceAgent
+
+            names = InferenceAgent.from_checkpoint(checkpoints[0],
+                                                   expect_task=args.task).context_names
+            values, splits = parse_values(args.values, names), ['custom']
         tables = evaluate_many(
-            checkpoints, args.out, splits=None if args.split == 'all' else [args.split],
+            checkpoints, args.out, splits=splits, values=values,
             jobs=args.jobs, force=args.force, progress=not args.no_progress,
             expect_task=args.task,
             episodes=args.episodes, switch_every=args.switch_every,

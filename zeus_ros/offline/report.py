@@ -21,12 +21,16 @@ from typing import Any
 import numpy as np
 
 from zeus_ros.learning.methods import METHODS
+from zeus_ros.offline.diagnostics import DIAGNOSTICS
 
-__all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'markdown_table', 'mean_se', 'method_order_key',
-           'per_run', 'wall_time_table', 'write_report']
+__all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'diagnostics_table', 'headroom_rows',
+           'headroom_table', 'markdown_table', 'mean_se', 'method_order_key',
+           'paired_difference', 'per_run', 'wall_time_table', 'write_report']
 
-METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman')
+METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman', *DIAGNOSTICS)
 """Columns of an eval summary that are averaged over seeds."""
+REFERENCE, BOUND = 'no_context', 'oracle'
+"""Headroom = BOUND - REFERENCE: what knowing the context is worth on a split."""
 RUN_NAME = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
 SPLIT_ORDER = ('train', 'interpolation', 'extrapolation')
 METHOD_ORDER = METHODS
@@ -94,7 +98,7 @@ def aggregate(folder: Path) -> list[dict[str, Any]]:
                 key = (match['method'], row['split'])
                 for metric in METRICS:
                     value = row.get(metric)
-                    if value and value.lower() != 'nan':
+                    if value and value.lower() not in ('nan', 'inf'):
                         table[key][metric].append(float(value))
                 table[key]['seeds'].append(float(match['seed']))
     rows = []
@@ -109,6 +113,81 @@ def aggregate(folder: Path) -> list[dict[str, Any]]:
             row['random_return'] = float(np.mean(random_returns[split]))
         rows.append(row)
     return rows
+
+
+def paired_difference(runs: list[dict[str, Any]], method: str, other: str, split: str,
+                      metric: str = 'mean_return') -> tuple[float, float, int] | None:
+    """Mean and s.e. over seeds of method - other, paired by seed; None below two seeds.
+
+    Runs of one seed share collection and evaluation seeds, so pairing removes their noise.
+    """
+    def by_seed(name: str) -> dict[int, float]:
+        return {r['seed']: float(r[metric]) for r in runs if r['method'] == name
+                and r['split'] == split and r.get(metric) not in ('', None)}
+
+    mine, theirs = by_seed(method), by_seed(other)
+    common = sorted(set(mine) & set(theirs))
+    if len(common) < 2:
+        return None
+    mean, se = mean_se([mine[s] - theirs[s] for s in common])
+    return mean, se, len(common)
+
+
+def headroom_rows(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per split and method: gain over no_context (paired), headroom and share recovered.
+
+    Share recovered = (method - no_context) / (oracle - no_context), on the paired means.
+    """
+    rows = []
+    splits = sorted({r['split'] for r in runs}, key=lambda s: _rank(s, SPLIT_ORDER))
+    methods = sorted({r['method'] for r in runs}, key=method_order_key)
+    for split in splits:
+        headroom = paired_difference(runs, BOUND, REFERENCE, split)
+        for method in methods:
+            if method == REFERENCE:
+                continue
+            gain = paired_difference(runs, method, REFERENCE, split)
+            if gain is None:
+                continue
+            row = {'split': split, 'method': method, 'seeds': gain[2], 'gain': gain[0],
+                   'gain_se': gain[1]}
+            if headroom is not None:
+                row['headroom'], row['headroom_se'] = headroom[0], headroom[1]
+                if abs(headroom[0]) > 0:
+                    row['recovered'] = gain[0] / headroom[0]
+            rows.append(row)
+    return rows
+
+
+def headroom_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown of headroom_rows: gains in return units, mean ± s.e. of paired differences."""
+    lines = [f'| split | method | seeds | method - {REFERENCE} | headroom ({BOUND} - '
+             f'{REFERENCE}) | share of headroom recovered |', '|---|---|---|---|---|---|']
+    for row in rows:
+        headroom = (f'{row["headroom"]:.1f} ± {row["headroom_se"]:.1f}' if 'headroom' in row
+                    else '-')
+        share = f'{row["recovered"]:.2f}' if 'recovered' in row else '-'
+        lines.append(f'| {row["split"]} | {row["method"]} | {row["seeds"]} | '
+                     f'{row["gain"]:.1f} ± {row["gain_se"]:.1f} | {headroom} | {share} |')
+    return '\n'.join(lines)
+
+
+def diagnostics_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown: the adaptation diagnostics per method and split (mean ± s.e. over seeds)."""
+    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
+        if metric not in row:
+            return '-'
+        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
+
+    lines = ['| method | split | seeds | context sensitivity (mean abs. delta action) | '
+             'context spread / noise | value of adaptation (frozen to other extreme) | '
+             'value of adaptation (frozen to mean) |', '|---|---|---|---|---|---|---|']
+    for row in rows:
+        lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
+                     f'{cell(row, "sensitivity", 3)} | {cell(row, "spread_noise", 2)} | '
+                     f'{cell(row, "adaptation_value_other", 1)} | '
+                     f'{cell(row, "adaptation_value_mean", 1)} |')
+    return '\n'.join(lines)
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
@@ -200,6 +279,16 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
         writer.writerows(runs)
     (out / 'wall_times.md').write_text(wall_time_table(runs) + '\n')
     (out / 'table.md').write_text(markdown_table(rows) + '\n')
+    (out / 'diagnostics.md').write_text(diagnostics_table(rows) + '\n')
+    headroom = headroom_rows(runs)
+    if headroom:
+        with (out / 'headroom.csv').open('w', newline='') as handle:
+            writer = csv.DictWriter(handle, fieldnames=['split', 'method', 'seeds', 'gain',
+                                                        'gain_se', 'headroom', 'headroom_se',
+                                                        'recovered'])
+            writer.writeheader()
+            writer.writerows(headroom)
+        (out / 'headroom.md').write_text(headroom_table(headroom) + '\n')
     _plot(rows, title or folder.name, out / 'returns.png')
     return rows
 
@@ -217,7 +306,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus report: {error}', file=sys.stderr)
         return 2
     print(markdown_table(rows))
-    print(f'\nwrote summary.csv, runs.csv, table.md, wall_times.md and returns.png to {args.out}')
+    print(f'\n{diagnostics_table(rows)}')
+    headroom = headroom_rows(per_run(args.folder))
+    if headroom:
+        print(f'\n{headroom_table(headroom)}')
+    print(f'\nwrote summary.csv, runs.csv, table.md, diagnostics.md, headroom.md, '
+          f'wall_times.md and returns.png to {args.out}')
     return 0
 
 

@@ -1,0 +1,199 @@
+"""Issue 10: the method registry, the options that stop the context collapse, the diagnostics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from zeus_ros.learning import ZeusConfig, make_agent
+from zeus_ros.learning.config import LEGACY_CONFIG, config_from_dict, upgrade_stored_config
+from zeus_ros.learning.context import ContextNormalizer
+from zeus_ros.learning.errors import ConfigError
+from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
+from zeus_ros.learning.models import RewardModel, TransitionModel
+from zeus_ros.learning.representation import context_loss
+from zeus_ros.learning.synthetic import SyntheticSystem
+from zeus_ros.offline.diagnostics import (
+    context_sensitivity,
+    extreme_indices,
+    farthest_extreme,
+    spread_over_noise,
+)
+from zeus_ros.offline.evaluate import Trace, parse_values, switching_order
+from zeus_ros.offline.report import headroom_rows
+
+torch.set_num_threads(1)
+
+
+def _config(method: str, **changes: object) -> ZeusConfig:
+    base = dict(method=method, k=3, alpha_psi=1.0, hidden_dim=32, model_hidden_dim=32,
+                context_hidden_dim=32, encoder_hidden_dim=32, transition_dim=8, context_dim=4,
+                batch_size=8, device='cpu')
+    base.update(changes)
+    return ZeusConfig(**base)
+
+
+@pytest.mark.parametrize('name', list(METHOD_REGISTRY))
+def test_registry_entry_decides_what_the_agent_builds(name: str) -> None:
+    """The context encoder exists iff the context is learned; declared models; one normaliser."""
+    spec = method_spec(name)
+    agent = make_agent(_config(name), SyntheticSystem(k=3).spec())
+    assert ('psi' in agent.modules) == (spec.context_source == 'psi')
+    for model in ('transition', 'reward', 'backward'):
+        assert (model in agent.modules) == (model in spec.models), model
+    assert ('context_norm' in agent.modules) == (spec.context_source != 'none')
+    plain = make_agent(_config(name, context_norm='none'), SyntheticSystem(k=3).spec())
+    assert 'context_norm' not in plain.modules
+
+
+def test_unknown_method_lists_the_registry() -> None:
+    """A typo names every method."""
+    with pytest.raises(ValueError, match='oracle_sac'):
+        method_spec('oracel')
+    with pytest.raises(ConfigError, match='oracle_sac'):
+        _config('oracel')
+
+
+def test_oracle_trains_zeus_models_on_the_true_context() -> None:
+    """The oracle has ZeUS's models and losses, and no context encoder to call."""
+    system = SyntheticSystem(k=3)
+    agent = make_agent(_config('oracle'), system.spec())
+    metrics = agent.update(system.sample(8), None, 0)
+    assert {'loss/dynamics', 'loss/reward', 'loss/critic'} <= set(metrics)
+    assert InferenceAgent(agent).needs_true_context
+    with pytest.raises(ValueError, match='true context'):
+        agent.encode_context(*[np.zeros((3, *s)) for s in ((5,), (2,), (1,), (5,))],
+                             np.ones(3, bool))
+    sac = make_agent(_config('oracle_sac'), system.spec())
+    assert 'loss/dynamics' not in sac.update(system.sample(8), None, 0)
+
+
+def test_context_normalizer_standardises_in_training_only() -> None:
+    """Statistics follow training batches; applying the normaliser never moves them."""
+    norm = ContextNormalizer(3, momentum=1.0)
+    batch = torch.randn(256, 3) * torch.tensor([1e-3, 1.0, 50.0]) + 7.0
+    norm.update(batch)
+    out = norm(batch)
+    torch.testing.assert_close(out.mean(0), torch.zeros(3), atol=1e-3, rtol=0)
+    torch.testing.assert_close(out.std(0, unbiased=False), torch.ones(3), atol=1e-2, rtol=0)
+    before = norm.state_dict()['mean'].clone()
+    norm(torch.randn(8, 3))
+    torch.testing.assert_close(norm.state_dict()['mean'], before)
+
+
+def test_scale_free_context_loss_ignores_the_size_of_psi() -> None:
+    """Shrinking psi 1000x lowers eq. 1 as written but leaves the scale-free form unchanged."""
+    torch.manual_seed(0)
+    transition, reward = TransitionModel(6, 2, 4, 16), RewardModel(6, 2, 4, 16)
+    feat, action = torch.randn(32, 6), torch.rand(32, 2) * 2 - 1
+    psi1, psi2 = torch.randn(32, 4), torch.randn(32, 4)
+
+    def loss(scale: float, scale_free: bool) -> float:
+        return float(context_loss(transition, reward, feat, action, psi1 * scale, psi2 * scale,
+                                  scale_free=scale_free).loss)
+
+    # d is computed at psi, so shrinking psi also changes d: compare patterns, not values
+    assert loss(1e-3, False) < loss(1.0, False)
+    shrunk = context_loss(transition, reward, feat, action, psi1 * 1e-3, psi2 * 1e-3,
+                          scale_free=True)
+    ratio = shrunk.context_distance / shrunk.context_distance.mean()
+    assert float(ratio.std()) > 0.1  # the pattern survives the shrinking
+    assert np.isfinite(loss(1e-3, True))
+
+
+def test_critic_gradient_reaches_psi_only_when_configured() -> None:
+    """Same seed and batch: psi moves differently when the TD error trains it too."""
+    system = SyntheticSystem(k=3)
+    batch, pair = system.sample(8), system.sample(8)
+    psi = {}
+    for flag in (False, True):
+        agent = make_agent(_config('zeus', critic_context_grad=flag, seed=3), system.spec())
+        agent.update(batch, pair, 0)
+        psi[flag] = [p.detach().clone() for p in agent.modules['psi'].parameters()]
+    assert any(not torch.equal(a, b) for a, b in zip(psi[False], psi[True], strict=True))
+
+
+def test_old_checkpoints_keep_the_config_they_were_trained_with() -> None:
+    """A stored config without the new fields gets the legacy values; 'oracle' was plain SAC."""
+    stored = {**_config('oracle').to_dict()}
+    for key in LEGACY_CONFIG:
+        stored.pop(key)
+    upgraded = config_from_dict(upgrade_stored_config(stored))
+    assert upgraded.method == 'oracle_sac'
+    assert upgraded.context_norm == 'none' and upgraded.context_loss == 'paper'
+    assert not upgraded.critic_context_grad and upgraded.exploration == 'noise'
+    current = _config('oracle').to_dict()
+    assert upgrade_stored_config(current) == current
+
+
+def _trace(obs: np.ndarray, psi: np.ndarray, context: float) -> Trace:
+    n = len(obs)
+    return Trace(reward=np.zeros(n), first=np.r_[True, np.zeros(n - 1, bool)],
+                 context=np.full((n, 1), context), segment=np.zeros(n, int), psi=psi,
+                 history_length=np.full(n, 3), obs=obs, action=np.zeros((n, 2), np.float32))
+
+
+def test_sensitivity_is_zero_for_an_actor_blind_to_its_context() -> None:
+    """Cutting the actor's context inputs makes the swap diagnostic exactly 0; otherwise > 0."""
+    system = SyntheticSystem(k=3)
+    agent = make_agent(_config('zeus', context_norm='none'), system.spec())
+    rng = np.random.default_rng(0)
+    obs = rng.standard_normal((20, *system.spec().obs_shape)).astype(np.float32)
+    traces = [_trace(obs, rng.standard_normal((20, 4)).astype(np.float32) + shift, v)
+              for shift, v in ((-3.0, 0.5), (0.0, 1.0), (3.0, 1.5))]
+    values = [{'x': 0.5}, {'x': 1.0}, {'x': 1.5}]
+    inference = InferenceAgent(agent)
+    assert context_sensitivity(inference, traces, values) > 1e-3
+    with torch.no_grad():
+        first = next(agent.modules['actor'].parameters())
+        first[:, -agent.context_dim:] = 0.0
+    assert context_sensitivity(inference, traces, values) == 0.0
+    blind = InferenceAgent(make_agent(_config('no_context'), system.spec()))
+    assert np.isnan(context_sensitivity(blind, traces, values))
+
+
+def test_spread_over_noise_and_extremes() -> None:
+    """Known spreads and noise; the extremes and the farthest extreme of each value."""
+    a = np.array([[0.0], [2.0]])  # mean 1, deviation 1
+    b = np.array([[10.0], [12.0]])  # mean 11
+    spread, noise, ratio = spread_over_noise([a, b])
+    assert spread == pytest.approx(5.0) and noise == pytest.approx(1.0)
+    assert ratio == pytest.approx(5.0)
+    assert spread_over_noise([np.ones((3, 1)), np.zeros((3, 1))])[2] == float('inf')
+    assert np.isnan(spread_over_noise([a, None])[2])
+    values = [{'x': 1.0}, {'x': 0.2}, {'x': 3.0}, {'x': 2.5}]
+    assert extreme_indices(values) == (1, 2)
+    assert [farthest_extreme(values, i) for i in range(4)] == [2, 2, 1, 1]
+
+
+def test_values_parse_any_values_and_name_mistakes() -> None:
+    """Plain numbers for one parameter, name=value pairs for several; clear errors."""
+    assert parse_values('0.5, 0.8,1.3', ['torso_length']) == [
+        {'torso_length': 0.5}, {'torso_length': 0.8}, {'torso_length': 1.3}]
+    assert parse_values('x=1:y=2', ['x', 'y']) == [{'x': 1.0, 'y': 2.0}]
+    for text, names, match in (('a', ['t'], 'could not convert'), ('1', ['x', 'y'], 'x, y'),
+                               ('x=1', ['x', 'y'], "'y'"), ('x=1:z=2', ['x'], 'unknown'),
+                               ('', ['t'], 'at least one'), ('nan', ['t'], 'not finite')):
+        with pytest.raises(ValueError, match=match):
+            parse_values(text, names)
+    values = [{'t': float(v)} for v in range(8)]
+    shuffled = switching_order(values, 100)
+    assert shuffled == switching_order(values, 100) and shuffled != values
+    assert sorted(v['t'] for v in shuffled) == list(range(8))
+
+
+def test_headroom_pairs_seeds_and_reports_the_share_recovered() -> None:
+    """Gains are paired differences over common seeds; share = gain / headroom."""
+    runs = []
+    for seed, (nc, zeus, oracle) in enumerate([(10, 15, 20), (20, 24, 30), (30, 36, 40)]):
+        runs += [{'method': 'no_context', 'seed': seed, 'split': 'train', 'mean_return': nc},
+                 {'method': 'zeus', 'seed': seed, 'split': 'train', 'mean_return': zeus},
+                 {'method': 'oracle', 'seed': seed, 'split': 'train', 'mean_return': oracle}]
+    rows = {row['method']: row for row in headroom_rows(runs)}
+    assert rows['zeus']['gain'] == pytest.approx(5.0)
+    assert rows['zeus']['gain_se'] == pytest.approx(np.std([5, 4, 6], ddof=1) / np.sqrt(3))
+    assert rows['zeus']['headroom'] == pytest.approx(10.0)
+    assert rows['zeus']['recovered'] == pytest.approx(0.5)
+    assert rows['oracle']['recovered'] == pytest.approx(1.0)

@@ -1,0 +1,117 @@
+"""Adaptation diagnostics: does the policy use its context, and does using it pay.
+
+Computed by `zeus eval` from the constant-context episodes of a split (evaluate.Trace), for every
+method alike ('context' below is psi(H), or the true context for the oracles):
+  - context sensitivity: mean |delta action| (actions scaled to [-1, 1]) of the deterministic
+    actor on the same observations when the live context is replaced by the mean context of the
+    split's other extreme value (both directions, averaged);
+  - spread / noise: RMS distance of the per-value mean contexts from their grand mean, over the
+    RMS deviation of the context from its value's mean within the episodes. Below ~1 the
+    context cannot tell the values apart, whatever its absolute size;
+  - value of adaptation: return with the context live minus return with it frozen (to the mean
+    context of the extreme value farthest from each value, and to the mean over all values),
+    on the same environment seeds, so every difference is paired.
+The headroom over seeds (oracle - no_context, and the share of it a method recovers) is in
+report.py, which sees every method of a task.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluate import Trace
+
+__all__ = ['DIAGNOSTICS', 'context_sensitivity', 'extreme_indices', 'farthest_extreme',
+           'policy_contexts', 'spread_over_noise']
+
+DIAGNOSTICS = ('sensitivity', 'spread_noise', 'adaptation_value_other', 'adaptation_value_mean')
+"""Diagnostic columns of an eval summary (NaN where the method has no context)."""
+
+
+def policy_contexts(trace: Trace, agent: InferenceAgent) -> np.ndarray | None:
+    """(T, C) the context each action of `trace` was computed from; None without a context.
+
+    Only steps with a full history count for psi methods (the first k steps of an episode are
+    start-up); the true context is complete from the first step.
+    """
+    if agent.context_dim == 0:
+        return None
+    if agent.needs_true_context:
+        return np.asarray(trace.context, np.float32)
+    if trace.psi is None:
+        return None
+    return np.asarray(trace.psi[trace.history_length >= agent.k], np.float32)
+
+
+def _steps(trace: Trace, agent: InferenceAgent) -> np.ndarray:
+    """Observations matching policy_contexts(trace, agent)."""
+    if agent.needs_true_context:
+        return trace.obs
+    return trace.obs[trace.history_length >= agent.k]
+
+
+def extreme_indices(values: Sequence[dict[str, float]]) -> tuple[int, int]:
+    """Indices of the smallest and largest value (by the first context parameter)."""
+    first = [next(iter(v.values())) for v in values]
+    return int(np.argmin(first)), int(np.argmax(first))
+
+
+def farthest_extreme(values: Sequence[dict[str, float]], index: int) -> int:
+    """Of the two extreme values, the one farther from values[index]."""
+    lo, hi = extreme_indices(values)
+    first = [next(iter(v.values())) for v in values]
+    return lo if abs(first[index] - first[lo]) >= abs(first[index] - first[hi]) else hi
+
+
+def context_sensitivity(agent: InferenceAgent, traces: Sequence[Trace],
+                        values: Sequence[dict[str, float]]) -> float:
+    """Mean |delta action| in [-1, 1] units when the context of one extreme replaces the other's.
+
+    NaN without a context or with fewer than two distinct values.
+    """
+    lo, hi = extreme_indices(values)
+    if lo == hi or agent.context_dim == 0:
+        return float('nan')
+    half_range = (agent.action_high - agent.action_low) / 2
+    deltas = []
+    for own, other in ((lo, hi), (hi, lo)):
+        live = policy_contexts(traces[own], agent)
+        swapped = policy_contexts(traces[other], agent)
+        if live is None or swapped is None or not len(live) or not len(swapped):
+            return float('nan')
+        obs = _steps(traces[own], agent)
+        replaced = np.repeat(swapped.mean(0, keepdims=True), len(obs), axis=0)
+        delta = agent.act(obs, live) - agent.act(obs, replaced)
+        deltas.append(float(np.mean(np.abs(delta) / half_range)))
+    return float(np.mean(deltas))
+
+
+def spread_over_noise(contexts: Sequence[np.ndarray | None]) -> tuple[float, float, float]:
+    """(spread, noise, spread / noise) of per-value context samples; NaNs without contexts."""
+    if any(c is None or not len(c) for c in contexts) or len(contexts) < 2:
+        return float('nan'), float('nan'), float('nan')
+    means = np.stack([c.mean(0) for c in contexts])
+    spread = float(np.sqrt(np.mean(np.sum((means - means.mean(0)) ** 2, axis=1))))
+    within = np.concatenate([np.sum((c - c.mean(0)) ** 2, axis=1) for c in contexts])
+    noise = float(np.sqrt(np.mean(within)))
+    if noise <= 1e-9 * max(spread, 1e-30):  # a constant per value (the true context)
+        return spread, noise, float('inf')
+    ratio = spread / noise
+    return spread, noise, ratio
+
+
+def frozen_contexts(agent: InferenceAgent, traces: Sequence[Trace],
+                    values: Sequence[dict[str, float]]) -> dict[str, list[Any]] | None:
+    """Per value, the context to freeze: 'other' (farthest extreme's mean) and 'mean'."""
+    contexts = [policy_contexts(t, agent) for t in traces]
+    if any(c is None or not len(c) for c in contexts):
+        return None
+    means = [c.mean(0) for c in contexts]
+    overall = np.mean(means, axis=0)
+    return {'other': [means[farthest_extreme(values, i)] for i in range(len(values))],
+            'mean': [overall for _ in values]}
