@@ -5,16 +5,24 @@ middle of episodes through training and extrapolation values; context_estimator 
 the task's shipped ZeUS checkpoint; this process watches the topics (subscribe only, like
 `zeus inspect`), then prints the per-segment summary and saves the inspection figure and
 per-step CSV under --out.
+
+Then it runs the same schedule again with the policy's context FROZEN at the mean context of
+the first run (policy parameter frozen_context) and prints the per-segment returns side by
+side: the value of adaptation, live. `--no-frozen` skips the second run.
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 import os
 from pathlib import Path
 import random
 import sys
 import time
+from typing import Any
+
+import numpy as np
 
 from zeus_ros.inspect import Inspector, write_csv
 from zeus_ros.inspection import format_segments, percentile, plot_inspection
@@ -59,8 +67,9 @@ def schedule_values(task: str) -> list[float]:
     return values
 
 
-def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeProcess]:
-    """The node processes of the demo with their parameters."""
+def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
+                frozen: str = '') -> list[NodeProcess]:
+    """The node processes of the demo with their parameters (`frozen`: policy frozen_context)."""
     values = '[' + ','.join(f'{float(v)}' for v in schedule_values(args.task)) + ']'
     bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
@@ -73,7 +82,8 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None) -> list[NodeP
         ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', f'task:={args.task}']
         nodes.append(NodeProcess('context_estimator',
                                  node_argv('context_estimator', None, ckpt)))
-        nodes.append(NodeProcess('policy', node_argv('policy', None, ckpt)))
+        frozen_param = ['-p', f'frozen_context:={frozen}'] if frozen else []
+        nodes.append(NodeProcess('policy', node_argv('policy', None, ckpt + frozen_param)))
     else:
         nodes.append(NodeProcess('policy', node_argv(
             'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}'])))
@@ -99,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')
     parser.add_argument('--out', type=Path, default=Path('out/demo'))
+    parser.add_argument('--no-frozen', action='store_true',
+                        help='skip the second run with the context frozen')
     args = parser.parse_args(argv)
     if args.every is None:
         args.every = 20 if args.task == 'Cheetah-Run-v1' else 150
@@ -116,8 +128,56 @@ def main(argv: list[str] | None = None) -> int:
     print(f'[demo] {args.task}, context switching every {args.every} steps through '
           f'{schedule_values(args.task)}; policy: {checkpoint or "random"}; '
           f'ROS_DOMAIN_ID={domain}', flush=True)
+    log, failed = _run(args, checkpoint, env, args.out, label='context live')
+    if failed is None and checkpoint is not None and not args.no_frozen:
+        estimates = [r.estimate for r in log.ordered() if r.estimate is not None
+                     and r.estimate.size]
+        if estimates:
+            mean = np.mean(np.stack(estimates), axis=0)
+            frozen = ','.join(f'{v:.6g}' for v in mean)
+            print(f"\n[demo] the same schedule again, the policy's context FROZEN at the mean "
+                  f'context of the live run ({len(mean)} values)', flush=True)
+            frozen_log, failed = _run(args, checkpoint, env, args.out / 'frozen',
+                                      label='context frozen', frozen=frozen)
+            print('\n[demo] value of adaptation: per-segment return with the context live '
+                  'and frozen (same schedule and seed)')
+            print(format_comparison(log.segments(), frozen_log.segments(),
+                                    log.context_names))
+    if failed == ('demo', 130):
+        return 130
+    if failed is not None:
+        print(f'[demo] node {failed[0]!r} died with exit code {failed[1]}', file=sys.stderr)
+        return 1
+    return 0
+
+
+def format_comparison(live: list[Any], frozen: list[Any], names: Sequence[str]) -> str:
+    """Side-by-side per-segment returns of the live and the frozen run, and their sum."""
+    header = (f'{"seg":>4} {"context":<28} {"live":>9} {"frozen":>9} {"live - frozen":>14}')
+    lines = [header, '-' * len(header)]
+    totals = [0.0, 0.0]
+    frozen_by_segment = {s.segment: s for s in frozen}
+    for seg in live:
+        other = frozen_by_segment.get(seg.segment)
+        if other is None or other.steps != seg.steps:
+            continue  # a segment cut short in one of the runs is not comparable
+        context = ', '.join(f'{n}={v:g}' for n, v in zip(names, seg.context, strict=False))
+        totals[0] += seg.total_return
+        totals[1] += other.total_return
+        lines.append(f'{seg.segment:>4} {context:<28} {seg.total_return:>9.2f} '
+                     f'{other.total_return:>9.2f} {seg.total_return - other.total_return:>14.2f}')
+    lines.append('-' * len(header))
+    lines.append(f'{"all":>4} {"":<28} {totals[0]:>9.2f} {totals[1]:>9.2f} '
+                 f'{totals[0] - totals[1]:>14.2f}')
+    return '\n'.join(lines)
+
+
+def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str], out: Path,
+         *, label: str, frozen: str = '') -> tuple[Any, tuple[str, int] | None]:
+    """One run of the system; prints live views and the summary, writes CSV and figure."""
+    out.mkdir(parents=True, exist_ok=True)
     inspector = Inspector()
-    supervisor = Supervisor(build_nodes(args, checkpoint), env)
+    supervisor = Supervisor(build_nodes(args, checkpoint, frozen), env)
     started = time.monotonic()
     supervisor.start()
     failed: tuple[str, int] | None = None
@@ -139,25 +199,23 @@ def main(argv: list[str] | None = None) -> int:
                 next_draw = time.monotonic() + 5.0
     except KeyboardInterrupt:
         print('[demo] Ctrl-C: stopping', flush=True)
+        failed = ('demo', 130)
     finally:
         supervisor.stop()
         inspector.close()
     wall = time.monotonic() - started
     log = inspector.log
-    print('\n[demo] per-segment summary (return = sum of rewards while that context was in '
-          'force)')
+    print(f'\n[demo] {label}: per-segment summary (return = sum of rewards while that '
+          'context was in force)')
     print(format_segments(log.segments(), log.context_names))
     latency = log.latencies_ms()
     print(f'[demo] {len(log.records)} steps in {wall:.1f} s '
           f'({len(log.records) / max(wall, 1e-9):.1f} steps/s incl. start-up); '
           f'observation->action latency p50 {percentile(latency, 50):.2f} ms, '
           f'p99 {percentile(latency, 99):.2f} ms')
-    print(f'[demo] per-step log: {write_csv(log, args.out / "steps.csv")}')
-    print(f'[demo] figure: {plot_inspection(log, args.out / "inspection.png", "zeus demo")}')
-    if failed is not None:
-        print(f'[demo] node {failed[0]!r} died with exit code {failed[1]}', file=sys.stderr)
-        return 1
-    return 0
+    print(f'[demo] per-step log: {write_csv(log, out / "steps.csv")}')
+    print(f'[demo] figure: {plot_inspection(log, out / "inspection.png", f"zeus demo ({label})")}')
+    return log, failed
 
 
 if __name__ == '__main__':

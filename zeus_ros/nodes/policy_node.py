@@ -42,7 +42,10 @@ DEFAULTS: dict[str, Any] = {
     'image_size': 84,
     'device': 'cpu',
     'torch_threads': 1,
+    'frozen_context': '',
 }
+"""`frozen_context`: comma-separated context values used at every step instead of the live
+estimate (the value-of-adaptation comparison of `zeus demo`); empty: live context."""
 
 
 class PolicyNode(Node):
@@ -70,6 +73,7 @@ class PolicyNode(Node):
             obs_kind, obs_shape = 'state', (task.state_dim,)
             task.close()
             self.needs_context = False
+        self.frozen = self._parse_frozen(self.params['frozen_context'])
         self.low = np.asarray(low, dtype=np.float32)
         self.high = np.asarray(high, dtype=np.float32)
         self.decoder = ObservationDecoder(obs_kind, obs_shape, self.params['image_size'])
@@ -97,8 +101,25 @@ class PolicyNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         source = 'random policy' if self.agent is None else \
             f'{self.agent.method} checkpoint for {self.agent.task}'
+        if self.frozen is not None:
+            source += ', context FROZEN (frozen_context)'
         self.get_logger().info(f'{source}; {obs_kind} observations, '
                                f'{"waits for" if self.needs_context else "no"} context')
+
+    def _parse_frozen(self, text: str) -> np.ndarray | None:
+        """The frozen_context parameter as a vector of the agent's context size, or None."""
+        if not text.strip():
+            return None
+        size = 0 if self.agent is None else self.agent.context_dim
+        try:
+            values = np.asarray([float(v) for v in text.split(',')], dtype=np.float32)
+        except ValueError:
+            raise ValueError(f'policy: parameter frozen_context={text!r} must be '
+                             'comma-separated numbers') from None
+        if values.shape != (size,) or not np.isfinite(values).all():
+            raise ValueError(f'policy: parameter frozen_context needs {size} finite values '
+                             f"(the checkpoint's context size), got {text!r}")
+        return values
 
     def _become_ready(self) -> None:
         if self.needs_context and self.count_publishers(TOPICS.CONTEXT) == 0:
@@ -176,6 +197,8 @@ class PolicyNode(Node):
         if self.agent is None:
             action = self.rng.uniform(self.low, self.high).astype(np.float32)
         else:
+            if self.frozen is not None:
+                context = self.frozen
             action = self.agent.act(obs, context, deterministic=self.params['deterministic'],
                                     noise=self.params['noise'], rng=self.rng)
         self._publish(step, feedback, action, kind)
