@@ -99,7 +99,7 @@ def spread_over_noise(contexts: Sequence[np.ndarray | None]) -> tuple[float, flo
     spread = float(np.sqrt(np.mean(np.sum((means - means.mean(0)) ** 2, axis=1))))
     within = np.concatenate([np.sum((c - c.mean(0)) ** 2, axis=1) for c in contexts])
     noise = float(np.sqrt(np.mean(within)))
-    if noise <= 1e-9 * max(spread, 1e-30):  # a constant per value (the true context)
+    if noise <= 1e-6 * max(spread, 1e-30):  # a constant per value (the true context)
         return spread, noise, float('inf')
     ratio = spread / noise
     return spread, noise, ratio

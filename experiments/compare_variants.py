@@ -1,0 +1,207 @@
+"""Issue 10: every config variant of one task side by side, against no_context and the oracle.
+
+    python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
+        [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
+
+For each variant folder under --root (default, paper, norm_only, ...: one training config each,
+runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
+evaluates every finished run on every split with `zeus eval` (resumable; evaluation seed 100,
+3 episodes per value, diagnostics), then writes one table per split: return, the paired gain
+over `no_context` of the default protocol (same seeds), the share of the oracle's headroom it
+recovers, and the adaptation diagnostics. With --export, each finished run is also shipped as a
+deployment checkpoint with its card under <export>/<variant>/<group>/.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zeus_ros.offline.eval_batch import evaluate_many, find_checkpoints, group_name
+from zeus_ros.offline.metrics import write_csv
+from zeus_ros.offline.report import (
+    BOUND,
+    REFERENCE,
+    SPLIT_ORDER,
+    mean_se,
+    method_order_key,
+    paired_difference,
+    per_run,
+)
+
+REFERENCE_VARIANT = 'default'
+"""The variant whose no_context and oracle runs define the headroom."""
+
+
+def _task_folder(task: str) -> str:
+    return task.lower().replace('-', '_')
+
+
+def evaluate_variant(root: Path, variant: str, task: str, evals: Path) -> Path | None:
+    """Evaluate the finished runs of one variant; returns the folder of its tables."""
+    runs = root / variant / _task_folder(task)
+    finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*'))
+              if (p / '.done_train').is_file()]
+    if not finals:
+        return None
+    evaluate_many(find_checkpoints(finals), evals / variant, splits=None, jobs=1,
+                  progress=True, expect_task=task, probe_steps=0, seed=100)
+    groups = sorted((evals / variant).glob(f'{_task_folder(task)}_*'))
+    return groups[0] if groups else None
+
+
+def _cell(values: list[float], digits: int = 1) -> str:
+    values = [v for v in values if np.isfinite(v)]
+    if not values:
+        return '-'
+    mean, se = mean_se(values)
+    return f'{mean:.{digits}f} ± {se:.{digits}f}'
+
+
+def _floats(rows: list[dict[str, Any]], key: str) -> list[float]:
+    out = []
+    for row in rows:
+        try:
+            out.append(float(row[key]))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def variant_rows(tables: dict[str, Path]) -> list[dict[str, Any]]:
+    """One row per (split, variant, method) with the numbers of the comparison table."""
+    runs = {variant: per_run(folder) for variant, folder in tables.items()}
+    reference = runs.get(REFERENCE_VARIANT, [])
+    baselines = [r for r in reference if r['method'] in (REFERENCE, BOUND)]
+    rows = []
+    for variant, mine in runs.items():
+        methods = sorted({r['method'] for r in mine}, key=method_order_key)
+        for split in SPLIT_ORDER:
+            headroom = paired_difference(baselines, BOUND, REFERENCE, split)
+            for method in methods:
+                if variant != REFERENCE_VARIANT and method in (REFERENCE, BOUND):
+                    continue
+                cells = [r for r in mine if r['method'] == method and r['split'] == split]
+                if not cells:
+                    continue
+                label = f'{method} ({variant})'
+                combined = [*baselines, *({**r, 'method': label} for r in cells)]
+                gain = paired_difference(combined, label, REFERENCE, split)
+                row = {'split': split, 'variant': variant, 'method': method,
+                       'seeds': len(cells), 'return': _cell(_floats(cells, 'mean_return')),
+                       'gain': '-' if gain is None else f'{gain[0]:.1f} ± {gain[1]:.1f}',
+                       'gain_over_se': '-' if gain is None or gain[1] == 0
+                       else f'{gain[0] / gain[1]:.1f}',
+                       'share': '-' if gain is None or headroom is None or not headroom[0]
+                       else f'{gain[0] / headroom[0]:.2f}',
+                       'sensitivity': _cell(_floats(cells, 'sensitivity'), 3),
+                       'spread_noise': _cell(_floats(cells, 'spread_noise'), 2),
+                       'adaptation_other': _cell(_floats(cells, 'adaptation_value_other')),
+                       'adaptation_mean': _cell(_floats(cells, 'adaptation_value_mean')),
+                       'spearman': _cell(_floats(cells, 'spearman'), 2),
+                       'headroom': '-' if headroom is None
+                       else f'{headroom[0]:.1f} ± {headroom[1]:.1f}'}
+                rows.append(row)
+    return rows
+
+
+COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
+           ('return', 'return'), ('gain', f'gain over {REFERENCE} (paired)'),
+           ('gain_over_se', 'gain / s.e.'), ('share', 'share of headroom'),
+           ('sensitivity', 'context sensitivity'), ('spread_noise', 'spread / noise'),
+           ('adaptation_other', 'value of adaptation (other extreme)'),
+           ('adaptation_mean', 'value of adaptation (mean)'), ('spearman', 'Spearman'))
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    """One table per split, headroom in its heading."""
+    sections = []
+    for split in SPLIT_ORDER:
+        mine = [r for r in rows if r['split'] == split]
+        if not mine:
+            continue
+        lines = [f'#### {split} (headroom {BOUND} - {REFERENCE}: {mine[0]["headroom"]})', '',
+                 '| ' + ' | '.join(title for _, title in COLUMNS) + ' |',
+                 '|' + '---|' * len(COLUMNS)]
+        lines += ['| ' + ' | '.join(str(r[key]) for key, _ in COLUMNS) + ' |' for r in mine]
+        sections.append('\n'.join(lines))
+    return '\n\n'.join(sections) + '\n'
+
+
+def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
+    """Return per config and method on each split, mean ± s.e. (what the tables say)."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    splits = [s for s in SPLIT_ORDER if any(r['split'] == s for r in rows)]
+    labels = list(dict.fromkeys(f'{r["method"]} ({r["variant"]})' for r in rows))
+    fig, axes = plt.subplots(1, len(splits), figsize=(4.2 * len(splits), 0.38 * len(labels) + 1.6),
+                             squeeze=False, sharey=True)
+    for ax, split in zip(axes[0], splits, strict=True):
+        for i, label in enumerate(labels):
+            row = next((r for r in rows if r['split'] == split
+                        and f'{r["method"]} ({r["variant"]})' == label), None)
+            if row is None or row['return'] == '-':
+                continue
+            mean, se = (float(x) for x in row['return'].split(' ± '))
+            ax.errorbar(mean, i, xerr=se, fmt='o', capsize=3)
+        ax.set_yticks(range(len(labels)), labels, fontsize=8)
+        ax.set_xlabel('episode return (mean ± s.e. over seeds)')
+        ax.set_title(split, fontsize=10)
+        ax.grid(alpha=0.3, axis='x')
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def export_runs(root: Path, variant: str, task: str, target: Path) -> None:
+    """Ship each finished run of the variant as a deployment checkpoint with its card."""
+    from zeus_ros.learning.checkpoint import load_checkpoint
+    from zeus_ros.offline.export import export
+
+    for run in sorted((root / variant / _task_folder(task)).glob('*_s*/')):
+        final = run / 'run' / 'final.pt'
+        if not (run / '.done_train').is_file() or not final.is_file():
+            continue
+        loaded = load_checkpoint(final, load_optimizers=False)
+        group = group_name(task, loaded.step)
+        out = target / variant / group / f'{loaded.config.method}_s{loaded.config.seed}.pt'
+        export(final, out, evals=None)
+
+
+def main() -> None:
+    """Evaluate, compare and (optionally) export every variant of one task."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--task', required=True)
+    parser.add_argument('--root', type=Path, default=Path('runs/i10'))
+    parser.add_argument('--evals', type=Path, default=Path('out/i10'))
+    parser.add_argument('--out', type=Path, default=Path('docs/results/issue10'))
+    parser.add_argument('--export', type=Path, help='ship finished runs here (with cards)')
+    args = parser.parse_args()
+    variants = sorted((p.name for p in args.root.iterdir() if p.is_dir()),
+                      key=lambda v: (v != REFERENCE_VARIANT, v != 'paper', v))
+    tables = {}
+    for variant in variants:
+        folder = evaluate_variant(args.root, variant, args.task, args.evals)
+        if folder is not None:
+            tables[variant] = folder
+            if args.export:
+                export_runs(args.root, variant, args.task, args.export)
+    rows = variant_rows(tables)
+    args.out.mkdir(parents=True, exist_ok=True)
+    stem = args.out / _task_folder(args.task)
+    write_csv(stem.with_suffix('.csv'), rows)
+    stem.with_suffix('.md').write_text(markdown(rows))
+    plot(rows, stem.with_suffix('.png'), f'{args.task}: configs and methods')
+    print(markdown(rows))
+    print(f'wrote {stem}.csv, .md and .png')
+
+
+if __name__ == '__main__':
+    main()
