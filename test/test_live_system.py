@@ -73,7 +73,7 @@ def diagnostics_value(messages: list, node_name: str, key: str) -> int:
     """Newest integer value of `key` that `node_name` reported on /diagnostics (0 if none)."""
     for array in reversed(messages):
         for status in array.status:
-            if status.name.startswith(node_name):
+            if status.name.lstrip('/').startswith(node_name):
                 values = {kv.key: kv.value for kv in status.values}
                 if key in values:
                     return int(values[key])

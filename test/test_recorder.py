@@ -49,7 +49,7 @@ class StepPublisher:
 
     def _on_diag(self, msg: Any) -> None:
         for status in msg.status:
-            if status.name.startswith('recorder'):
+            if status.name.lstrip('/').startswith('recorder'):
                 self.diagnostics = {kv.key: kv.value for kv in status.values}
 
     def wait_for_recorder(self, timeout: float = 15.0) -> None:

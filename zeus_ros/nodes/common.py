@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+import math
+import signal
 import sys
 import time
 from typing import TYPE_CHECKING
@@ -11,6 +13,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import (
     HistoryPolicy,
@@ -22,13 +25,17 @@ from sensor_msgs.msg import Image
 
 if TYPE_CHECKING:
     from rclpy.node import Node
+    from rclpy.timer import Timer
 
 __all__ = [
     'TOPICS',
     'NodeFinished',
     'RateMeter',
+    'WaitReport',
     'action_qos',
     'array_from_image',
+    'count_publishers',
+    'count_subscribers',
     'diagnostics_message',
     'image_from_array',
     'image_qos',
@@ -36,21 +43,64 @@ __all__ = [
     'seconds_from_stamp',
     'stamp_from_seconds',
     'stamp_ns',
+    'steady_timer',
     'step_qos',
 ]
 
 
 class TOPICS:
-    """Topic names of the step protocol (DESIGN.md section 1); one place for all nodes."""
+    """Topic names of the step protocol (DESIGN.md section 1); one place for all nodes.
 
-    STATE = '/zeus/observation/state'
-    IMAGE = '/zeus/observation/image'
-    STEP = '/zeus/step'
-    CONTEXT_TRUTH = '/zeus/context_truth'
-    CONTEXT = '/zeus/context'
-    ACTION = '/zeus/action'
+    The zeus topics are relative, so `__ns:=/robot1` moves a whole system and `-r` remaps them;
+    /clock and /diagnostics stay absolute, as ROS convention wants (one clock, one aggregator).
+    """
+
+    STATE = 'zeus/observation/state'
+    IMAGE = 'zeus/observation/image'
+    STEP = 'zeus/step'
+    CONTEXT_TRUTH = 'zeus/context_truth'
+    CONTEXT = 'zeus/context'
+    ACTION = 'zeus/action'
     CLOCK = '/clock'
     DIAGNOSTICS = '/diagnostics'
+
+
+def steady_timer(node: Node, period: float, callback: Callable[[], None]) -> Timer:
+    """A timer on the steady clock: it runs before /clock moves, even with use_sim_time."""
+    return node.create_timer(period, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+def count_publishers(node: Node, topic: str) -> int:
+    """Publishers on `topic` as this node resolves it (namespace and remaps applied)."""
+    return node.count_publishers(node.resolve_topic_name(topic))
+
+
+def count_subscribers(node: Node, topic: str) -> int:
+    """Subscribers on `topic` as this node resolves it (namespace and remaps applied)."""
+    return node.count_subscribers(node.resolve_topic_name(topic))
+
+
+class WaitReport:
+    """Says what a start-up wait is waiting for, once it has lasted `after` seconds.
+
+    Quiet for a normal start; a wait that never ends (a remapped or missing peer) then names
+    the resolved topic and what is missing, every `every` seconds.
+    """
+
+    def __init__(self, node: Node, after: float = 3.0, every: float = 10.0) -> None:
+        self._node = node
+        self._start = time.monotonic()
+        self._after = after
+        self._every = every
+        self._last = -math.inf
+
+    def waiting(self, what: str) -> None:
+        """Log `what` if this wait has lasted long enough and nothing was said recently."""
+        now = time.monotonic()
+        if now - self._start >= self._after and now - self._last >= self._every:
+            self._last = now
+            self._node.get_logger().warning(
+                f'still waiting after {now - self._start:.0f} s: {what}')
 
 
 def step_qos(depth: int = 10) -> QoSProfile:
@@ -145,7 +195,7 @@ def diagnostics_message(
 ) -> DiagnosticArray:
     """One DiagnosticStatus (WARN when `problems` is not empty) wrapped in a DiagnosticArray."""
     status = DiagnosticStatus()
-    status.name = f'{node.get_name()}: {name}'
+    status.name = f'{node.get_fully_qualified_name()}: {name}'
     status.hardware_id = 'zeus_ros'
     status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
     status.message = '; '.join(problems) if problems else 'ok'
@@ -160,12 +210,23 @@ class NodeFinished(Exception):  # noqa: N818 - a signal, not an error
     """Raised from a callback when a node has done its job (e.g. max_steps reached)."""
 
 
+def _stop_quietly(_signum: int, _frame: object) -> None:
+    """Python's half of SIGINT/SIGTERM: nothing, so no KeyboardInterrupt breaks a clean-up.
+
+    rclpy's own handler, which runs first, shuts the context down and wakes the executor; a
+    second signal during `close()` (a recorder closing its bag) then changes nothing.
+    """
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
-    """Jazzy shutdown pattern: spin until Ctrl-C / external shutdown, then clean up.
+    """Jazzy shutdown pattern: spin until Ctrl-C / SIGTERM / external shutdown, then clean up.
 
     A `ValueError` raised while building the node (bad parameters) is printed as one clear line
-    and gives exit code 2, instead of a traceback.
+    and gives exit code 2, instead of a traceback. A signal ends the spin, `close()` runs to its
+    end, and the exit code is 0.
     """
+    for stop_signal in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(stop_signal, _stop_quietly)
     rclpy.init(args=args)
     try:
         node = factory()

@@ -9,7 +9,6 @@ counted gap (the transition across it is not formed), never a silent misalignmen
 from __future__ import annotations
 
 import time
-from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
@@ -23,18 +22,20 @@ from zeus_ros.nodes.common import (
     RateMeter,
     diagnostics_message,
     run_node,
+    steady_timer,
     step_qos,
 )
 from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
-from zeus_ros.nodes.params import declare_and_validate
+from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 
-DEFAULTS: dict[str, Any] = {
-    'checkpoint': '',
-    'task': '',
-    'mode': 'lockstep',
-    'image_size': 84,
-    'device': 'cpu',
-    'torch_threads': 1,
+SPECS: dict[str, Spec] = {
+    'checkpoint': Spec('', 'checkpoint holding phi and psi', required=True),
+    'task': Spec('', 'task the checkpoint must be for (empty: any)'),
+    'mode': Spec('lockstep', "sim_bridge's mode (sets the image QoS)",
+                 choices=('lockstep', 'realtime')),
+    'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
+    'device': Spec('cpu', 'torch device'),
+    'torch_threads': Spec(1, 'torch intra-op threads', low=1),
 }
 
 
@@ -43,7 +44,7 @@ class ContextEstimatorNode(Node):
 
     def __init__(self) -> None:
         super().__init__('context_estimator')
-        self.params = declare_and_validate(self, DEFAULTS, required=('checkpoint',))
+        self.params = declare_specs(self, SPECS)
         self.agent = load_inference_agent('context_estimator', self.params)
         self.history = self.agent.new_history()
         self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
@@ -63,7 +64,9 @@ class ContextEstimatorNode(Node):
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
         # Publisher last: a peer that sees it knows the subscriptions above already exist.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
-        self.create_timer(1.0, self._publish_diagnostics)
+        steady_timer(self, 1.0, self._publish_diagnostics)
+        # Nothing here can change live; this still refuses every change with its reason.
+        serve_live_changes(self, SPECS, self.params, lambda _changed: None)
         self.get_logger().info(
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
             f'k={self.agent.k}, context dim {self.agent.context_dim})')

@@ -1,16 +1,46 @@
-"""Declare a node's parameters with defaults and validate them with errors a user can act on."""
+"""Declare a node's parameters with descriptors, validate them, and apply live changes.
+
+One table of `Spec`s per node says each parameter's default, what it means, its range or
+choices, and whether it can change while the node runs. The same checks run at start-up (a
+ValueError stops the node with one clear line) and for every `ros2 param set` (refused with
+the reason); parameters that cannot change live are declared read-only, so ROS refuses them.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from rclpy.exceptions import InvalidParameterTypeException, ParameterException
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['declare_and_validate']
+__all__ = ['ROS_OWN', 'Spec', 'declare_specs', 'serve_live_changes', 'validate']
+
+ROS_OWN = frozenset({'use_sim_time', 'start_type_description_service'})
+"""Parameters rclpy declares on every node."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: default (its type is the parameter's type), meaning, limits, liveness."""
+
+    default: Any
+    description: str
+    live: bool = False
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[Any, ...] = ()
+    required: bool = False
 
 
 def _type_name(value: Any) -> str:
@@ -18,73 +48,128 @@ def _type_name(value: Any) -> str:
         type(value), type(value).__name__)
 
 
-ROS_OWN = frozenset({'use_sim_time', 'start_type_description_service'})
-"""Parameters rclpy declares on every node."""
-
-
-def _check_type(node_name: str, key: str, default: Any, value: Any) -> None:
-    """A value that arrived through automatic declaration must still have the default's type."""
+def _type_ok(default: Any, value: Any) -> bool:
     if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, (int, float)):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    else:
-        ok = isinstance(value, type(default))
-    if not ok:
-        raise ValueError(f'{node_name}: parameter {key} must be {_type_name(default)}, '
-                         f'got {value!r}')
+        return isinstance(value, bool)
+    if isinstance(default, (int, float)):
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and (
+            isinstance(default, float) or isinstance(value, int))
+    if isinstance(default, list):
+        return isinstance(value, (list, tuple)) or hasattr(value, 'typecode')
+    return isinstance(value, type(default))
 
 
-def declare_and_validate(
+def validate(node_name: str, specs: Mapping[str, Spec], values: Mapping[str, Any]) -> None:
+    """Raise ValueError naming parameter, value and what is allowed, for the first bad value."""
+    for key, value in values.items():
+        spec = specs[key]
+        if not _type_ok(spec.default, value):
+            raise ValueError(f'{node_name}: parameter {key} must be {_type_name(spec.default)}, '
+                             f'got {value!r}')
+        if spec.low is not None and value < spec.low:
+            raise ValueError(f'{node_name}: parameter {key} must be >= {spec.low}, got {value}')
+        if spec.high is not None and value > spec.high:
+            raise ValueError(f'{node_name}: parameter {key} must be <= {spec.high}, got {value}')
+        if spec.choices and value not in spec.choices:
+            raise ValueError(f'{node_name}: parameter {key}={value!r} is not allowed; '
+                             f'choose one of {", ".join(map(str, spec.choices))}')
+        if spec.required and not value:
+            raise ValueError(f'{node_name}: parameter {key} is required (e.g. -p {key}:=...)')
+
+
+def _descriptor(spec: Spec) -> ParameterDescriptor:
+    """What `ros2 param describe` shows: meaning, limits, and whether a change applies live."""
+    text = spec.description + ('' if spec.live else ' (read-only: restart the node to change)')
+    descriptor = ParameterDescriptor(description=text, read_only=not spec.live)
+    if spec.choices:
+        descriptor.additional_constraints = 'one of ' + ', '.join(map(str, spec.choices))
+    if spec.low is not None or spec.high is not None:
+        if isinstance(spec.default, float):
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(spec.low if spec.low is not None else -1e308),
+                to_value=float(spec.high if spec.high is not None else 1e308))]
+        elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
+            descriptor.integer_range = [IntegerRange(
+                from_value=int(spec.low if spec.low is not None else -2**63),
+                to_value=int(spec.high if spec.high is not None else 2**63 - 1), step=1)]
+    return descriptor
+
+
+def declare_specs(
     node: Node,
-    defaults: Mapping[str, Any],
+    specs: Mapping[str, Spec],
     *,
-    required: Iterable[str] = (),
-    choices: Mapping[str, Iterable[Any]] | None = None,
-    nonnegative: bool = True,
-    open_prefixes: Iterable[str] | None = None,
+    open_prefixes: Iterable[str] = (),
 ) -> dict[str, Any]:
-    """Declare every parameter with its default and return the validated values.
+    """Declare every parameter of `specs` with its descriptor; return the validated values.
 
-    Raises ValueError naming the node, the parameter, what was given and what is allowed: a
-    wrong type, a negative number, a value outside `choices`, or an empty required string.
-    A node built with `automatically_declare_parameters_from_overrides` passes the prefixes of
-    the free-form groups it accepts (e.g. `schedule.`) as `open_prefixes`; any other unknown
-    override is then an error instead of being silently ignored.
+    Raises ValueError for an unknown override (a typo would otherwise be silently ignored), a
+    wrong type, a value out of range or choices, or an empty required string. Overrides under
+    one of `open_prefixes` (free-form groups such as `schedule.`) are declared read-only as given.
     """
     name = node.get_name()
-    values: dict[str, Any] = {}
-    for key, default in defaults.items():
-        if node.has_parameter(key):  # declared from an override already
-            values[key] = node.get_parameter(key).value
-            _check_type(name, key, default, values[key])
-            continue
+    overrides: dict[str, Parameter] = dict(node._parameter_overrides)
+    prefixes = tuple(open_prefixes)
+    unknown = sorted(key for key in overrides
+                     if key not in specs and key not in ROS_OWN and not key.startswith(prefixes))
+    if unknown:
+        raise ValueError(f'{name}: unknown parameter(s) {unknown}; known: {sorted(specs)}'
+                         + ''.join(f' and {p}*' for p in prefixes))
+    values = {key: overrides[key].value if key in overrides else spec.default
+              for key, spec in specs.items()}
+    validate(name, specs, values)
+    for key, spec in specs.items():
+        if isinstance(spec.default, float) and isinstance(values[key], int):
+            values[key] = float(values[key])  # `timeout: 2` means 2.0: accept it as a double
+            overrides[key] = node._parameter_overrides[key] = Parameter(key, value=values[key])
         try:
-            parameter = node.declare_parameter(key, default)
-        except (InvalidParameterTypeException, ParameterException) as error:
-            raise ValueError(
-                f'{name}: parameter {key} must be {_type_name(default)} '
-                f'(default {default!r}): {error}') from error
-        values[key] = parameter.value
-    if open_prefixes is not None:
-        prefixes = tuple(open_prefixes)
-        unknown = sorted(key for key in node._parameters
-                         if key not in defaults and key not in ROS_OWN
-                         and not key.startswith(prefixes))
-        if unknown:
-            raise ValueError(f'{name}: unknown parameter(s) {unknown}; known: '
-                             f'{sorted(defaults)}' + ''.join(f' and {p}*' for p in prefixes))
-    for key, value in values.items():
-        default = defaults[key]
-        if isinstance(default, (int, float)) and not isinstance(default, bool) and nonnegative \
-                and value < 0:
-            raise ValueError(f'{name}: parameter {key} must be >= 0, got {value}')
-    for key, allowed in (choices or {}).items():
-        allowed = tuple(allowed)
-        if values[key] not in allowed:
-            raise ValueError(f'{name}: parameter {key}={values[key]!r} is not allowed; '
-                             f'choose one of {", ".join(map(str, allowed))}')
-    for key in required:
-        if not values[key]:
-            raise ValueError(f'{name}: parameter {key} is required (e.g. -p {key}:=...)')
+            values[key] = node.declare_parameter(key, spec.default, _descriptor(spec)).value
+        except ParameterException as error:
+            raise ValueError(f'{name}: parameter {key}: {error}') from error
+    for key, override in overrides.items():
+        if key.startswith(prefixes) and prefixes:
+            node.declare_parameter(key, override.type_, ParameterDescriptor(
+                read_only=True, description='part of a free-form group (read-only)'))
     return values
+
+
+def serve_live_changes(
+    node: Node,
+    specs: Mapping[str, Spec],
+    values: dict[str, Any],
+    apply: Callable[[dict[str, Any]], None],
+    check: Callable[[dict[str, Any]], None] | None = None,
+) -> None:
+    """Validate `ros2 param set` like start-up; on success update `values` and call `apply`.
+
+    `check(all_values)` runs the node's own cross-parameter checks (raise ValueError); `apply`
+    gets only the changed values, after they were accepted. A refusal carries the reason.
+    """
+    name = node.get_name()
+
+    def on_set(parameters: list[Parameter]) -> SetParametersResult:
+        changed = {p.name: p.value for p in parameters if p.name not in ROS_OWN}
+        for key in changed:
+            if key not in specs:
+                return SetParametersResult(successful=False, reason=f'{name}: unknown or '
+                                           f'read-only parameter {key}; known: {sorted(specs)}')
+            if not specs[key].live:
+                return SetParametersResult(
+                    successful=False, reason=f'{name}: parameter {key} is read-only')
+        try:
+            validate(name, specs, changed)
+            if check is not None:
+                check({**values, **changed})
+        except ValueError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        return SetParametersResult(successful=True)
+
+    def after_set(parameters: list[Parameter]) -> None:
+        changed = {p.name: p.value for p in parameters if p.name in specs}
+        if changed:
+            values.update(changed)
+            apply(changed)
+            node.get_logger().info(f'parameters changed live: {changed}')
+
+    node.add_on_set_parameters_callback(on_set)
+    node.add_post_set_parameters_callback(after_set)

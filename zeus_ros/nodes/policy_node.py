@@ -22,30 +22,37 @@ from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
     RateMeter,
+    WaitReport,
     action_qos,
+    count_publishers,
     diagnostics_message,
     run_node,
+    steady_timer,
     step_qos,
 )
 from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
-from zeus_ros.nodes.params import declare_and_validate
+from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 
-DEFAULTS: dict[str, Any] = {
-    'checkpoint': '',
-    'task': '',
-    'mode': 'lockstep',
-    'deterministic': True,
-    'noise': 0.0,
-    'seed': 0,
-    'context_deadline': 0.2,
-    'context_timeout': 2.0,
-    'image_size': 84,
-    'device': 'cpu',
-    'torch_threads': 1,
-    'frozen_context': '',
+SPECS: dict[str, Spec] = {
+    'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy)'),
+    'task': Spec('', 'task the checkpoint must be for (required without a checkpoint)'),
+    'mode': Spec('lockstep', "sim_bridge's mode (sets the action QoS)",
+                 choices=('lockstep', 'realtime')),
+    'deterministic': Spec(True, "act with the actor's mean (false: sample)", live=True),
+    'noise': Spec(0.0, 'exploration noise, a fraction of half the action range', live=True,
+                  low=0.0, high=1.0),
+    'seed': Spec(0, 'seeds sampling, noise and the random policy', low=0),
+    'context_deadline': Spec(0.2, 'seconds to wait for context k before acting on the newest',
+                             live=True, low=0.0),
+    'context_timeout': Spec(2.0, 'no context for this long: publish the safe action',
+                            live=True, low=0.001),
+    'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
+    'device': Spec('cpu', 'torch device'),
+    'torch_threads': Spec(1, 'torch intra-op threads', low=1),
+    'frozen_context': Spec('', 'comma-separated context values used at every step instead of '
+                           'the live estimate (value of adaptation); empty: live context',
+                           live=True),
 }
-"""`frozen_context`: comma-separated context values used at every step instead of the live
-estimate (the value-of-adaptation comparison of `zeus demo`); empty: live context."""
 
 
 class PolicyNode(Node):
@@ -53,8 +60,7 @@ class PolicyNode(Node):
 
     def __init__(self) -> None:
         super().__init__('policy')
-        self.params = declare_and_validate(self, DEFAULTS, choices={
-            'mode': ('lockstep', 'realtime')})
+        self.params = declare_specs(self, SPECS)
         self.rng = np.random.default_rng(self.params['seed'])
         self.agent: InferenceAgent | None = None
         if self.params['checkpoint']:
@@ -95,10 +101,13 @@ class PolicyNode(Node):
                                      step_qos())
         # The action publisher appears only once a context source exists: sim_bridge starts
         # stepping when it sees an action publisher, so step 0 already gets its context.
-        self._waiting_since = time.monotonic()
-        self._ready_timer = self.create_timer(0.05, self._become_ready)
-        self.create_timer(0.002, self._check_deadline)
-        self.create_timer(1.0, self._publish_diagnostics)
+        # Steady clocks: with use_sim_time, ROS time only moves once sim_bridge steps.
+        self._wait_report = WaitReport(self)
+        self._ready_timer = steady_timer(self, 0.05, self._become_ready)
+        steady_timer(self, 0.002, self._check_deadline)
+        steady_timer(self, 1.0, self._publish_diagnostics)
+        serve_live_changes(self, SPECS, self.params, self._apply_live,
+                           check=lambda values: self._parse_frozen(values['frozen_context']))
         source = 'random policy' if self.agent is None else \
             f'{self.agent.method} checkpoint for {self.agent.task}'
         if self.frozen is not None:
@@ -121,12 +130,15 @@ class PolicyNode(Node):
                              f"(the checkpoint's context size), got {text!r}")
         return values
 
+    def _apply_live(self, changed: dict[str, Any]) -> None:
+        """Live parameter changes read through self.params; frozen_context needs parsing."""
+        if 'frozen_context' in changed:
+            self.frozen = self._parse_frozen(changed['frozen_context'])
+
     def _become_ready(self) -> None:
-        if self.needs_context and self.count_publishers(TOPICS.CONTEXT) == 0:
-            if time.monotonic() - self._waiting_since > 5.0:
-                self.get_logger().warning(
-                    f'waiting for a context_estimator publishing on {TOPICS.CONTEXT}')
-                self._waiting_since = time.monotonic()
+        if self.needs_context and count_publishers(self, TOPICS.CONTEXT) == 0:
+            self._wait_report.waiting('a context_estimator publishing on '
+                                      f'{self.resolve_topic_name(TOPICS.CONTEXT)}')
             return
         self._pub = self.create_publisher(Action, TOPICS.ACTION,
                                           action_qos(self.params['mode']))

@@ -21,7 +21,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 
-from zeus_ros.nodes.common import TOPICS, diagnostics_message, run_node, step_qos
+from zeus_ros.nodes.common import (
+    TOPICS,
+    diagnostics_message,
+    run_node,
+    steady_timer,
+    step_qos,
+)
+from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.durable import DurableBagWriter
 from zeus_ros.offline.errors import BagError
 from zeus_ros.offline.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
@@ -31,20 +38,22 @@ if TYPE_CHECKING:
     from zeus_ros.offline.bag_writer import Storage
 
 STORAGES = ('mcap', 'sqlite3')
-ROS_BUILTIN_PARAMETERS = {'use_sim_time', 'start_type_description_service'}
-"""Declared by rclpy's Node itself (Jazzy): never 'unknown'."""
-DEFAULTS: dict[str, Any] = {
-    'output': '',
-    'storage': 'mcap',
-    'topics': list(MSGTYPES),
-    'split_size_mb': 0.0,
-    'split_duration_s': 0.0,
-    'flush_period_s': 1.0,
-    'image_best_effort': False,
+MAX_FLUSH_PERIOD_S = 60.0
+SPECS: dict[str, Spec] = {
+    'output': Spec('', "directory of the bags; '' = ./bags/zeus_<date>_<time>"),
+    'storage': Spec('mcap', 'bag storage', choices=STORAGES),
+    'topics': Spec(list(MSGTYPES), 'zeus schema topics to record (bag names; a zeus topic is '
+                   "subscribed relative to the recorder's namespace)"),
+    'split_size_mb': Spec(0.0, 'start a new bag at this many MB (0: never)', live=True,
+                          low=0.0),
+    'split_duration_s': Spec(0.0, 'start a new bag after this many seconds (0: never)',
+                             live=True, low=0.0),
+    'flush_period_s': Spec(1.0, 'seconds between flushes; bounds what a crash loses',
+                           low=0.001, high=MAX_FLUSH_PERIOD_S),
+    'image_best_effort': Spec(False, 'subscribe to frames best effort (realtime only)'),
 }
 RECORD_DEPTH = 100
 """Reliable keep-last depth: absorbs a slow disk for ~100 steps before the publisher drops."""
-MAX_FLUSH_PERIOD_S = 60.0
 SPLIT_GRACE_S = 1.0
 """After a split the previous bag stays open this long for late messages of its own steps."""
 RECENT_STAMPS = 256
@@ -70,11 +79,7 @@ class RecorderNode(Node):
     """Records the zeus topics to split, crash-safe bags and reports drops live."""
 
     def __init__(self) -> None:
-        super().__init__(
-            'recorder',
-            allow_undeclared_parameters=True,
-            automatically_declare_parameters_from_overrides=True,
-        )
+        super().__init__('recorder')
         self.params = self._read_parameters()
         self.output = Path(self.params['output']).expanduser().resolve()
         if not self.params['output']:  # like rosbag2: a new timestamped directory
@@ -100,14 +105,17 @@ class RecorderNode(Node):
             qos = step_qos(RECORD_DEPTH)
             if topic == TOPIC_IMAGE and self.params['image_best_effort']:
                 qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing
+            # The bag keeps the schema name; the subscription follows namespace and remaps.
+            source = topic if topic == TOPICS.CLOCK else topic.lstrip('/')
             self.create_subscription(
-                _message_class(MSGTYPES[topic]), topic, partial(self._on_message, topic), qos,
+                _message_class(MSGTYPES[topic]), source, partial(self._on_message, topic), qos,
                 raw=True,
             )
         self._open_next_bag()  # last: a start-up failure above leaves no empty bag behind
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self.create_timer(self.params['flush_period_s'], self._on_flush_timer)
-        self.create_timer(1.0, self._publish_diagnostics)
+        steady_timer(self, self.params['flush_period_s'], self._on_flush_timer)
+        steady_timer(self, 1.0, self._publish_diagnostics)
+        serve_live_changes(self, SPECS, self.params, lambda _changed: None)
         self.get_logger().info(
             f'recording {len(self.topics)} topics to {self.output} ({self.storage}), flush every '
             f'{self.params["flush_period_s"]} s, split at {self.params["split_size_mb"]} MB / '
@@ -117,32 +125,7 @@ class RecorderNode(Node):
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
         """Declare every parameter with its default, then validate them all with clear errors."""
-        for name, default in DEFAULTS.items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, default)
-        params = {name: self.get_parameter(name).value for name in DEFAULTS}
-        unknown = sorted(set(self._parameters) - set(DEFAULTS) - ROS_BUILTIN_PARAMETERS)
-        if unknown:
-            raise ValueError(
-                f'recorder: unknown parameter(s) {unknown}; known: {sorted(DEFAULTS)}')
-        for name in ('split_size_mb', 'split_duration_s', 'flush_period_s'):
-            value = params[name]
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or value < 0:
-                raise ValueError(
-                    f'recorder: parameter {name} must be a number >= 0, got {value!r}')
-            params[name] = float(value)
-        if not 0 < params['flush_period_s'] <= MAX_FLUSH_PERIOD_S:
-            raise ValueError(
-                f'recorder: parameter flush_period_s must be in (0, {MAX_FLUSH_PERIOD_S}] s, got '
-                f'{params["flush_period_s"]}; it bounds what a crash can lose'
-            )
-        if not isinstance(params['image_best_effort'], bool):
-            raise ValueError('recorder: parameter image_best_effort must be true or false')
-        if params['storage'] not in STORAGES:
-            raise ValueError(
-                f'recorder: parameter storage={params["storage"]!r}; '
-                f'allowed: {", ".join(STORAGES)}'
-            )
+        params = declare_specs(self, SPECS)
         params['topics'] = self._check_topics(params['topics'])
         self._check_output(params['output'])
         return params

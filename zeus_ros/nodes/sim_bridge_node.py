@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
 
@@ -27,32 +26,40 @@ from zeus_ros.nodes.common import (
     TOPICS,
     NodeFinished,
     RateMeter,
+    WaitReport,
     action_qos,
     diagnostics_message,
     image_from_array,
     image_qos,
     run_node,
     stamp_from_seconds,
+    steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.params import declare_and_validate
+from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 
 MODES = ('lockstep', 'realtime')
 SCHEDULE_PREFIX = 'schedule.'
-DEFAULTS: dict[str, Any] = {
-    'task': 'Cheetah-Run-v0',
-    'mode': 'lockstep',
-    'seed': 0,
-    'pixels': False,
-    'image_size': 84,
-    'action_timeout': 2.0,
-    'control_rate': 0.0,
-    'stale_action_age': 0.0,
-    'max_steps': 0,
-    'wait_for_peers': True,
-    'peer_grace': 0.5,
-    'min_observers': 0,
-    'log_every': 0,
+SPECS: dict[str, Spec] = {
+    'task': Spec('Cheetah-Run-v0', 'contextual MuJoCo task', choices=TASK_NAMES),
+    'mode': Spec('lockstep', 'lockstep: step k+1 after Action k; realtime: wall-clock timer',
+                 choices=MODES),
+    'seed': Spec(0, "seeds the task's initial states and sampled schedules", low=0),
+    'pixels': Spec(False, 'also publish rgb8 frames on zeus/observation/image'),
+    'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
+    'action_timeout': Spec(2.0, 'lockstep: seconds to wait for Action k before the safe action',
+                           live=True, low=0.001),
+    'control_rate': Spec(0.0, "realtime: steps per second (0: the task's own rate)", low=0.0),
+    'stale_action_age': Spec(0.0, 'realtime: an older action is replaced (0: 3 periods)',
+                             live=True, low=0.0),
+    'max_steps': Spec(0, 'stop after this many steps (0: run until stopped)', live=True, low=0),
+    'wait_for_peers': Spec(True, 'start once a policy publishes actions and someone observes'),
+    'peer_grace': Spec(0.5, 'seconds between seeing the peers and publishing step 0',
+                       live=True, low=0.0),
+    'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
+                          live=True, low=0),
+    'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
+                      live=True, low=0),
 }
 
 
@@ -60,12 +67,8 @@ class SimBridgeNode(Node):
     """Steps a ScheduledEnv and speaks the step protocol of DESIGN.md."""
 
     def __init__(self) -> None:
-        super().__init__(
-            'sim_bridge',
-            allow_undeclared_parameters=True,
-            automatically_declare_parameters_from_overrides=True,
-        )
-        self.params = self._read_parameters()
+        super().__init__('sim_bridge')
+        self.params = declare_specs(self, SPECS, open_prefixes=[SCHEDULE_PREFIX])
         task = make_task(self.params['task'], seed=self.params['seed'])
         schedule = schedule_from_config(self._schedule_config(), task, self.params['seed'])
         self.env = ScheduledEnv(task, schedule)
@@ -98,28 +101,23 @@ class SimBridgeNode(Node):
                                                     action_qos(self.mode))
         self._period = self._control_period(task)
         tick = self._period if self.mode == 'realtime' else 0.005
-        self.create_timer(tick, self._on_tick)
-        self.create_timer(1.0, self._publish_diagnostics)
+        # Steady clocks: with use_sim_time, ROS time only moves once we publish /clock.
+        steady_timer(self, tick, self._on_tick)
+        steady_timer(self, 1.0, self._publish_diagnostics)
+        self._wait_report = WaitReport(self)
+        serve_live_changes(self, SPECS, self.params, lambda _changed: None)
         self.get_logger().info(
             f'{self.params["task"]} in {self.mode} mode, contexts {list(task.context_names)}, '
-            f'pixels={self.params["pixels"]}; waiting for peers on {TOPICS.ACTION}'
+            f'pixels={self.params["pixels"]}; waiting for peers on {self._sub_action.topic_name}'
             if self.params['wait_for_peers'] else f'{self.params["task"]} in {self.mode} mode'
         )
 
     # -- parameters -------------------------------------------------------------------------
-    def _read_parameters(self) -> dict[str, Any]:
-        """Declare every known parameter with its default, then validate them all at once."""
-        params = declare_and_validate(self, DEFAULTS, open_prefixes=[SCHEDULE_PREFIX],
-                                      choices={'task': TASK_NAMES, 'mode': MODES})
-        if params['action_timeout'] <= 0:
-            raise ValueError('sim_bridge: parameter action_timeout must be > 0 seconds')
-        return params
-
     def _schedule_config(self) -> dict[str, Any]:
         """Collect the `schedule.*` parameters into the plain dict the schedule code reads."""
         config: dict[str, Any] = {}
         for name, parameter in self._parameters.items():
-            if name.startswith(SCHEDULE_PREFIX) and parameter.type_ != Parameter.Type.NOT_SET:
+            if name.startswith(SCHEDULE_PREFIX):
                 value = parameter.value
                 if not isinstance(value, (str, bytes)) and hasattr(value, '__len__'):
                     value = list(value)  # ROS array parameters come as array.array
@@ -144,17 +142,30 @@ class SimBridgeNode(Node):
         """
         if not self.params['wait_for_peers']:
             return True
-        outputs = [(self._pub_state, TOPICS.STATE), (self._pub_step, TOPICS.STEP)]
+        # Counted on the names as this node resolved them: namespace and remaps applied.
+        outputs = [self._pub_state, self._pub_step]
         if self._pub_image is not None:
-            outputs.append((self._pub_image, TOPICS.IMAGE))
-        observers = sum(self.count_subscribers(topic) for pub, topic in outputs
-                        if pub is not self._pub_step)
-        matched = all(pub.get_subscription_count() >= self.count_subscribers(topic)
-                      for pub, topic in outputs)
-        actions = self.count_publishers(TOPICS.ACTION)
-        expected = self._pub_step.get_subscription_count() >= self.params['min_observers']
-        return (actions > 0 and observers > 0 and matched and expected
-                and self._sub_action.get_publisher_count() >= actions)
+            outputs.append(self._pub_image)
+        observations = [pub for pub in outputs if pub is not self._pub_step]
+        observers = sum(self.count_subscribers(pub.topic_name) for pub in observations)
+        unmatched = [pub.topic_name for pub in outputs
+                     if pub.get_subscription_count() < self.count_subscribers(pub.topic_name)]
+        action_topic = self._sub_action.topic_name
+        actions = self.count_publishers(action_topic)
+        listening = self._pub_step.get_subscription_count()
+        missing = []
+        if actions == 0:
+            missing.append(f'a policy publishing on {action_topic}')
+        if observers == 0:
+            missing.append(f'a subscriber of {observations[0].topic_name}')
+        if listening < self.params['min_observers']:
+            missing.append(f'{self.params["min_observers"]} subscribers of '
+                           f'{self._pub_step.topic_name} (min_observers; {listening} so far)')
+        if unmatched or self._sub_action.get_publisher_count() < actions:
+            missing.append(f'DDS to match the endpoints of {unmatched or [action_topic]}')
+        if missing:
+            self._wait_report.waiting('; '.join(missing))
+        return not missing
 
     def _on_tick(self) -> None:
         now = time.monotonic()
