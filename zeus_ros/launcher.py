@@ -27,6 +27,8 @@ NODES = {
     'policy': 'zeus_ros.nodes.policy_node',
     'recorder': 'zeus_ros.nodes.recorder_node',
 }
+RECORDS_OTHERS = frozenset({'recorder'})
+"""Nodes that stop only after the others, so nothing in flight is lost to them."""
 
 
 @dataclass
@@ -104,24 +106,54 @@ class Supervisor:
                 return None, 0
             time.sleep(0.1)
 
-    def stop(self, grace: float = 10.0) -> None:
-        """SIGINT every running node, wait up to `grace` seconds, then SIGKILL what is left."""
-        for node in reversed(self.nodes):
-            if node.process is not None and node.process.poll() is None:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(node.process.pid, signal.SIGINT)
+    def stop(self, grace: float = 10.0) -> dict[str, int]:
+        """SIGINT every running node, wait up to `grace` seconds, then SIGKILL what is left.
+
+        Returns each node's exit code (and prints it), so a node that did not stop cleanly is
+        named. A second Ctrl-C meanwhile is ignored: the nodes are already closing their files.
+        """
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            self._stop(grace)
+            return self._exit_codes()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+    def _stop(self, grace: float) -> None:
         deadline = time.monotonic() + grace
-        for node in reversed(self.nodes):
-            if node.process is None:
-                continue
-            try:
-                node.process.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(node.process.pid, signal.SIGKILL)
-                node.process.wait(timeout=5)
-            if node.reader is not None:
-                node.reader.join(timeout=2)
+        # The recorder stops last, once the nodes it records are gone: it then holds every
+        # step they published, not just those that arrived before the signal.
+        producers = [node for node in self.nodes if node.name not in RECORDS_OTHERS]
+        recorders = [node for node in self.nodes if node.name in RECORDS_OTHERS]
+        for group in (producers, recorders):
+            for node in group:
+                if node.process is not None and node.process.poll() is None:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.killpg(node.process.pid, signal.SIGINT)
+            for node in group:
+                self._wait_or_kill(node, deadline)
+
+    def _wait_or_kill(self, node: NodeProcess, deadline: float) -> None:
+        """Wait for one signalled node until `deadline`, then SIGKILL it."""
+        if node.process is None:
+            return
+        try:
+            node.process.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(node.process.pid, signal.SIGKILL)
+            node.process.wait(timeout=5)
+        if node.reader is not None:
+            node.reader.join(timeout=2)
+
+    def _exit_codes(self) -> dict[str, int]:
+        """Each node's exit code, printed on one line."""
+        codes = {node.name: node.process.returncode for node in self.nodes
+                 if node.process is not None}
+        print('[zeus launch] exit codes: ' + ', '.join(f'{name} {code}'
+                                                       for name, code in codes.items()),
+              file=self.out, flush=True)
+        return codes
 
 
 def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | None = None,
@@ -133,8 +165,8 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
         name, code = supervisor.wait(timeout)
     except KeyboardInterrupt:
         print('[zeus launch] Ctrl-C: stopping all nodes', file=out, flush=True)
-        supervisor.stop()
-        return 130
+        codes = supervisor.stop()
+        return 0 if not any(codes.values()) else 1
     supervisor.stop()
     if name is None:
         print(f'[zeus launch] time limit of {timeout} s reached: stopped all nodes', file=out)

@@ -295,8 +295,11 @@ class SimBridgeNode(Node):
         self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems))
 
     def close(self) -> None:
-        """Release the renderer."""
+        """Release the renderer; say how far the loop got (what a recording should hold)."""
         self.env.task.close()
+        if self._started:
+            self.get_logger().info(f'stopped after step {self.counts["steps"] - 1}; '
+                                   f'counts {self.counts}')
 
 
 def main(args: list[str] | None = None) -> int:

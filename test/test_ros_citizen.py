@@ -1,0 +1,272 @@
+"""What a ROS user does next: namespaces, remaps, sim time, live parameters, Ctrl-C.
+
+Real node processes, one fresh domain per test, loopback only, always cleaned up.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+import pytest
+
+from live_fixtures import TASK, tiny_checkpoint
+from ros_harness import (
+    REPO,
+    ProcessGroup,
+    driver_node,
+    fresh_domain_id,
+    python_module,
+    ros_environment,
+    spin_until,
+)
+
+pytestmark = pytest.mark.ros
+
+MODULES = {'sim_bridge': 'sim_bridge_node', 'context_estimator': 'context_estimator_node',
+           'policy': 'policy_node', 'recorder': 'recorder_node'}
+
+
+def ros_node(name: str, *ros_args: str) -> list[str]:
+    """The command line of a zeus_ros node followed by raw `--ros-args` arguments."""
+    return python_module(f'zeus_ros.nodes.{MODULES[name]}', '--ros-args', *ros_args)
+
+
+def final_counts(log: str) -> dict[str, int]:
+    """sim_bridge's counts from its 'max_steps=N reached; counts {...}' line."""
+    match = re.search(r'max_steps=\d+ reached; counts (\{.*\})', log)
+    assert match, log[-2000:]
+    return {k: int(v) for k, v in re.findall(r"'(\w+)': (\d+)", match.group(1))}
+
+
+def newest_status(diagnostics: list[Any], name: str) -> dict[str, str]:
+    """Key/values of the newest /diagnostics status whose name starts with `name`."""
+    for array in reversed(diagnostics):
+        for status in array.status:
+            if status.name.startswith(name):
+                return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
+def test_two_namespaced_systems_in_one_domain_run_without_crosstalk(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """/r1 and /r2 with use_sim_time: 200 lockstep steps each, own schedule, no crosstalk.
+
+    One params file with `/**/node:` keys configures both; each system's schedule comes from a
+    `/rN/sim_bridge:` section. Two simulators in one domain each remap /clock into their
+    namespace, as a ROS user would.
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    from zeus_msgs.msg import ContextTruth
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    values = {'r1': [0.6, 1.0], 'r2': [1.3, 1.5]}
+    params = tmp_path / 'params.yaml'
+    params.write_text(
+        '/**/sim_bridge:\n  ros__parameters:\n'
+        f'    task: {TASK}\n    max_steps: 200\n    min_observers: 2\n    action_timeout: 5.0\n'
+        + ''.join(f'/{ns}/sim_bridge:\n  ros__parameters:\n    schedule:\n      kind: switch\n'
+                  f'      every: 50\n      values: {vals}\n' for ns, vals in values.items())
+        + ''.join(f'/**/{name}:\n  ros__parameters:\n    checkpoint: {checkpoint}\n'
+                  f'    task: {TASK}\n' for name in ('context_estimator', 'policy')))
+    bridges = {}
+    for ns in values:
+        common = ['-r', f'__ns:=/{ns}', '-r', f'/clock:=/{ns}/clock', '-p', 'use_sim_time:=true',
+                  '--params-file', str(params)]
+        bridges[ns] = ros_processes.start(f'{ns}-sim_bridge', ros_node('sim_bridge', *common))
+        for name in ('context_estimator', 'policy'):
+            ros_processes.start(f'{ns}-{name}', ros_node(name, *common))
+    truths: dict[str, dict[int, float]] = {ns: {} for ns in values}
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        from zeus_ros.nodes.common import step_qos
+
+        for ns in values:
+            probe.create_subscription(
+                ContextTruth, f'/{ns}/zeus/context_truth',
+                lambda m, ns=ns: truths[ns].__setitem__(m.step, m.values[0]), step_qos(300))
+        probe.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
+        done = spin_until(probe, lambda: all(b.poll() is not None for b in bridges.values()),
+                          timeout=180)
+        assert done, ros_processes.log_text('r1-sim_bridge')[-2000:]
+        spin_until(probe, lambda: False, timeout=1.5)  # the estimators' final diagnostics
+    for ns, bridge in bridges.items():
+        assert bridge.returncode == 0, ros_processes.log_text(f'{ns}-sim_bridge')[-2000:]
+        counts = final_counts(ros_processes.log_text(f'{ns}-sim_bridge'))
+        assert counts['steps'] == 201 and counts['ok'] == 200, counts
+        assert counts['unexpected'] == 0 and counts['timeouts'] == 0, counts
+        assert truths[ns], f'no truth seen on /{ns}'
+        assert {round(v, 3) for v in truths[ns].values()} <= set(values[ns]), truths[ns]
+        estimator = newest_status(diagnostics, f'/{ns}/context_estimator')
+        assert estimator.get('gaps') == '0' and estimator.get('estimates') == '201', estimator
+        policy = newest_status(diagnostics, f'/{ns}/policy')
+        assert policy.get('actions') == '201' and policy.get('safe') == '0', policy
+    stamps = [array.header.stamp.sec for array in diagnostics
+              if array.status[0].name.startswith('/r1/policy')]
+    assert stamps and max(stamps) < 3600, 'the policy does not run on simulation time'
+
+
+def test_a_remapped_action_topic_runs_the_loop_and_a_wait_says_why(
+        ros_processes: ProcessGroup) -> None:
+    """`-r zeus/action:=cmd` on both ends: sim_bridge first names what it waits for, then runs."""
+    remap = ('-r', 'zeus/action:=cmd')
+    bridge = ros_processes.start('remap-sim_bridge', ros_node(
+        'sim_bridge', *remap, '-p', f'task:={TASK}', '-p', 'max_steps:=100'))
+    ros_processes.wait_for_log('remap-sim_bridge', 'still waiting after', timeout=60)
+    waiting = ros_processes.log_text('remap-sim_bridge')
+    assert 'a policy publishing on /cmd' in waiting, waiting
+    ros_processes.start('remap-policy', ros_node('policy', *remap, '-p', f'task:={TASK}'))
+    assert bridge.wait(timeout=120) == 0, ros_processes.log_text('remap-sim_bridge')[-2000:]
+    counts = final_counts(ros_processes.log_text('remap-sim_bridge'))
+    assert counts['ok'] == 100 and counts['unexpected'] == 0 and counts['timeouts'] == 0
+
+
+def call(node: Any, future: Any, timeout: float = 20.0) -> Any:
+    """Spin until a parameter-service future is done; its result."""
+    assert spin_until(node, future.done, timeout), 'no answer from the parameter service'
+    return future.result()
+
+
+def test_live_parameters_apply_or_are_refused_with_the_reason(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """Through rclpy's parameter services: describe, refuse bad values, apply good ones live.
+
+    The policy's `noise` is measured on the next actions (they leave the deterministic action),
+    sim_bridge's `max_steps` on where the loop stops.
+    """
+    import numpy as np
+    from rcl_interfaces.msg import ParameterType
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    import torch
+    from zeus_msgs.msg import Action, StateVector
+
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.nodes.common import step_qos
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt', method='no_context')
+    bridge = ros_processes.start('live-sim_bridge', ros_node(
+        'sim_bridge', '-p', f'task:={TASK}', '-p', 'action_timeout:=5.0'))
+    ros_processes.start('live-policy', ros_node('policy', '-p', f'checkpoint:={checkpoint}'))
+    torch.set_num_threads(1)
+    agent = InferenceAgent.from_checkpoint(checkpoint)
+    states: dict[int, Any] = {}
+    gaps: dict[int, float] = {}
+
+    def on_action(msg: Any) -> None:
+        if msg.step in states:
+            expected = agent.act(states[msg.step], np.zeros(0, np.float32), deterministic=True)
+            gaps[msg.step] = float(np.abs(expected - np.asarray(msg.data)).max())
+
+    with driver_node(ros_processes.domain_id) as probe:
+        probe.create_subscription(StateVector, 'zeus/observation/state',
+                                  lambda m: states.__setitem__(
+                                      m.step, np.asarray(m.data, np.float32)),
+                                  step_qos(100))
+        probe.create_subscription(Action, 'zeus/action', on_action, step_qos(100))
+        policy = AsyncParameterClient(probe, 'policy')
+        bridge_params = AsyncParameterClient(probe, 'sim_bridge')
+        assert policy.wait_for_services(30) and bridge_params.wait_for_services(30)
+        assert spin_until(probe, lambda: len(gaps) > 20, timeout=60)
+        assert max(gaps.values()) < 1e-4, 'deterministic actions should match the checkpoint'
+
+        described = call(probe, policy.describe_parameters(['noise', 'mode'])).descriptors
+        assert 'noise' in described[0].description
+        assert described[0].floating_point_range[0].to_value == pytest.approx(1.0)
+        assert described[1].read_only and 'lockstep' in described[1].additional_constraints
+
+        refused = {
+            'context_deadline': Parameter('context_deadline', value=-3.0),
+            'frozen_context': Parameter('frozen_context', value='banana'),
+            'mode': Parameter('mode', value='banana'),
+        }
+        results = call(probe, policy.set_parameters(list(refused.values()))).results
+        for (name, _), result in zip(refused.items(), results, strict=True):
+            assert not result.successful and result.reason, name
+        assert 'frozen_context' in results[1].reason and 'numbers' in results[1].reason
+        assert 'read-only' in results[2].reason
+        kept = call(probe, policy.get_parameters(['context_deadline', 'mode'])).values
+        assert kept[0].double_value == pytest.approx(0.2) and kept[1].string_value == 'lockstep'
+
+        result = call(probe, policy.set_parameters([Parameter('noise', value=0.5)])).results[0]
+        assert result.successful, result.reason
+        changed_at = max(states)
+        assert spin_until(probe, lambda: len([s for s in gaps if s > changed_at + 2]) > 20, 60)
+        noisy = [gap for step, gap in gaps.items() if step > changed_at + 2]
+        assert min(noisy) > 1e-3, 'noise=0.5 did not reach the actions'
+
+        stop_at = max(states) + 30
+        result = call(probe, bridge_params.set_parameters(
+            [Parameter('max_steps', value=stop_at)])).results[0]
+        assert result.successful, result.reason
+        refused_type = call(probe, bridge_params.set_parameters(
+            [Parameter('action_timeout', value='soon')])).results[0]
+        assert not refused_type.successful and refused_type.reason
+        assert spin_until(probe, lambda: bridge.poll() is not None, timeout=60)
+    assert bridge.returncode == 0
+    assert f'max_steps={stop_at} reached' in ros_processes.log_text('live-sim_bridge')
+    assert kept[0].type == ParameterType.PARAMETER_DOUBLE
+
+
+def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
+    """SIGINT to `zeus launch --record`: all exit 0 within 3 s, no traceback, a closed bag.
+
+    The bag has its final metadata and every step from 0 without a gap.
+    """
+    from rosbags.highlevel import AnyReader
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    out = tmp_path / 'bag'
+    params = tmp_path / 'params.yaml'
+    params.write_text(
+        f'/**/sim_bridge:\n  ros__parameters:\n    task: {TASK}\n    log_every: 100\n'
+        + ''.join(f'/**/{name}:\n  ros__parameters:\n    checkpoint: {checkpoint}\n'
+                  f'    task: {TASK}\n' for name in ('context_estimator', 'policy'))
+        + f'/**/recorder:\n  ros__parameters:\n    output: {out}\n')
+    launch = subprocess.Popen(
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params), '--record'],
+        cwd=REPO, env=ros_environment(fresh_domain_id()), stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    lines: list[str] = []
+    try:
+        assert launch.stdout is not None
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            line = launch.stdout.readline()
+            lines.append(line)
+            if 'step 200 ' in line or not line:
+                break
+        assert 'step 200 ' in lines[-1], ''.join(lines[-30:])
+        signalled = time.monotonic()
+        os.killpg(launch.pid, signal.SIGINT)
+        rest = launch.communicate(timeout=30)[0]
+        stopped_in = time.monotonic() - signalled
+    finally:
+        if launch.poll() is None:
+            os.killpg(launch.pid, signal.SIGKILL)
+            launch.wait(timeout=10)
+    output = ''.join(lines) + rest
+    assert launch.returncode == 0, output[-3000:]
+    assert stopped_in < 3.0, f'stopping took {stopped_in:.1f} s'
+    codes = re.search(r'exit codes: (.*)', output)
+    assert codes and codes.group(1).strip() == (
+        'sim_bridge 0, context_estimator 0, policy 0, recorder 0'), output[-2000:]
+    assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output[-3000:]
+    bag = out / f'{out.name}_000'
+    metadata = (bag / 'metadata.yaml').read_text()
+    assert re.search(r'zeus_bag_state: .?closed', metadata), metadata
+    steps: dict[str, list[int]] = {}
+    with AnyReader([bag]) as reader:
+        for conn, _, raw in reader.messages():
+            if conn.topic in ('/zeus/step', '/zeus/context', '/zeus/action'):
+                step = int(reader.deserialize(raw, conn.msgtype).step)
+                steps.setdefault(conn.topic, []).append(step)
+    recorded = steps['/zeus/step']
+    assert len(recorded) > 200 and sorted(recorded) == list(range(len(recorded)))
+    assert set(steps['/zeus/context']) >= set(range(len(recorded) - 1))
