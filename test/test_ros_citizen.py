@@ -217,7 +217,8 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
 def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
     """SIGINT to `zeus launch --record`: all exit 0 within 3 s, no traceback, a closed bag.
 
-    The bag has its final metadata and every step from 0 without a gap.
+    The group runs in namespace /r7 on simulation time; the bag has its final metadata and
+    every step sim_bridge published, from 0 without a gap, under the schema's topic names.
     """
     from rosbags.highlevel import AnyReader
 
@@ -230,7 +231,8 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
                   f'    task: {TASK}\n' for name in ('context_estimator', 'policy'))
         + f'/**/recorder:\n  ros__parameters:\n    output: {out}\n')
     launch = subprocess.Popen(
-        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params), '--record'],
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params), '--record',
+         '--namespace', 'r7', '--sim-time'],
         cwd=REPO, env=ros_environment(fresh_domain_id()), stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True, start_new_session=True)
     lines: list[str] = []
@@ -268,5 +270,21 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
                 step = int(reader.deserialize(raw, conn.msgtype).step)
                 steps.setdefault(conn.topic, []).append(step)
     recorded = steps['/zeus/step']
-    assert len(recorded) > 200 and sorted(recorded) == list(range(len(recorded)))
+    last = re.search(r'stopped after step (\d+)', output)
+    assert last, output[-2000:]
+    assert sorted(recorded) == list(range(int(last.group(1)) + 1)), 'a step is missing'
     assert set(steps['/zeus/context']) >= set(range(len(recorded) - 1))
+
+
+@pytest.mark.parametrize(('name', 'params'), [
+    ('policy', ('task:=Cheetah-Run-v0', 'noize:=0.1')),
+    ('context_estimator', ('checkpoint:=missing.pt', 'noize:=0.1')),
+])
+def test_an_unknown_parameter_stops_the_node_at_start(
+        ros_processes: ProcessGroup, name: str, params: tuple[str, ...]) -> None:
+    """A typo in a parameter name is an error (exit 2 naming it), never silently ignored."""
+    args = [arg for param in params for arg in ('-p', param)]
+    process = ros_processes.start(f'unknown-{name}', ros_node(name, *args))
+    assert process.wait(timeout=60) == 2
+    log = ros_processes.log_text(f'unknown-{name}')
+    assert 'unknown parameter' in log and 'noize' in log and 'Traceback' not in log, log

@@ -38,7 +38,7 @@ def write_csv(log: StepLog, path: Path) -> Path:
 class Inspector:
     """ROS subscriber that fills a StepLog (imports rclpy only when constructed)."""
 
-    def __init__(self) -> None:
+    def __init__(self, namespace: str = '') -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
@@ -47,7 +47,8 @@ class Inspector:
         from zeus_ros.nodes.common import TOPICS, step_qos
 
         rclpy.init()
-        self.node = rclpy.create_node('zeus_inspect')
+        # In the system's namespace, the relative zeus topics resolve to that system's.
+        self.node = rclpy.create_node('zeus_inspect', namespace=namespace)
         # One executor for the whole run: rclpy.spin_once() would build a new one per call.
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -152,8 +153,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--csv', type=Path, default=None, help='save the per-step log here')
     parser.add_argument('--refresh', type=float, default=1.0, help='seconds between redraws')
     parser.add_argument('--quiet', action='store_true', help='no live view, only the summary')
+    parser.add_argument('--namespace', default='',
+                        help='watch the system in this namespace (e.g. r1 for /r1/zeus/...)')
     args = parser.parse_args(argv)
-    inspector = Inspector()
+    inspector = Inspector(namespace='/' + args.namespace.strip('/'))
     try:
         inspector.spin(args.duration, args.steps, args.refresh, args.quiet)
     finally:

@@ -63,6 +63,16 @@ def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) ->
     return [*argv, *extra]
 
 
+def group_ros_args(namespace: str, sim_time: bool) -> list[str]:
+    """`--ros-args` every node of a group shares: its namespace and whether time is simulated."""
+    args: list[str] = []
+    if namespace:
+        args += ['-r', f'__ns:=/{namespace.strip("/")}']
+    if sim_time:
+        args += ['-p', 'use_sim_time:=true']
+    return args
+
+
 def _pump(node: NodeProcess, stream: IO[bytes], out: IO[str], keep: int = 200) -> None:
     """Copy a child's output line by line with its name as prefix; keep the tail for errors."""
     for raw in iter(stream.readline, b''):
@@ -192,6 +202,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='ROS_DOMAIN_ID for the group (default: $ROS_DOMAIN_ID or random)')
     parser.add_argument('--timeout', type=float, default=None,
                         help='stop everything after this many seconds')
+    parser.add_argument('--namespace', default='',
+                        help='run the group in this namespace (zeus/* topics move with it; '
+                        '/clock and /diagnostics stay global)')
+    parser.add_argument('--sim-time', action='store_true',
+                        help='every node sets use_sim_time (sim_bridge publishes /clock)')
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.nodes.split(',') if name.strip()]
     if args.record and 'recorder' not in names:
@@ -204,9 +219,9 @@ def main(argv: list[str] | None = None) -> int:
     # sim_bridge waits until every other node of the group listens to /zeus/step: none of them
     # misses step 0, however slowly it starts.
     observers = ['-p', f'min_observers:={len(names) - 1}']
-    nodes = [NodeProcess(name, node_argv(name, args.params,
-                                         observers if name == 'sim_bridge' else ()))
-             for name in names]
+    common = group_ros_args(args.namespace, args.sim_time)
+    nodes = [NodeProcess(name, node_argv(name, args.params, [
+        *common, *(observers if name == 'sim_bridge' else ())])) for name in names]
     return run_group(nodes, ros_env(args.domain_id), args.timeout)
 
 

@@ -121,6 +121,9 @@ class RecorderNode(Node):
             f'{self.params["flush_period_s"]} s, split at {self.params["split_size_mb"]} MB / '
             f'{self.params["split_duration_s"]} s (0: never)'
         )
+        if self.get_namespace() != '/':
+            self.get_logger().info(f'zeus topics of namespace {self.get_namespace()} are written '
+                                   'under their schema names (/zeus/...), so ingest reads them')
 
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
