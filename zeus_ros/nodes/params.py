@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+import math
 from typing import TYPE_CHECKING, Any
 
 from rcl_interfaces.msg import (
@@ -86,8 +87,8 @@ def _descriptor(spec: Spec) -> ParameterDescriptor:
     if spec.low is not None or spec.high is not None:
         if isinstance(spec.default, float):
             descriptor.floating_point_range = [FloatingPointRange(
-                from_value=float(spec.low if spec.low is not None else -1e308),
-                to_value=float(spec.high if spec.high is not None else 1e308))]
+                from_value=float(spec.low if spec.low is not None else -math.inf),
+                to_value=float(spec.high if spec.high is not None else math.inf))]
         elif isinstance(spec.default, int) and not isinstance(spec.default, bool):
             descriptor.integer_range = [IntegerRange(
                 from_value=int(spec.low if spec.low is not None else -2**63),
