@@ -288,3 +288,41 @@ def test_an_unknown_parameter_stops_the_node_at_start(
     assert process.wait(timeout=60) == 2
     log = ros_processes.log_text(f'unknown-{name}')
     assert 'unknown parameter' in log and 'noize' in log and 'Traceback' not in log, log
+
+
+def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """Ctrl-C in a terminal on `ros2 launch`: every node gets SIGINT, then the launch's own.
+
+    Each node exits 0 within 3 s without a traceback, and the recorder still closes its bag.
+    """
+    from rosbags.highlevel import AnyReader
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    out = tmp_path / 'bag'
+    agent = ('-p', f'checkpoint:={checkpoint}', '-p', f'task:={TASK}')
+    nodes = {
+        'sim_bridge': ros_node('sim_bridge', '-p', f'task:={TASK}', '-p', 'log_every:=100',
+                               '-p', 'min_observers:=3'),
+        'context_estimator': ros_node('context_estimator', *agent),
+        'policy': ros_node('policy', *agent),
+        'recorder': ros_node('recorder', '-p', f'output:={out}'),
+    }
+    processes = {name: ros_processes.start(f'sigint2-{name}', argv)
+                 for name, argv in nodes.items()}
+    ros_processes.wait_for_log('sigint2-sim_bridge', 'step 100 ', timeout=90)
+    signalled = time.monotonic()
+    for _ in range(2):
+        for process in processes.values():
+            os.killpg(process.pid, signal.SIGINT)
+        time.sleep(0.05)
+    for name, process in processes.items():
+        code = process.wait(timeout=max(0.1, signalled + 3.0 - time.monotonic()))
+        log = ros_processes.log_text(f'sigint2-{name}')
+        assert code == 0 and 'Traceback' not in log, f'{name} exited {code}:\n{log[-2000:]}'
+    bag = out / f'{out.name}_000'
+    assert re.search(r'zeus_bag_state: .?closed', (bag / 'metadata.yaml').read_text())
+    with AnyReader([bag]) as reader:
+        recorded = sorted(int(reader.deserialize(raw, conn.msgtype).step)
+                          for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
+    assert len(recorded) > 100 and recorded == list(range(len(recorded)))

@@ -220,6 +220,7 @@ class SimBridgeNode(Node):
         if max_steps and self.counts['steps'] > max_steps:
             # Observation max_steps got its answer: the loop is complete, stop here.
             self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
+            self._started = False  # said all there is to say
             raise NodeFinished
         result = self.env.step(action)
         if stale and result.status == ActionStatus.TIMEOUT:
