@@ -122,15 +122,16 @@ def declare_specs(
     for key, spec in specs.items():
         if isinstance(spec.default, float) and isinstance(values[key], int):
             values[key] = float(values[key])  # `timeout: 2` means 2.0: accept it as a double
-            overrides[key] = node._parameter_overrides[key] = Parameter(key, value=values[key])
+            node._parameter_overrides[key] = Parameter(key, value=values[key])
         try:
             values[key] = node.declare_parameter(key, spec.default, _descriptor(spec)).value
         except ParameterException as error:
             raise ValueError(f'{name}: parameter {key}: {error}') from error
     for key, override in overrides.items():
-        if key.startswith(prefixes) and prefixes:
+        if prefixes and key.startswith(prefixes):
             node.declare_parameter(key, override.type_, ParameterDescriptor(
-                read_only=True, description='part of a free-form group (read-only)'))
+                read_only=True, description='part of a free-form group (read-only: restart '
+                'the node to change)'))
     return values
 
 
