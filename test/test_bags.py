@@ -139,11 +139,89 @@ def test_truncated_bag_named(tmp_path: Path, storage: str) -> None:
 
 
 def test_unclosed_bag_named(tmp_path: Path) -> None:
-    """A bag directory without metadata.yaml (writer killed) raises BagError naming it."""
+    """A bag folder without metadata.yaml: the error names the .mcap inside and both remedies."""
     bag = _write_synthetic(tmp_path / 'killed', 12)
     (bag / 'metadata.yaml').unlink()
-    with pytest.raises(BagError, match='killed'):
+    with pytest.raises(BagError, match=r'no metadata\.yaml') as info:
         ingest_bags(tmp_path)
+    assert info.value.path == bag
+    text = str(info.value)
+    assert 'killed.mcap' in text and f'zeus recover {bag}' in text, text
+    assert str(bag / 'killed.mcap') in text  # ... which, passed as it says, reads
+    assert ingest_bags(bag / 'killed.mcap').num_transitions == 10
+
+
+def test_bag_metadata_is_what_jazzy_writes(tmp_path: Path) -> None:
+    """Version 9, ros_distro jazzy (also inside the mcap), offered QoS and RIHS01 per topic."""
+    from ruamel.yaml import YAML
+
+    from zeus_ros.offline.schema import MSGTYPES, typestore
+
+    for storage in ('mcap', 'sqlite3'):
+        bag = _write_synthetic(tmp_path / storage, 3, storage=storage)
+        info = YAML(typ='safe').load((bag / 'metadata.yaml').read_text())[
+            'rosbag2_bagfile_information']
+        assert (info['version'], info['ros_distro']) == (9, 'jazzy')
+        assert len(info['topics_with_message_count']) == 4
+        for entry in info['topics_with_message_count']:
+            meta = entry['topic_metadata']
+            assert meta['type_description_hash'] == typestore().hash_rihs01(
+                MSGTYPES[meta['name']])
+            [qos] = meta['offered_qos_profiles']
+            assert (qos['reliability'], qos['durability']) == ('reliable', 'volatile')
+            assert qos['deadline'] == {'sec': 9223372036, 'nsec': 854775807}
+        with AnyReader([bag]) as reader:
+            assert all(c.ext.offered_qos_profiles[0].depth == 0 for c in reader.connections)
+    assert b'ros_distro: jazzy' in (tmp_path / 'mcap' / 'mcap.mcap').read_bytes()
+
+
+def _renamed(src: Path, dst: Path, namespace: str) -> Path:
+    """Copy a bag with every zeus topic moved under /namespace (as `ros2 bag record` sees it)."""
+    from rosbags.rosbag2 import Writer
+
+    from zeus_ros.offline.ingest import bag_topic
+
+    with AnyReader([src]) as reader, Writer(dst, version=9) as writer:
+        conns = {c.id: writer.add_connection(bag_topic(c.topic, namespace), c.msgtype,
+                                             typestore=codec().store)
+                 for c in reader.connections}
+        for conn, log, raw in reader.messages():
+            writer.write(conns[conn.id], log, raw)
+    return dst
+
+
+def test_namespaced_bag_needs_its_namespace(tmp_path: Path, capsys: Any) -> None:
+    """/r1/zeus/... topics need --namespace r1, and the error says so; with it, same episodes.
+
+    Without it: 'no zeus topics (found these: ...)', never 'corrupt'.
+    """
+    from zeus_ros.offline.ingest import main
+
+    plain = _write_synthetic(tmp_path / 'plain', 12)
+    spaced = _renamed(plain, tmp_path / 'spaced', 'r1')
+    with pytest.raises(BagError, match=r'no zeus topics \(found these: /r1/zeus/action, '
+                       r'/r1/zeus/context_truth, .*\).*--namespace r1'):
+        ingest_bags(spaced)
+    ds = ingest_bags(spaced, namespace='/r1/', strict=True)
+    assert [e.steps.tolist() for e in ds.episodes] == [
+        e.steps.tolist() for e in ingest_bags(plain).episodes]
+    assert main([str(spaced), '--namespace', 'r1']) == 0
+    assert '10 transitions' in capsys.readouterr().out
+    assert main([str(spaced)]) == 1
+    assert 'no zeus topics' in capsys.readouterr().err
+
+
+def test_metadata_count_mismatch_reported(tmp_path: Path) -> None:
+    """metadata.yaml listing more /zeus/step messages than the file holds is an issue."""
+    bag = _write_synthetic(tmp_path / 'bag', 6)
+    meta = bag / 'metadata.yaml'
+    text = meta.read_text()
+    meta.write_text(text.replace('message_count: 6\n    topic_metadata:\n      name: /zeus/step',
+                                 'message_count: 7\n    topic_metadata:\n      name: /zeus/step'))
+    assert meta.read_text() != text
+    with pytest.warns(IngestWarning, match='lists 7 messages but 6 were read'):
+        ds = ingest_bags(bag)
+    assert [(i.topic, i.kind) for i in ds.report.issues] == [(TOPIC_STEP, 'count')]
 
 
 def test_corrupt_bag_skipped_and_counted(tmp_path: Path) -> None:
@@ -277,11 +355,20 @@ def _check_against_env(ds: Any, env: RecordingEnv, actions: dict, frames: dict,
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_collect_ingest_round_trip(tmp_path: Path, storage: str) -> None:
     """Collected bags ingest back to exactly the env's states, actions, rewards and context."""
+    import time
+
+    started = time.time_ns()
     env, actions, frames = _run_collect(tmp_path / 'bag', storage=storage, pixels=False,
                                         steps=100)
     ds = ingest_bags(tmp_path / 'bag')
     assert not ds.has_frames
     _check_against_env(ds, env, actions, frames, 100)
+    with AnyReader([tmp_path / 'bag']) as reader:  # bag times: sim time from the run's start
+        start = reader.start_time
+        conns = [c for c in reader.connections if c.topic == TOPIC_STEP]
+        logs = [log for _, log, _ in reader.messages(connections=conns)]
+    assert started <= start == logs[0] <= time.time_ns()
+    assert logs[9] - logs[0] == ds.episodes[0].stamps_ns[9] - ds.episodes[0].stamps_ns[0]
 
 
 def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:

@@ -117,7 +117,13 @@ def steps_per_topic(bags: list[Path]) -> dict[str, set[int]]:
 
 def test_sigint_closes_a_bag_holding_every_step(
         ros_processes: ProcessGroup, tmp_path: Path) -> None:
-    """SIGINT after 300 steps leaves a closed mcap bag with all of them, readable by ingest."""
+    """SIGINT after 300 steps leaves a closed mcap bag with all of them, readable by ingest.
+
+    The metadata is Jazzy's: version 9, the QoS the publishers offered and their type hashes,
+    as the ROS graph reports them.
+    """
+    from ruamel.yaml import YAML
+
     out = tmp_path / 'run'
     recorder = start_recorder(ros_processes, out)
     with ros_node(ros_processes.domain_id) as node:
@@ -127,10 +133,20 @@ def test_sigint_closes_a_bag_holding_every_step(
         key = 'messages /zeus/action'
         assert spin_until(node, lambda: pub.diagnostics.get(key) == '300', 10.0), pub.diagnostics
         assert pub.diagnostics['gaps /zeus/observation/state'] == '0'
+        [graph] = node.get_publishers_info_by_topic('/zeus/step')
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text(
         f'recorder-{tmp_path.name}')
     bag = out / 'run_000'
     assert (bag / 'run_000.mcap').read_bytes()[-8:] == b'\x89MCAP0\r\n'
+    info = YAML(typ='safe').load((bag / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']
+    assert (info['version'], info['ros_distro']) == (9, 'jazzy')
+    [step] = [t['topic_metadata'] for t in info['topics_with_message_count']
+              if t['topic_metadata']['name'] == '/zeus/step']
+    assert step['type_description_hash'] == str(graph.topic_type_hash)
+    [qos] = step['offered_qos_profiles']
+    assert (qos['reliability'], qos['durability'], qos['history']) == (
+        'reliable', 'volatile', graph.qos_profile.history.name.lower())
     assert all(s == set(range(300)) for s in steps_per_topic([bag]).values())
     data = ingest_bags(out, strict=True)
     assert data.num_transitions == 299

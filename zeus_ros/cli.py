@@ -11,6 +11,7 @@ import sys
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'collect': ('zeus_ros.offline.collect', 'run a task in-process and write bags (no ROS)'),
+    'ingest': ('zeus_ros.offline.ingest', 'read bags as training does; report what they hold'),
     'train': ('zeus_ros.offline.train', 'train a checkpoint from bags'),
     'eval': ('zeus_ros.offline.evaluate', 'evaluate checkpoints in-process (+ tables)'),
     'report': ('zeus_ros.offline.report', 'mean ± s.e. over seeds of evaluations'),

@@ -19,7 +19,15 @@ from typing import TYPE_CHECKING, Any, cast
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 
 from zeus_ros.nodes.common import (
     TOPICS,
@@ -32,9 +40,11 @@ from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.durable import DurableBagWriter
 from zeus_ros.offline.errors import BagError
 from zeus_ros.offline.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
-from zeus_ros.offline.schema import MSGTYPES, TOPIC_IMAGE
+from zeus_ros.offline.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE
 
 if TYPE_CHECKING:
+    from rclpy.duration import Duration
+
     from zeus_ros.offline.bag_writer import Storage
 
 STORAGES = ('mcap', 'sqlite3')
@@ -63,6 +73,23 @@ def _message_class(msgtype: str) -> type:
     """The rclpy class of 'pkg/msg/Name' (the wheel install has no rosidl_runtime_py)."""
     package, _, name = msgtype.split('/')
     return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+def _qos_time(duration: Duration) -> QosTime:
+    sec, nsec = divmod(duration.nanoseconds, 1_000_000_000)
+    return QosTime(sec=sec, nsec=nsec)
+
+
+def bag_qos(profile: QoSProfile) -> Qos:
+    """A publisher's QoS from the ROS graph in the form metadata.yaml stores (as rosbag2 does)."""
+    return Qos(
+        history=QosHistory(int(profile.history)), depth=int(profile.depth),
+        reliability=QosReliability(int(profile.reliability)),
+        durability=QosDurability(int(profile.durability)),
+        deadline=_qos_time(profile.deadline), lifespan=_qos_time(profile.lifespan),
+        liveliness=QosLiveliness(int(profile.liveliness)),
+        liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
 
 
 @dataclass
@@ -100,13 +127,15 @@ class RecorderNode(Node):
         self._recent: OrderedDict[int, int] = OrderedDict()
         """stamp -> step of recent steps: routes /clock and images, which carry no step."""
         self._opened = time.monotonic()
+        self._sources: dict[str, str] = {}
+        """bag topic -> the name subscribed (relative: follows namespace and remaps)."""
 
         for topic in self.topics:
             qos = step_qos(RECORD_DEPTH)
             if topic == TOPIC_IMAGE and self.params['image_best_effort']:
                 qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing
             # The bag keeps the schema name; the subscription follows namespace and remaps.
-            source = topic if topic == TOPICS.CLOCK else topic.lstrip('/')
+            source = self._sources[topic] = topic if topic == TOPICS.CLOCK else topic.lstrip('/')
             self.create_subscription(
                 _message_class(MSGTYPES[topic]), source, partial(self._on_message, topic), qos,
                 raw=True,
@@ -163,13 +192,22 @@ class RecorderNode(Node):
         try:
             self.output.mkdir(parents=True, exist_ok=True)
             self._writer = DurableBagWriter(
-                path, storage=cast('Storage', self.storage), pixels=TOPIC_IMAGE in self.topics)
+                path, storage=cast('Storage', self.storage), pixels=TOPIC_IMAGE in self.topics,
+                offered_qos=self._offered_qos)
         except (BagError, OSError) as exc:
             raise ValueError(f'recorder: parameter output={str(self.output)!r}: {exc}') from exc
         self.bags.append(path)
         self._opened = time.monotonic()
         if len(self.bags) > 1:
             self.get_logger().info(f'split: now writing {path}')
+
+    def _offered_qos(self, topic: str) -> list[Qos]:
+        """What the publishers of a bag topic offer, from the graph, for `ros2 bag play`.
+
+        Asked when the topic's first message arrives, so its publisher is known by then.
+        """
+        infos = self.get_publishers_info_by_topic(self.resolve_topic_name(self._sources[topic]))
+        return [bag_qos(info.qos_profile) for info in infos] or list(OFFERED_QOS[topic])
 
     def _split(self) -> None:
         """Open the next bag; the old one keeps taking late messages of its steps a moment."""

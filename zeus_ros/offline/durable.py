@@ -13,11 +13,18 @@ from io import StringIO
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
-from zeus_ros.offline.bag_writer import BAG_VERSION, StepBagWriter, Storage
+from zeus_ros.offline.bag_writer import (
+    BAG_VERSION,
+    ROS_DISTRO,
+    QosSource,
+    StepBagWriter,
+    Storage,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -30,7 +37,10 @@ STATE_KEY = 'zeus_bag_state'
 
 def bag_metadata(storage: str, file_name: str, topics: Sequence[dict[str, Any]],
                  start_ns: int, end_ns: int, state: str) -> str:
-    """metadata.yaml text (rosbag2 version 8), as rosbags' Writer.close() writes it."""
+    """metadata.yaml text (rosbag2 version 9), as JazzyWriter.close() writes it.
+
+    Each topic's `offered_qos_profiles` is the version 9 list (rosbags' dump_qos_v9).
+    """
     count = sum(int(t['message_count']) for t in topics)
     start = start_ns if count else 0
     duration = max(0, end_ns - start_ns) if count else 0
@@ -53,7 +63,7 @@ def bag_metadata(storage: str, file_name: str, topics: Sequence[dict[str, Any]],
         'files': [{'path': file_name, 'starting_time': {'nanoseconds_since_epoch': start},
                    'duration': {'nanoseconds': duration}, 'message_count': count}],
         'custom_data': {STATE_KEY: state},
-        'ros_distro': 'rosbags',
+        'ros_distro': ROS_DISTRO,
     }
     yaml = YAML(typ='safe')
     yaml.default_flow_style = False
@@ -77,8 +87,9 @@ class DurableBagWriter(StepBagWriter):
     zeus_bag_state=provisional), which `close()` replaces with the final one.
     """
 
-    def __init__(self, path: Path | str, *, storage: Storage = 'mcap', pixels: bool) -> None:
-        super().__init__(path, storage=storage, pixels=pixels)
+    def __init__(self, path: Path | str, *, storage: Storage = 'mcap', pixels: bool,
+                 offered_qos: QosSource | None = None) -> None:
+        super().__init__(path, storage=storage, pixels=pixels, offered_qos=offered_qos)
         assert self._writer is not None
         self._writer.set_custom_data(STATE_KEY, 'closed')
         self.flushes = 0
@@ -104,7 +115,9 @@ class DurableBagWriter(StepBagWriter):
             storage.conn.commit()
         topics = [
             {'name': c.topic, 'type': c.msgtype, 'serialization_format': 'cdr',
-             'offered_qos_profiles': '', 'type_description_hash': c.digest,
+             'offered_qos_profiles': dump_qos_v9(list(getattr(c.ext, 'offered_qos_profiles',
+                                                               []))),
+             'type_description_hash': c.digest,
              'message_count': writer.counts[c.id]}
             for c in writer.connections
         ]

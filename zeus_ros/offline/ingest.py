@@ -5,13 +5,20 @@ Transition k of an episode is (o_k, a_k, r_{k+1}, o_{k+1}) where a_k is the `app
 of StepFeedback k+1 (what the physics saw, after clipping or a timeout's safe action) and
 r_{k+1} its reward. A step missing from any required topic cuts its episode there: the pieces
 on either side become separate episodes, so no transition or history spans a hole.
+
+A bag recorded with `ros2 bag record` from a namespaced system holds /<ns>/zeus/... topics:
+ingest it with `namespace=` (`zeus ingest --namespace <ns>`). What metadata.yaml counts and what
+was read must agree; a difference is reported like a gap.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
+import argparse
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
+import re
+import sys
 import time
 from typing import TYPE_CHECKING, Any
 import warnings
@@ -34,8 +41,8 @@ from zeus_ros.offline.schema import (
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-__all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'find_bags',
-           'ingest_bags']
+__all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_topic',
+           'find_bags', 'ingest_bags', 'main']
 
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
@@ -54,7 +61,7 @@ class Issue:
     topic: str
     step: int | None
     kind: str
-    """gap | duplicate | stamp_mismatch | episode | schema."""
+    """gap | duplicate | stamp_mismatch | episode | schema | count."""
     detail: str
 
     def __str__(self) -> str:
@@ -194,6 +201,35 @@ def _holds_storage(folder: Path) -> bool:
     return any(folder.glob('*.mcap')) or any(folder.glob('*.db3'))
 
 
+def bag_topic(topic: str, namespace: str = '') -> str:
+    """The name a schema topic has in a bag of a system in `namespace` (/clock stays global)."""
+    ns = namespace.strip('/')
+    return f'/{ns}{topic}' if ns and topic.startswith('/zeus/') else topic
+
+
+def _without_metadata(path: Path) -> BagError:
+    """A bag folder without metadata.yaml: say what is inside and the two ways to read it."""
+    files = sorted(path.glob('*.mcap')) + sorted(path.glob('*.db3'))
+    inside = ', '.join(f.name for f in files)
+    mcaps = [f for f in files if f.suffix == '.mcap']
+    read_file = f', or pass the file itself ({mcaps[0]}) to read it as it is' if mcaps else ''
+    return BagError(path, f'no metadata.yaml in this bag folder (the recorder did not close it: '
+                          f'killed?); it holds {inside}. Run `zeus recover {path}` to rebuild '
+                          f'the metadata{read_file}')
+
+
+def _no_zeus_topics(path: Path, topics: list[str], namespace: str) -> BagError:
+    """No schema topic in the bag: list what it holds and hint at a namespace."""
+    where = f' in namespace /{namespace.strip("/")}' if namespace.strip('/') else ''
+    hint = ''
+    spaces = sorted({m.group(1) for t in topics if (m := re.fullmatch(r'/(.+)/zeus/step', t))})
+    if spaces:
+        hint = (f'; a namespaced system? pass --namespace {spaces[0]} (ingest_bags(..., '
+                f'namespace={spaces[0]!r}))')
+    return BagError(path, f'no zeus topics{where} (found these: '
+                          f'{", ".join(sorted(topics)) or "none"}){hint}')
+
+
 @dataclass
 class _Topic:
     """Per-topic columns of one bag: step -> (stamp, message), first occurrence wins."""
@@ -201,21 +237,28 @@ class _Topic:
     by_step: dict[int, tuple[int, Any]] = field(default_factory=dict)
 
 
-def _read_bag(path: Path, report: IngestReport) -> dict[str, Any]:
+def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str, Any]:
     """Deserialize the zeus topics of one bag, reporting duplicates; raise BagError if broken."""
     cdc = codec()
     topics: dict[str, _Topic] = {t: _Topic() for t in _STEP_TOPICS}
     images: dict[int, list[Any]] = defaultdict(list)
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        raise _without_metadata(path)
     try:
         reader = Reader(path)
         reader.open()
     except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
         raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}') from exc
     count = 0
+    schema_topic = {bag_topic(t, namespace): t for t in _READ_TOPICS}
+    read: Counter[str] = Counter()
     try:
-        conns = [c for c in reader.connections if c.topic in _READ_TOPICS]
+        conns = [c for c in reader.connections if c.topic in schema_topic]
+        if not conns:  # an empty filter would read every topic of the bag
+            raise _no_zeus_topics(path, sorted({c.topic for c in reader.connections}),
+                                  namespace)
         for conn in conns:
-            expected = MSGTYPES[conn.topic]
+            expected = MSGTYPES[schema_topic[conn.topic]]
             if conn.msgtype != expected:
                 raise BagError(path, f'topic {conn.topic} has type {conn.msgtype}, '
                                      f'expected {expected}')
@@ -227,13 +270,15 @@ def _read_bag(path: Path, report: IngestReport) -> dict[str, Any]:
                                            'definition; decoding may fail'))
         for conn, _, raw in reader.messages(connections=conns):
             count += 1
+            read[conn.topic] += 1
             msg = cdc.deserialize(raw, conn.msgtype)
             stamp = ns_from_stamp(msg.header.stamp)
-            if conn.topic == TOPIC_IMAGE:
+            topic = schema_topic[conn.topic]
+            if topic == TOPIC_IMAGE:
                 images[stamp].append(msg)
                 continue
             step = int(msg.step)
-            col = topics[conn.topic].by_step
+            col = topics[topic].by_step
             if step in col:
                 report.issues.append(Issue(str(path), conn.topic, step, 'duplicate',
                                            'step seen again; keeping the first message'))
@@ -246,7 +291,22 @@ def _read_bag(path: Path, report: IngestReport) -> dict[str, Any]:
     finally:
         reader.close()
     report.messages += count
+    _check_counts(path, conns, read, report)
     return {'topics': topics, 'images': images}
+
+
+def _check_counts(path: Path, conns: list[Any], read: Counter[str],
+                  report: IngestReport) -> None:
+    """Report each topic whose message count in the bag's metadata differs from what was read."""
+    listed: Counter[str] = Counter()
+    for conn in conns:
+        listed[conn.topic] += int(conn.msgcount)
+    for topic, expected in sorted(listed.items()):
+        if read[topic] != expected:
+            report.issues.append(Issue(
+                str(path), topic, None, 'count',
+                f'the metadata lists {expected} messages but {read[topic]} were read '
+                '(metadata.yaml edited, or written by another tool?)'))
 
 
 def _check_alignment(path: Path, topics: dict[str, _Topic], report: IngestReport) -> set[int]:
@@ -370,8 +430,9 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     )
 
 
-def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any]) -> list[Episode]:
-    read = _read_bag(path, report)
+def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any],
+                namespace: str = '') -> list[Episode]:
+    read = _read_bag(path, report, namespace)
     topics: dict[str, _Topic] = read['topics']
     usable = _check_alignment(path, topics, report)
     fb = topics[TOPIC_STEP].by_step
@@ -404,13 +465,16 @@ def ingest_bags(
     *,
     skip_corrupt: bool = False,
     strict: bool = False,
+    namespace: str = '',
 ) -> Dataset:
     """Read bags into a Dataset of step-aligned episodes.
 
     `paths`: bag directories, .mcap/.db3 files, or directories holding bags. A corrupt or
     truncated bag raises BagError naming it, or with `skip_corrupt` is skipped and listed in
-    `report.skipped`. Gaps, duplicates and stamp mismatches are listed in `report.issues` and
-    warned about (IngestWarning); with `strict` they raise IngestError instead.
+    `report.skipped`. Gaps, duplicates, stamp mismatches and metadata counts that differ from
+    what was read are listed in `report.issues` and warned about (IngestWarning); with `strict`
+    they raise IngestError instead. `namespace`: the system's namespace when the bag holds
+    /<namespace>/zeus/... topics (`ros2 bag record` of a namespaced system).
     """
     start = time.perf_counter()
     report = IngestReport()
@@ -419,7 +483,7 @@ def ingest_bags(
     for bag in find_bags(paths):
         before = len(report.issues)
         try:
-            eps = _ingest_one(bag, report, meta)
+            eps = _ingest_one(bag, report, meta, namespace)
         except BagError as exc:
             if not skip_corrupt:
                 raise
@@ -446,3 +510,32 @@ def ingest_bags(
 
 def _bag_files(bag: Path) -> list[Path]:
     return [bag] if bag.is_file() else [f for f in bag.iterdir() if f.is_file()]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`zeus ingest BAG...`: read bags as training would and say what they hold or lack."""
+    parser = argparse.ArgumentParser(
+        prog='zeus ingest', description='Read bags exactly as `zeus train` does and report '
+        'steps, episodes and every gap, duplicate or count mismatch (exit 1 if unusable).')
+    parser.add_argument('bags', nargs='+', type=Path,
+                        help='bag directories, .mcap/.db3 files, or directories of bags')
+    parser.add_argument('--namespace', default='',
+                        help='namespace of the recorded system: reads /<ns>/zeus/... topics')
+    parser.add_argument('--strict', action='store_true', help='any issue is an error')
+    parser.add_argument('--skip-corrupt', action='store_true',
+                        help='skip (and list) bags that cannot be read')
+    args = parser.parse_args(argv)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always', IngestWarning)
+            data = ingest_bags(args.bags, skip_corrupt=args.skip_corrupt, strict=args.strict,
+                               namespace=args.namespace)
+    except (BagError, IngestError) as exc:
+        print(f'zeus ingest: {exc}', file=sys.stderr)
+        return 1
+    for warning in caught:
+        print(f'warning: {warning.message}', file=sys.stderr)
+    print(f'{data.task}: {len(data.episodes)} episode piece(s), {data.num_transitions} '
+          f'transitions; context {", ".join(data.context_names)}')
+    print(data.report.summary())
+    return 0

@@ -16,12 +16,12 @@ import struct
 import sys
 from typing import TYPE_CHECKING
 
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, StoragePlugin
 from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
-from zeus_ros.offline.bag_writer import BAG_VERSION
+from zeus_ros.offline.bag_writer import BAG_VERSION, JazzyWriter
 from zeus_ros.offline.durable import STATE_KEY, bag_metadata, replace_text
 from zeus_ros.offline.errors import BagError
 from zeus_ros.offline.schema import MSGTYPES, typestore
@@ -186,7 +186,7 @@ def _rebuild_mcap(bag: Path, mcap: Path, scan: _Mcap, report: RecoveryReport,
     tmp_root.mkdir()
     tmp_bag = tmp_root / mcap.stem
     try:
-        writer = Writer(tmp_bag, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        writer = JazzyWriter(tmp_bag, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         writer.set_custom_data(STATE_KEY, 'recovered')
         writer.open()
         conns = {}
@@ -237,8 +237,10 @@ def _recover_sqlite(bag: Path, db3: Path, report: RecoveryReport, *, dry_run: bo
         _tally(report, ((names[tid], raw) for tid, raw in data), list(names.values()))
     finally:
         conn.close()
+    yaml = YAML(typ='safe')
     topics = [{'name': r[1], 'type': r[2], 'serialization_format': r[3],
-               'offered_qos_profiles': r[4], 'type_description_hash': r[5],
+               'offered_qos_profiles': yaml.load(r[4] or '[]') or [],
+               'type_description_hash': r[5],
                'message_count': report.counts[r[1]]} for r in rows]
     report.notes.append('inserts after the last commit (the last flush) are not in the file')
     if not dry_run:

@@ -15,6 +15,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from zeus_ros.offline.errors import SchemaError
@@ -30,6 +38,8 @@ __all__ = [
     'IMAGE_ENCODING',
     'IMAGE_FRAME_ID',
     'MSGTYPES',
+    'OFFERED_QOS',
+    'QOS_INFINITE',
     'TOPIC_ACTION',
     'TOPIC_CLOCK',
     'TOPIC_CONTEXT',
@@ -41,6 +51,7 @@ __all__ = [
     'Codec',
     'codec',
     'find_msg_dir',
+    'graph_qos',
     'ns_from_sim_time',
     'ns_from_stamp',
     'typestore',
@@ -64,6 +75,27 @@ MSGTYPES: dict[str, str] = {
     TOPIC_CONTEXT: 'zeus_msgs/msg/ContextEstimate',
 }
 """Every topic a bag may hold, with its message type."""
+
+QOS_INFINITE = QosTime(sec=9223372036, nsec=854775807)
+"""An infinite deadline / lifespan / lease, as the ROS graph reports it (rmw's infinity)."""
+
+
+def graph_qos(reliability: QosReliability = QosReliability.RELIABLE,
+              durability: QosDurability = QosDurability.VOLATILE) -> Qos:
+    """A publisher's QoS as the ROS graph (and so `ros2 bag record`) reports it.
+
+    Discovery does not carry history and depth, so they read UNKNOWN / 0 there too.
+    """
+    return Qos(history=QosHistory.UNKNOWN, depth=0, reliability=reliability,
+               durability=durability, deadline=QOS_INFINITE, lifespan=QOS_INFINITE,
+               liveliness=QosLiveliness.AUTOMATIC, liveliness_lease_duration=QOS_INFINITE,
+               avoid_ros_namespace_conventions=False)
+
+
+OFFERED_QOS: dict[str, tuple[Qos, ...]] = {topic: (graph_qos(),) for topic in MSGTYPES}
+"""What the zeus publishers offer in lockstep mode (reliable, volatile: nodes/common.py
+step_qos), one publisher per topic. `zeus collect` bags carry these; the recorder asks the
+graph."""
 
 ZEUS_MSG_NAMES = ('Action', 'ContextEstimate', 'ContextTruth', 'StateVector', 'StepFeedback')
 FRAME_ID = ''
