@@ -1,48 +1,54 @@
-"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder) with a params file.
+r"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder), self-contained.
 
-    ros2 launch zeus_ros zeus.launch.py params_file:=/path/to/params.yaml record:=true
+    ros2 launch zeus_ros zeus.launch.py
+    ros2 launch zeus_ros zeus.launch.py namespace:=robot1 use_sim_time:=true record:=true \
+        checkpoint:=/path/to/ckpt.pt params_file:=/path/to/params.yaml log_level:=debug
 
-Same nodes and parameters as `zeus launch`; any node exiting shuts the whole launch down.
-Discovery scope and domain come from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and
-ROS_DOMAIN_ID before launching).
+Runs from any folder with only the installed files: the params file defaults to
+share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's
+folder, then the package share. Arguments, defaults and parameter overrides come from
+`zeus_ros.launch_defaults`, which `zeus launch` uses too: the two cannot drift apart.
+`ros2 launch zeus_ros zeus.launch.py --show-args` lists the arguments. Any node but the recorder
+exiting shuts the whole launch down. Discovery scope and domain come from the environment
+(export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID before launching).
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler
-from launch.conditions import IfCondition
+from launch import LaunchContext, LaunchDescription
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from zeus_ros import launch_defaults
+
+
+def launch_nodes(context: LaunchContext) -> list:
+    """The planned nodes for the given arguments, and a shutdown when a non-recorder exits."""
+    values = {argument.name: LaunchConfiguration(argument.name).perform(context)
+              for argument in launch_defaults.ARGUMENTS}
+    plan = launch_defaults.plan_from_arguments(values)
+    actions = []
+    for spec in plan.nodes:
+        node = Node(package=launch_defaults.PACKAGE, executable=spec.executable,
+                    name=spec.name, namespace=plan.namespace or None,
+                    parameters=[str(plan.params_file), spec.parameters],
+                    ros_arguments=['--log-level', plan.log_level], output='screen')
+        actions.append(node)
+        if not spec.records_others:
+            actions.append(RegisterEventHandler(OnProcessExit(
+                target_action=node,
+                on_exit=[EmitEvent(event=Shutdown(reason=f'{spec.name} exited'))])))
+    return actions
+
 
 def generate_launch_description() -> LaunchDescription:
-    """Declare the arguments and the four nodes; stop everything when one exits."""
-    default_params = os.path.join(get_package_share_directory('zeus_ros'), 'params',
-                                  'zeus.yaml')
-    params = LaunchConfiguration('params_file')
-    nodes = [
-        Node(package='zeus_ros', executable='sim_bridge_node', name='sim_bridge',
-             parameters=[params], output='screen'),
-        Node(package='zeus_ros', executable='context_estimator_node', name='context_estimator',
-             parameters=[params], output='screen'),
-        Node(package='zeus_ros', executable='policy_node', name='policy',
-             parameters=[params], output='screen'),
-        Node(package='zeus_ros', executable='recorder_node', name='recorder',
-             parameters=[params], output='screen',
-             condition=IfCondition(LaunchConfiguration('record'))),
+    """Declare the shared launch arguments; build the nodes once their values are known."""
+    arguments = [
+        DeclareLaunchArgument(
+            argument.name, description=argument.description,
+            default_value=(str(launch_defaults.default_params_file())
+                           if argument.name == 'params_file' else argument.default))
+        for argument in launch_defaults.ARGUMENTS
     ]
-    stop_all = [RegisterEventHandler(OnProcessExit(
-        target_action=node, on_exit=[EmitEvent(event=Shutdown(reason='a node exited'))]))
-        for node in nodes[:3]]
-    return LaunchDescription([
-        DeclareLaunchArgument('params_file', default_value=default_params,
-                              description='ROS 2 params file for all nodes'),
-        DeclareLaunchArgument('record', default_value='false',
-                              description='also start the recorder'),
-        *nodes,
-        *stop_all,
-    ])
+    return LaunchDescription([*arguments, OpaqueFunction(function=launch_nodes)])

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
 import subprocess
 import sys
+import types
+from typing import Any
 
 import pytest
 
@@ -44,3 +48,159 @@ def test_the_group_runs_until_the_time_limit_then_stops_cleanly(tmp_path) -> Non
     assert result.returncode == 0, result.stdout + result.stderr
     assert '[sim_bridge]' in result.stdout and 'step 50 ' in result.stdout
     assert 'time limit of 12.0 s reached' in result.stdout
+
+
+# --- one set of defaults for `ros2 launch zeus_ros zeus.launch.py` and `zeus launch` -------
+
+def test_defaults_are_the_installed_params_and_checkpoint() -> None:
+    """No arguments: the installed zeus.yaml, its checkpoint as an absolute installed path."""
+    from zeus_ros import launch_defaults as d
+
+    plan = d.plan()
+    share = d.share_dir()
+    assert plan.params_file == share / 'params' / 'zeus.yaml' and plan.params_file.is_file()
+    assert [n.name for n in plan.nodes] == ['sim_bridge', 'context_estimator', 'policy']
+    nodes = {n.name: n.parameters for n in plan.nodes}
+    assert nodes['sim_bridge'] == {'min_observers': 2}
+    for name in d.AGENT_NODES:
+        checkpoint = Path(nodes[name]['checkpoint'])
+        assert checkpoint.is_absolute() and checkpoint.is_file()
+        assert str(checkpoint).startswith(str(share)), checkpoint
+    assert (plan.namespace, plan.log_level) == ('', 'info')
+
+
+def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: Path) -> None:
+    """record:=true adds the recorder, counted in sim_bridge's min_observers.
+
+    namespace, use_sim_time, checkpoint and log_level reach every node they concern.
+    """
+    from zeus_ros import launch_defaults as d
+
+    ckpt = tmp_path / 'mine.pt'
+    ckpt.write_bytes(b'x')
+    plan = d.plan_from_arguments({'record': 'true', 'use_sim_time': 'True',
+                                  'namespace': '/robot1/', 'checkpoint': str(ckpt),
+                                  'log_level': 'debug'})
+    nodes = {n.name: n.parameters for n in plan.nodes}
+    assert list(nodes) == ['sim_bridge', 'context_estimator', 'policy', 'recorder']
+    assert nodes['sim_bridge']['min_observers'] == 3
+    assert all(p['use_sim_time'] is True for p in nodes.values())
+    assert nodes['policy']['checkpoint'] == nodes['context_estimator']['checkpoint'] == str(ckpt)
+    assert (plan.namespace, plan.log_level) == ('/robot1', 'debug')
+    args = plan.ros_args(plan.nodes[2])
+    assert args[:2] == ['--params-file', str(plan.params_file)]
+    assert args[2:4] == ['-r', '__ns:=/robot1'] and args[-2:] == ['--log-level', 'debug']
+    assert f"checkpoint:='{ckpt}'" in args and 'use_sim_time:=true' in args
+    for bad, match in (({'record': 'maybe'}, 'record'), ({'log_level': 'loud'}, 'log_level'),
+                       ({'nope': '1'}, 'unknown launch argument')):
+        with pytest.raises(ValueError, match=match):
+            d.plan_from_arguments(bad)
+
+
+def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
+                                                              monkeypatch: Any) -> None:
+    """`checkpoint: mine.pt` is the file beside the params file.
+
+    A missing one is an error naming every place looked in.
+    """
+    from zeus_ros import launch_defaults as d
+
+    (tmp_path / 'cfg').mkdir()
+    (tmp_path / 'cfg' / 'mine.pt').write_bytes(b'x')
+    params = tmp_path / 'cfg' / 'p.yaml'
+    params.write_text('/**/policy:\n  ros__parameters:\n    checkpoint: mine.pt\n')
+    monkeypatch.chdir(tmp_path)
+    plan = d.plan(params_file='cfg/p.yaml', nodes=['sim_bridge', 'policy'])
+    assert plan.params_file == params
+    assert plan.nodes[1].parameters == {'checkpoint': str(tmp_path / 'cfg' / 'mine.pt')}
+    params.write_text('policy:\n  ros__parameters:\n    checkpoint: typo.pt\n')
+    with pytest.raises(ValueError, match=r"policy checkpoint .*'typo.pt' not found; looked "
+                       rf'in: {tmp_path}/cfg/typo.pt, .*share.*'):
+        d.plan(params_file=params, nodes=['policy'])
+    with pytest.raises(ValueError, match='does not exist'):
+        d.plan(params_file=tmp_path / 'none.yaml')
+
+
+def _stub_launch_modules(monkeypatch: Any) -> None:
+    """Minimal stand-ins for launch and launch_ros (not installable here): record the calls."""
+    class Recorded:
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            self.args, self.kwargs = args, kwargs
+
+    class LaunchConfiguration(Recorded):
+        def perform(self, context: dict[str, str]) -> str:
+            return context[self.args[0]]
+
+    modules = {
+        'launch': {'LaunchContext': dict, 'LaunchDescription': lambda entities: entities},
+        'launch.actions': {name: type(name, (Recorded,), {}) for name in (
+            'DeclareLaunchArgument', 'EmitEvent', 'OpaqueFunction', 'RegisterEventHandler')},
+        'launch.event_handlers': {'OnProcessExit': Recorded},
+        'launch.events': {'Shutdown': Recorded},
+        'launch.substitutions': {'LaunchConfiguration': LaunchConfiguration},
+        'launch_ros': {},
+        'launch_ros.actions': {'Node': type('Node', (Recorded,), {})},
+    }
+    for name, attributes in modules.items():
+        module = types.ModuleType(name)
+        module.__dict__.update(attributes)
+        monkeypatch.setitem(sys.modules, name, module)
+
+
+def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
+    """The installed zeus.launch.py starts the nodes `zeus launch` starts, with the same args.
+
+    It declares the shared arguments; for record:=true in a namespace on sim time it builds the
+    nodes, parameters and ROS arguments `zeus launch` gives its children.
+    """
+    from zeus_ros import launch_defaults as d
+    from zeus_ros.launcher import plan_processes
+
+    _stub_launch_modules(monkeypatch)
+    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
+    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
+    assert spec is not None and spec.loader is not None
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    *declared, opaque = launch_file.generate_launch_description()
+    defaults = {a.args[0]: a.kwargs['default_value'] for a in declared}
+    assert list(defaults) == [a.name for a in d.ARGUMENTS]
+    assert defaults['params_file'] == str(d.default_params_file())
+    context = {**defaults, 'record': 'true', 'namespace': 'r1', 'use_sim_time': 'true'}
+    actions = opaque.kwargs['function'](context)
+    nodes = [a for a in actions if type(a).__name__ == 'Node']
+    stops = [a for a in actions if type(a).__name__ == 'RegisterEventHandler']
+    plan = d.plan(record=True, namespace='r1', use_sim_time=True)
+    assert len(stops) == 3 and len(nodes) == 4
+    children = plan_processes(plan)
+    for node, planned, child in zip(nodes, plan.nodes, children, strict=True):
+        kwargs = node.kwargs
+        assert (kwargs['executable'], kwargs['name'], kwargs['namespace']) == (
+            f'{planned.name}_node', planned.name, '/r1')
+        assert kwargs['parameters'] == [str(plan.params_file), planned.parameters]
+        assert child.argv[-len(plan.ros_args(planned)):] == plan.ros_args(planned)
+    assert nodes[0].kwargs['parameters'][1]['min_observers'] == 3
+
+
+def test_zeus_launch_without_params_runs_from_any_folder(tmp_path: Path) -> None:
+    """`zeus launch --record` without --params, outside the repository, runs the installed files.
+
+    The installed params and shipped checkpoint drive the loop; the recorder, counted in
+    min_observers, has step 0 and every step after it in a Jazzy bag under ./bags.
+    """
+    from rosbags.highlevel import AnyReader
+
+    result = subprocess.run(
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--record', '--timeout', '25',
+         '--log-level', 'warn'],
+        cwd=tmp_path, env=ros_environment(fresh_domain_id()), capture_output=True, text=True,
+        timeout=150, check=False)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-3000:]
+    assert 'share/zeus_ros/params/zeus.yaml' in output and 'min_observers' in output
+    [bag] = (tmp_path / 'bags').glob('zeus_*/zeus_*_000')
+    assert 'version: 9' in (bag / 'metadata.yaml').read_text()
+    with AnyReader([bag]) as reader:
+        steps = sorted(int(reader.deserialize(raw, conn.msgtype).step)
+                       for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
+    assert len(steps) > 50 and steps == list(range(len(steps))), steps[:10]

@@ -2,7 +2,9 @@
 
 Every child gets loopback-only discovery and one shared domain id, its output is streamed with
 a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node exits: a non-zero
-exit names the node that died.
+exit names the node that died. Nodes, parameters and defaults come from
+`zeus_ros.launch_defaults`, exactly as for `ros2 launch zeus_ros zeus.launch.py`: without
+--params the installed share/zeus_ros/params/zeus.yaml applies, from any folder.
 """
 
 from __future__ import annotations
@@ -21,14 +23,8 @@ import threading
 import time
 from typing import IO
 
-NODES = {
-    'sim_bridge': 'zeus_ros.nodes.sim_bridge_node',
-    'context_estimator': 'zeus_ros.nodes.context_estimator_node',
-    'policy': 'zeus_ros.nodes.policy_node',
-    'recorder': 'zeus_ros.nodes.recorder_node',
-}
-RECORDS_OTHERS = frozenset({'recorder'})
-"""Nodes that stop only after the others, so nothing in flight is lost to them."""
+from zeus_ros import launch_defaults
+from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
 
 
 @dataclass
@@ -63,14 +59,10 @@ def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) ->
     return [*argv, *extra]
 
 
-def group_ros_args(namespace: str, sim_time: bool) -> list[str]:
-    """`--ros-args` every node of a group shares: its namespace and whether time is simulated."""
-    args: list[str] = []
-    if namespace:
-        args += ['-r', f'__ns:=/{namespace.strip("/")}']
-    if sim_time:
-        args += ['-p', 'use_sim_time:=true']
-    return args
+def plan_processes(launch: LaunchPlan) -> list[NodeProcess]:
+    """One child per planned node: `python -m <module> --ros-args <the plan's arguments>`."""
+    return [NodeProcess(node.name, [sys.executable, '-m', node.module, '--ros-args',
+                                    *launch.ros_args(node)]) for node in launch.nodes]
 
 
 def _pump(node: NodeProcess, stream: IO[bytes], out: IO[str], keep: int = 200) -> None:
@@ -194,10 +186,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='zeus launch', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--params', type=Path, default=None,
-                        help='ROS 2 params file for all nodes (node_name: ros__parameters: ...)')
-    parser.add_argument('--nodes', default='sim_bridge,context_estimator,policy',
+                        help='ROS 2 params file for all nodes (/**/node_name: ros__parameters: '
+                        f'...); default: the installed {launch_defaults.default_params_file()}')
+    parser.add_argument('--nodes', default=','.join(launch_defaults.DEFAULT_NODES),
                         help=f'comma-separated subset of {",".join(NODES)}')
     parser.add_argument('--record', action='store_true', help='also start the recorder')
+    parser.add_argument('--checkpoint', default='',
+                        help='checkpoint for context_estimator and policy (default: the params '
+                        "file's)")
+    parser.add_argument('--log-level', default='info', choices=launch_defaults.LOG_LEVELS,
+                        help='log level of every node')
     parser.add_argument('--domain-id', type=int, default=None,
                         help='ROS_DOMAIN_ID for the group (default: $ROS_DOMAIN_ID or random)')
     parser.add_argument('--timeout', type=float, default=None,
@@ -209,20 +207,17 @@ def main(argv: list[str] | None = None) -> int:
                         help='every node sets use_sim_time (sim_bridge publishes /clock)')
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.nodes.split(',') if name.strip()]
-    if args.record and 'recorder' not in names:
-        names.append('recorder')
-    unknown = [name for name in names if name not in NODES]
-    if unknown:
-        parser.error(f'unknown node(s) {unknown}; choose from {list(NODES)}')
-    if args.params is not None and not args.params.is_file():
-        parser.error(f'params file {args.params} does not exist')
-    # sim_bridge waits until every other node of the group listens to /zeus/step: none of them
-    # misses step 0, however slowly it starts.
-    observers = ['-p', f'min_observers:={len(names) - 1}']
-    common = group_ros_args(args.namespace, args.sim_time)
-    nodes = [NodeProcess(name, node_argv(name, args.params, [
-        *common, *(observers if name == 'sim_bridge' else ())])) for name in names]
-    return run_group(nodes, ros_env(args.domain_id), args.timeout)
+    try:
+        launch = launch_defaults.plan(
+            namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
+            checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
+            nodes=names)
+    except ValueError as error:
+        parser.error(str(error))
+    print(f'[zeus launch] params {launch.params_file}; ' + '; '.join(
+        f'{node.name} {node.parameters}' for node in launch.nodes if node.parameters),
+        flush=True)
+    return run_group(plan_processes(launch), ros_env(args.domain_id), args.timeout)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,247 @@
+"""The one set of launch defaults: `ros2 launch zeus_ros zeus.launch.py` and `zeus launch`.
+
+Both ask `plan()` which nodes to start with which parameters, so they cannot drift apart. The
+params file defaults to the installed share/zeus_ros/params/zeus.yaml, and a relative path in
+it (a `checkpoint`) is looked up next to the params file, then in the package share, then in
+the working directory: the installed launch runs from any folder. Pure Python (no `launch`
+import), so it is unit-tested without a ROS launch installation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = ['AGENT_NODES', 'ARGUMENTS', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
+           'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
+           'plan_from_arguments', 'resolve_path', 'share_dir']
+
+PACKAGE = 'zeus_ros'
+NODES: dict[str, str] = {
+    'sim_bridge': 'zeus_ros.nodes.sim_bridge_node',
+    'context_estimator': 'zeus_ros.nodes.context_estimator_node',
+    'policy': 'zeus_ros.nodes.policy_node',
+    'recorder': 'zeus_ros.nodes.recorder_node',
+}
+"""Node name -> module; the installed executable is `<name>_node`."""
+DEFAULT_NODES = ('sim_bridge', 'context_estimator', 'policy')
+AGENT_NODES = ('context_estimator', 'policy')
+"""Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
+RECORDS_OTHERS = frozenset({'recorder'})
+"""Nodes that stop last and whose exit does not end the launch."""
+PATH_PARAMETERS = {'context_estimator': ('checkpoint',), 'policy': ('checkpoint',)}
+"""Parameters holding a file to read: resolved to an absolute path before the node starts."""
+LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
+_TRUE = ('true', '1', 'yes', 'on')
+_FALSE = ('false', '0', 'no', 'off', '')
+
+
+@dataclass(frozen=True)
+class LaunchArgument:
+    """One launch argument: `name:=value` for ros2 launch, `--name` for zeus launch."""
+
+    name: str
+    default: str
+    description: str
+
+
+ARGUMENTS: tuple[LaunchArgument, ...] = (
+    LaunchArgument('namespace', '', 'namespace of the whole system (zeus/* topics move with it; '
+                   '/clock and /diagnostics stay global)'),
+    LaunchArgument('use_sim_time', 'false', 'every node runs on /clock, which sim_bridge '
+                   'publishes'),
+    LaunchArgument('params_file', '', 'ROS 2 params file for all nodes (empty: the installed '
+                   'share/zeus_ros/params/zeus.yaml)'),
+    LaunchArgument('checkpoint', '', 'checkpoint for context_estimator AND policy (empty: '
+                   'the one in the params file)'),
+    LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
+    LaunchArgument('log_level', 'info', 'log level of every node: ' + ', '.join(LOG_LEVELS)),
+)
+
+
+@dataclass(frozen=True)
+class NodePlan:
+    """One node to start: its overrides go after the params file, so they win."""
+
+    name: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def executable(self) -> str:
+        """The console script colcon installs (lib/zeus_ros/<name>_node)."""
+        return f'{self.name}_node'
+
+    @property
+    def module(self) -> str:
+        """The module `python -m` runs."""
+        return NODES[self.name]
+
+    @property
+    def records_others(self) -> bool:
+        """Stops last; its exit does not stop the others."""
+        return self.name in RECORDS_OTHERS
+
+
+@dataclass(frozen=True)
+class LaunchPlan:
+    """Everything both launchers need: namespace, params file, log level and the nodes."""
+
+    namespace: str
+    params_file: Path
+    log_level: str
+    nodes: tuple[NodePlan, ...]
+
+    def ros_args(self, node: NodePlan) -> list[str]:
+        """`--ros-args` arguments of one node as `zeus launch` passes them on its command line."""
+        args = ['--params-file', str(self.params_file)]
+        if self.namespace:
+            args += ['-r', f'__ns:={self.namespace}']
+        for key, value in node.parameters.items():
+            args += ['-p', f'{key}:={_ros_arg_value(value)}']
+        return [*args, '--log-level', self.log_level]
+
+
+def _ros_arg_value(value: Any) -> str:
+    """A parameter value as `-p key:=value` parses it back (YAML)."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, str):
+        return yaml.safe_dump(value, default_style="'").strip().removesuffix('\n...')
+    return str(value)
+
+
+def share_dir() -> Path:
+    """share/zeus_ros of the installed package; the repository when it is not installed."""
+    try:
+        from ament_index_python.packages import (
+            PackageNotFoundError,
+            get_package_share_directory,
+        )
+    except ImportError:
+        return Path(__file__).resolve().parents[1]
+    try:
+        return Path(get_package_share_directory(PACKAGE))
+    except PackageNotFoundError:
+        return Path(__file__).resolve().parents[1]
+
+
+def default_params_file() -> Path:
+    """The installed params file every launch uses unless given another."""
+    return share_dir() / 'params' / 'zeus.yaml'
+
+
+def parse_bool(name: str, text: str | bool) -> bool:
+    """A launch argument's true/false (as `ros2 launch` spells it); ValueError names it."""
+    if isinstance(text, bool):
+        return text
+    value = text.strip().lower()
+    if value in _TRUE:
+        return True
+    if value in _FALSE:
+        return False
+    raise ValueError(f'launch argument {name}:={text!r} must be true or false')
+
+
+def resolve_path(value: str, params_dir: Path | None, what: str = 'file') -> Path:
+    """An existing file: absolute as given, else next to the params file, in the share, in cwd.
+
+    Raises ValueError naming every place looked in, so a typo is found before any node starts.
+    """
+    path = Path(os.path.expanduser(value))
+    if path.is_absolute():
+        return path
+    bases = [*([params_dir] if params_dir is not None else []), share_dir(), Path.cwd()]
+    candidates = [Path(os.path.abspath(base / path)) for base in bases]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    raise ValueError(f'{what} {value!r} not found; looked in: '
+                     + ', '.join(str(c) for c in candidates))
+
+
+def _node_sections(params: Mapping[str, Any], name: str) -> list[Mapping[str, Any]]:
+    """The ros__parameters that apply to node `name` (`name`, `/**/name`, `/ns/name`, `/**`)."""
+    sections = []
+    for key, section in params.items():
+        last = str(key).rstrip('/').rsplit('/', 1)[-1]
+        if (last == name or key in ('/**', '**')) and isinstance(section, Mapping):
+            sections.append(section.get('ros__parameters') or {})
+    return sections
+
+
+def read_params(params_file: Path) -> dict[str, Any]:
+    """The params file as a mapping; ValueError when it is missing or not a ROS params file."""
+    if not params_file.is_file():
+        raise ValueError(f'params file {params_file} does not exist')
+    try:
+        data = yaml.safe_load(params_file.read_text()) or {}
+    except yaml.YAMLError as error:
+        raise ValueError(f'params file {params_file}: not valid YAML: {error}') from error
+    if not isinstance(data, dict):
+        raise ValueError(f'params file {params_file}: expected node_name: ros__parameters: ...')
+    return data
+
+
+def plan(
+    *,
+    namespace: str = '',
+    use_sim_time: bool = False,
+    params_file: Path | str | None = None,
+    checkpoint: str = '',
+    record: bool = False,
+    log_level: str = 'info',
+    nodes: Sequence[str] = DEFAULT_NODES,
+) -> LaunchPlan:
+    """Which nodes to start with which parameter overrides (ValueError on a bad argument).
+
+    sim_bridge waits for every other node of the group (the recorder included) on zeus/step,
+    so none of them misses step 0; a relative checkpoint becomes an absolute path.
+    """
+    names = list(dict.fromkeys(nodes))
+    if record and 'recorder' not in names:
+        names.append('recorder')
+    unknown = [name for name in names if name not in NODES]
+    if unknown:
+        raise ValueError(f'unknown node(s) {unknown}; choose from {list(NODES)}')
+    if log_level.lower() not in LOG_LEVELS:
+        raise ValueError(f'log_level {log_level!r}: choose one of {", ".join(LOG_LEVELS)}')
+    given = str(params_file) if params_file not in (None, '') else ''
+    path = Path(os.path.abspath(os.path.expanduser(given))) if given else default_params_file()
+    params = read_params(path)
+    ns = namespace.strip().strip('/')
+    planned = []
+    for name in names:
+        overrides: dict[str, Any] = {}
+        if name == 'sim_bridge':
+            overrides['min_observers'] = len(names) - 1
+        for key in PATH_PARAMETERS.get(name, ()):
+            if key == 'checkpoint' and checkpoint:
+                overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))
+                continue
+            values = [s[key] for s in _node_sections(params, name) if s.get(key)]
+            if values:
+                overrides[key] = str(resolve_path(str(values[-1]), path.parent,
+                                                  f'{name} {key} (params file {path})'))
+        if use_sim_time:
+            overrides['use_sim_time'] = True
+        planned.append(NodePlan(name, overrides))
+    return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
+                      log_level=log_level.lower(), nodes=tuple(planned))
+
+
+def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
+    """`plan()` from launch-argument strings (what `ros2 launch` hands the launch file)."""
+    known = {argument.name for argument in ARGUMENTS}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f'unknown launch argument(s) {unknown}; known: {sorted(known)}')
+    get = {argument.name: values.get(argument.name, argument.default) for argument in ARGUMENTS}
+    return plan(namespace=get['namespace'], use_sim_time=parse_bool('use_sim_time',
+                                                                    get['use_sim_time']),
+                params_file=get['params_file'], checkpoint=get['checkpoint'],
+                record=parse_bool('record', get['record']), log_level=get['log_level'])
