@@ -2,6 +2,7 @@
 
     python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
+        [--splits train extrapolation] [--episodes 3] [--jobs 1]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -40,15 +41,17 @@ def _task_folder(task: str) -> str:
     return task.lower().replace('-', '_')
 
 
-def evaluate_variant(root: Path, variant: str, task: str, evals: Path) -> Path | None:
+def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
+                     splits: list[str] | None, episodes: int, jobs: int) -> Path | None:
     """Evaluate the finished runs of one variant; returns the folder of its tables."""
     runs = root / variant / _task_folder(task)
     finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*'))
               if (p / '.done_train').is_file()]
     if not finals:
         return None
-    evaluate_many(find_checkpoints(finals), evals / variant, splits=None, jobs=1,
-                  progress=True, expect_task=task, probe_steps=0, seed=100)
+    evaluate_many(find_checkpoints(finals), evals / variant, splits=splits, jobs=jobs,
+                  progress=True, expect_task=task, probe_steps=0, seed=100,
+                  episodes=episodes)
     groups = sorted((evals / variant).glob(f'{_task_folder(task)}_*'))
     return groups[0] if groups else None
 
@@ -183,12 +186,17 @@ def main() -> None:
     parser.add_argument('--evals', type=Path, default=Path('out/i10'))
     parser.add_argument('--out', type=Path, default=Path('docs/results/issue10'))
     parser.add_argument('--export', type=Path, help='ship finished runs here (with cards)')
+    parser.add_argument('--splits', nargs='+', choices=SPLIT_ORDER,
+                        help="default: every split the task's preset defines")
+    parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
+    parser.add_argument('--jobs', type=int, default=1, help='evaluations in parallel')
     args = parser.parse_args()
     variants = sorted((p.name for p in args.root.iterdir() if p.is_dir()),
                       key=lambda v: (v != REFERENCE_VARIANT, v != 'paper', v))
     tables = {}
     for variant in variants:
-        folder = evaluate_variant(args.root, variant, args.task, args.evals)
+        folder = evaluate_variant(args.root, variant, args.task, args.evals,
+                                  splits=args.splits, episodes=args.episodes, jobs=args.jobs)
         if folder is not None:
             tables[variant] = folder
             if args.export:

@@ -197,3 +197,23 @@ def test_headroom_pairs_seeds_and_reports_the_share_recovered() -> None:
     assert rows['zeus']['headroom'] == pytest.approx(10.0)
     assert rows['zeus']['recovered'] == pytest.approx(0.5)
     assert rows['oracle']['recovered'] == pytest.approx(1.0)
+
+
+def test_consistency_loss_is_scale_free_and_zero_for_a_steady_context() -> None:
+    """No drift gives 0; scaling psi leaves the loss unchanged; episode ends are ignored."""
+    from zeus_ros.learning.representation import consistency_loss
+
+    torch.manual_seed(0)
+    psi = torch.randn(16, 4)
+    not_done = torch.ones(16, 1)
+    assert float(consistency_loss(psi, psi, not_done)) == 0.0
+    noisy = psi + 0.1 * torch.randn(16, 4)
+    loss = float(consistency_loss(psi, noisy, not_done))
+    assert 0.0 < loss < 0.1
+    assert float(consistency_loss(psi * 1e-3, noisy * 1e-3, not_done)) == pytest.approx(loss,
+                                                                                       rel=1e-3)
+    ends = torch.zeros(16, 1)
+    ends[0] = 1.0
+    jumped = psi.clone()
+    jumped[1:] += 100.0  # only the last steps of episodes jump: not counted
+    assert float(consistency_loss(psi, jumped, ends)) == 0.0

@@ -43,7 +43,8 @@ EXPLORATIONS = ('stochastic', 'noise')
 """How a trained policy collects: sampling the SAC policy (Algorithm 1) or its mode + noise."""
 
 LEGACY_CONFIG: dict[str, Any] = {'context_norm': 'none', 'context_loss': 'paper',
-                                 'critic_context_grad': False, 'exploration': 'noise'}
+                                 'critic_context_grad': False, 'exploration': 'noise',
+                                 'context_consistency': 0.0}
 """Values of the fields added with the method registry, for checkpoints written before them
 (whose 'oracle' was plain SAC on the true context, now 'oracle_sac')."""
 
@@ -88,6 +89,9 @@ class ZeusConfig:
     """'paper': MSE(||psi1 - psi2||, d) as eq. 1 writes it, which psi can satisfy by shrinking
     towards a constant (d is computed at psi itself); 'scale_free': both distance vectors divided
     by their batch mean before the MSE, so only the pattern of distances counts, not their size."""
+    context_consistency: float = 0.0
+    """Weight of the consistency loss (representation.consistency_loss): psi should drift little
+    from one step to the next of an episode relative to its spread across the batch. 0: off."""
     context_norm: str = 'running'
     """'running': standardise the context (psi or the true one) at the actor/critic input with
     running statistics of the training batches; 'none': feed it raw (the paper)."""
@@ -201,7 +205,8 @@ class ZeusConfig:
         for name in ('critic_tau', 'encoder_tau', 'discount', 'up_osi_warmup_fraction',
                      'context_norm_momentum'):
             _check_float(name, getattr(self, name), low=0.0, high=1.0)
-        for name in ('cadm_beta', 'decoder_latent_lambda', 'decoder_weight_decay'):
+        for name in ('cadm_beta', 'decoder_latent_lambda', 'decoder_weight_decay',
+                     'context_consistency'):
             _check_float(name, getattr(self, name), low=0.0)
         _check_float('actor_log_std_min', self.actor_log_std_min)
         _check_float('actor_log_std_max', self.actor_log_std_max)

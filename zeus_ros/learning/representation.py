@@ -30,6 +30,7 @@ __all__ = [
     'ContextLoss',
     'RepresentationLosses',
     'autoencoder_loss',
+    'consistency_loss',
     'context_loss',
     'dynamics_loss',
     'representation_losses',
@@ -169,7 +170,29 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
         next_history = history.detach().shifted(feat.detach(), action, batch.reward,
                                                 target_next)
         next_context = m['psi'](next_history)
+    if cfg.context_consistency > 0:
+        consistency = consistency_loss(psi1, next_context, batch.not_done)
+        total = total + cfg.context_consistency * consistency
+        metrics['loss/consistency'] = consistency
     return RepresentationLosses(total=total, context=psi1.detach(), next_context=next_context)
+
+
+def consistency_loss(psi: torch.Tensor, next_psi: torch.Tensor,
+                     not_done: torch.Tensor) -> torch.Tensor:
+    """Within-episode drift of psi relative to its spread across the batch (scale-free).
+
+    The context is constant over long stretches of an episode, so psi(H_t) and psi(H_{t+1})
+    (one transition apart, target stopped) should agree, while histories drawn at random from
+    the batch (mostly other contexts) should not: mean ||psi_t - psi_{t+1}||^2 divided by
+    mean ||psi_i - psi_j||^2 over random pairs. The ratio has no trivial solution in the size
+    of psi; it uses no context labels.
+    """
+    keep = not_done.reshape(-1).bool()
+    drift = (psi - next_psi.detach()).pow(2).sum(-1)
+    drift = drift[keep].mean() if bool(keep.any()) else drift.mean()
+    shuffled = psi.roll(1, dims=0)
+    spread = (psi - shuffled).pow(2).sum(-1).mean()
+    return drift / (spread + 1e-8)
 
 
 def _true_context_losses(agent: ZeusAgent, batch: HistoryBatch,
