@@ -210,8 +210,8 @@ def test_consistency_loss_is_scale_free_and_zero_for_a_steady_context() -> None:
     noisy = psi + 0.1 * torch.randn(16, 4)
     loss = float(consistency_loss(psi, noisy, not_done))
     assert 0.0 < loss < 0.1
-    assert float(consistency_loss(psi * 1e-3, noisy * 1e-3, not_done)) == pytest.approx(loss,
-                                                                                       rel=1e-3)
+    shrunk = float(consistency_loss(psi * 1e-3, noisy * 1e-3, not_done))
+    assert shrunk == pytest.approx(loss, rel=1e-2)
     ends = torch.zeros(16, 1)
     ends[0] = 1.0
     jumped = psi.clone()
