@@ -92,7 +92,8 @@ def variant_rows(tables: dict[str, Path]) -> list[dict[str, Any]]:
                     continue
                 label = f'{method} ({variant})'
                 combined = [*baselines, *({**r, 'method': label} for r in cells)]
-                gain = paired_difference(combined, label, REFERENCE, split)
+                gain = (None if method == REFERENCE
+                        else paired_difference(combined, label, REFERENCE, split))
                 row = {'split': split, 'variant': variant, 'method': method,
                        'seeds': len(cells), 'return': _cell(_floats(cells, 'mean_return')),
                        'gain': '-' if gain is None else f'{gain[0]:.1f} ± {gain[1]:.1f}',

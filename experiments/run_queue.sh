@@ -1,9 +1,27 @@
 #!/usr/bin/env bash
-# Run the lines of a queue file, JOBS at a time (default 2), each through run_one.sh:
+# Run the lines of a queue file through run_one.sh, at most JOBS training runs at a time
+# (default 2: one per core), counting every `zeus loop` on the machine:
 #   CONFIG TASK METHOD SEED OUT_ROOT      (one run per line; '#' starts a comment)
-# Finished runs are skipped and unfinished ones resume, so rerunning the same queue resumes it.
+# The file is read again before each start, so lines can be added or reordered while it runs;
+# finished runs (.done_train) and runs locked by another copy are skipped, unfinished ones resume.
 #   usage: [JOBS=2] [EVAL=0] nice bash experiments/run_queue.sh experiments/queues/issue10.txt
-set -euo pipefail
+set -uo pipefail
 cd "$(dirname "$0")/.."
-grep -v '^\s*#' "$1" | grep -v '^\s*$' | xargs -P "${JOBS:-2}" -L 1 sh -c \
-  'CONFIG="$0" bash experiments/run_one.sh "$1" "$2" "$3" "$4"'
+QUEUE=$1 JOBS=${JOBS:-2}
+next_line() {
+  grep -v '^\s*#' "$QUEUE" | grep -v '^\s*$' | while read -r config task method seed root; do
+    run="$root/$(echo "$task" | tr 'A-Z-' 'a-z_')/${method}_s${seed}"
+    if [ ! -f "$run/.done_train" ] && [ ! -d "$run.lock" ]; then
+      echo "$config $task $method $seed $root"; break
+    fi
+  done
+}
+while true; do
+  while [ "$(pgrep -fc 'zeus loop')" -ge "$JOBS" ]; do sleep 5; done
+  line=$(next_line)
+  if [ -z "$line" ]; then wait; echo "queue: nothing left in $QUEUE"; exit 0; fi
+  read -r config task method seed root <<< "$line"
+  echo "queue: start $task $method seed $seed ($config -> $root)"
+  CONFIG="$config" bash experiments/run_one.sh "$task" "$method" "$seed" "$root" &
+  sleep 8  # let it take its lock and start before counting again
+done
