@@ -326,3 +326,100 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
         recorded = sorted(int(reader.deserialize(raw, conn.msgtype).step)
                           for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
     assert len(recorded) > 100 and recorded == list(range(len(recorded)))
+
+
+def test_live_checkpoint_redeploy_swaps_the_pair_and_never_mixes_it(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """`checkpoint` set live on policy, then estimator: no restart, the loop keeps running.
+
+    While only the policy has the new checkpoint it refuses the old estimator's contexts
+    (counted `mismatched`, safe actions); once both have it, estimates carry its sha256 and the
+    actions are the new checkpoint's. Both log its absolute path and sha256; a missing file is
+    refused with the reason.
+    """
+    import hashlib
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    import numpy as np
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    import torch
+    from zeus_msgs.msg import Action, ContextEstimate, StateVector
+
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.nodes.common import step_qos
+
+    old, new = tiny_checkpoint(tmp_path / 'old.pt'), tiny_checkpoint(tmp_path / 'new.pt')
+    sha = {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in (old, new)}
+    assert sha[old] != sha[new]
+    ros_processes.start('swap-sim_bridge', ros_node(
+        'sim_bridge', '-p', f'task:={TASK}', '-p', 'min_observers:=2', '-p',
+        'action_timeout:=5.0'))
+    for name in ('context_estimator', 'policy'):
+        ros_processes.start(f'swap-{name}', ros_node(name, '-p', f'checkpoint:={old}'))
+    torch.set_num_threads(1)
+    agent = InferenceAgent.from_checkpoint(new)
+    states: dict[int, Any] = {}
+    contexts: dict[int, tuple[str, Any]] = {}
+    actions: dict[int, Any] = {}
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        probe.create_subscription(StateVector, 'zeus/observation/state',
+                                  lambda m: states.__setitem__(
+                                      m.step, np.asarray(m.data, np.float32)), step_qos(100))
+        probe.create_subscription(ContextEstimate, 'zeus/context', lambda m: contexts.__setitem__(
+            m.step, (m.checkpoint_sha256, np.asarray(m.data, np.float32))), step_qos(100))
+        probe.create_subscription(Action, 'zeus/action', lambda m: actions.__setitem__(
+            m.step, np.asarray(m.data, np.float32)), step_qos(100))
+        probe.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 50)
+        clients = {name: AsyncParameterClient(probe, name)
+                   for name in ('policy', 'context_estimator')}
+        assert all(client.wait_for_services(30) for client in clients.values())
+        assert spin_until(probe, lambda: len(contexts) > 20, timeout=60)
+        assert {s for s, _ in contexts.values()} == {sha[old]}
+
+        refused = call(probe, clients['policy'].set_parameters(
+            [Parameter('checkpoint', value=str(tmp_path / 'missing.pt'))])).results[0]
+        assert not refused.successful and 'missing.pt' in refused.reason, refused.reason
+        result = call(probe, clients['policy'].set_parameters(
+            [Parameter('checkpoint', value=str(new))]), timeout=60).results[0]
+        assert result.successful, result.reason
+
+        def policy_counts() -> dict[str, str]:
+            return newest_status(diagnostics, '/policy')
+
+        assert spin_until(probe, lambda: int(policy_counts().get('mismatched', 0)) > 0
+                          and int(policy_counts().get('safe', 0)) > 0, timeout=30)
+        asked = time.monotonic()
+        result = call(probe, clients['context_estimator'].set_parameters(
+            [Parameter('checkpoint', value=str(new))]), timeout=60).results[0]
+        swap_s = time.monotonic() - asked
+        assert result.successful, result.reason
+        assert swap_s < 5.0, f'the estimator took {swap_s:.2f} s to load and swap'
+        assert spin_until(probe, lambda: any(s == sha[new] for s, _ in contexts.values()), 30)
+        first_new = min(step for step, (s, _) in contexts.items() if s == sha[new])
+        assert spin_until(probe, lambda: len([s for s in actions if s > first_new + 5]) > 20, 60)
+        reports: list[dict[str, str]] = []
+
+        def next_report() -> dict[str, str]:
+            """The policy's status from a /diagnostics message that arrives from now on."""
+            seen = len(diagnostics)
+            assert spin_until(probe, lambda: newest_status(diagnostics[seen:], '/policy'), 5)
+            reports.append(newest_status(diagnostics[seen:], '/policy'))
+            return reports[-1]
+
+        next_report()  # may have been taken before the last old estimate was refused
+        mismatched = next_report()['mismatched']
+        next_report()
+        assert next_report()['mismatched'] == mismatched, f'still refusing: {reports}'
+    assert all(s == sha[new] for step, (s, _) in contexts.items() if step >= first_new)
+    checked = [step for step in actions if step > first_new + 5 and step in contexts
+               and step in states]
+    assert len(checked) > 10
+    for step in checked:
+        expected = agent.act(states[step], contexts[step][1], deterministic=True)
+        np.testing.assert_allclose(actions[step], expected, atol=1e-4, err_msg=f'step {step}')
+    for name in ('context_estimator', 'policy'):
+        log = ros_processes.log_text(f'swap-{name}')
+        assert f'loaded {old} (sha256 {sha[old]})' in log, log[-2000:]
+        assert f'redeployed live: zeus checkpoint {new} (sha256 {sha[new]})' in log, log[-2000:]

@@ -1,30 +1,86 @@
-"""Load the checkpoint a node runs, with the node's name in every error."""
+"""Load the checkpoint a node runs, with the node's name in every error.
+
+A node says exactly what it loaded (absolute path and sha256), at start and on a live
+redeploy, and the estimator stamps every estimate with that sha256: the policy acts only on
+estimates of its own checkpoint, so a half-done redeploy never pairs mismatched networks.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
+import hashlib
+from pathlib import Path
 from typing import Any
 
 import torch
 
+from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
 
-__all__ = ['load_inference_agent']
+__all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 
 
-def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> InferenceAgent:
+@dataclass(frozen=True)
+class LoadedAgent:
+    """An agent with the identity of the file it came from."""
+
+    agent: InferenceAgent
+    path: Path
+    """Absolute path of the checkpoint file."""
+    sha256: str
+    """Hex digest of the file's bytes, as they were read for loading."""
+
+    def describe(self) -> str:
+        """What a log line says about it."""
+        return f'{self.path} (sha256 {self.sha256})'
+
+
+def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAgent:
     """InferenceAgent from params checkpoint/task/device/torch_threads; ValueError if unusable.
 
-    Inference on these small networks gains nothing from intra-op threads, and three node
-    processes on a few cores would oversubscribe them, so `torch_threads` defaults to 1 (which
-    also keeps results bit-identical with the in-process tools).
+    A relative checkpoint that is not in the working directory is looked up in the package
+    share (where the shipped checkpoints are installed). Inference on these small networks
+    gains nothing from intra-op threads, and three node processes on a few cores would
+    oversubscribe them, so `torch_threads` defaults to 1 (which also keeps results
+    bit-identical with the in-process tools).
     """
     if params['torch_threads'] < 1:
         raise ValueError(f'{node_name}: parameter torch_threads must be >= 1')
     torch.set_num_threads(int(params['torch_threads']))
+    given = str(params['checkpoint'])
+    path = Path(given).expanduser()
+    if not path.is_absolute():
+        path = Path.cwd() / path if (Path.cwd() / path).is_file() else resolve_path(
+            given, None, f'{node_name}: parameter checkpoint')
+    path = path.absolute()
     try:
-        return InferenceAgent.from_checkpoint(
-            params['checkpoint'], expect_task=params['task'] or None, device=params['device'])
+        data = path.read_bytes()
+    except OSError as error:
+        raise ValueError(f'{node_name}: checkpoint {path}: {error.strerror or error}') from error
+    try:
+        agent = InferenceAgent.from_checkpoint(
+            path, expect_task=params['task'] or None, device=params['device'])
     except CheckpointError as error:
         raise ValueError(f'{node_name}: {error}') from error
+    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest())
+
+
+def check_swappable(node_name: str, old: InferenceAgent, new: InferenceAgent) -> None:
+    """Raise ValueError unless `new` can replace `old` without restarting the node.
+
+    Observations, actions and subscriptions were set up for `old`: the task, observation kind
+    and shape, action size and the need for the true context must stay the same.
+    """
+    same = {
+        'task': (old.task, new.task),
+        'observation kind': (old.obs_kind, new.obs_kind),
+        'observation shape': (tuple(old.obs_shape), tuple(new.obs_shape)),
+        'action size': (old.action_dim, new.action_dim),
+        'use of the true context': (old.needs_true_context, new.needs_true_context),
+    }
+    for what, (before, after) in same.items():
+        if before != after:
+            raise ValueError(f'{node_name}: the new checkpoint changes the {what} ({before} -> '
+                             f'{after}); restart the node to load it')

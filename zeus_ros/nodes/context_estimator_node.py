@@ -9,13 +9,14 @@ counted gap (the transition across it is not formed), never a silent misalignmen
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
 from zeus_msgs.msg import ContextEstimate, ContextTruth, StepFeedback
 
-from zeus_ros.nodes.agent_loader import load_inference_agent
+from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
@@ -29,7 +30,9 @@ from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 
 SPECS: dict[str, Spec] = {
-    'checkpoint': Spec('', 'checkpoint holding phi and psi', required=True),
+    'checkpoint': Spec('', 'checkpoint holding phi and psi; a live change loads it (same task, '
+                       'observations and actions) and stamps the estimates with its sha256',
+                       live=True, required=True),
     'task': Spec('', 'task the checkpoint must be for (empty: any)'),
     'mode': Spec('lockstep', "sim_bridge's mode (sets the image QoS)",
                  choices=('lockstep', 'realtime')),
@@ -45,7 +48,9 @@ class ContextEstimatorNode(Node):
     def __init__(self) -> None:
         super().__init__('context_estimator')
         self.params = declare_specs(self, SPECS)
-        self.agent = load_inference_agent('context_estimator', self.params)
+        self.loaded = load_inference_agent('context_estimator', self.params)
+        self._pending: LoadedAgent | None = None
+        self.agent = self.loaded.agent
         self.history = self.agent.new_history()
         self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
                                           self.params['image_size'])
@@ -65,11 +70,35 @@ class ContextEstimatorNode(Node):
         # Publisher last: a peer that sees it knows the subscriptions above already exist.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
         steady_timer(self, 1.0, self._publish_diagnostics)
-        # Nothing here can change live; this still refuses every change with its reason.
-        serve_live_changes(self, SPECS, self.params, lambda _changed: None)
+        serve_live_changes(self, SPECS, self.params, self._apply_live,
+                           prepare=self._prepare_live)
         self.get_logger().info(
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
-            f'k={self.agent.k}, context dim {self.agent.context_dim})')
+            f'k={self.agent.k}, context dim {self.agent.context_dim}): loaded '
+            f'{self.loaded.describe()}')
+
+    def _prepare_live(self, changed: dict[str, Any]) -> None:
+        """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
+        self._pending = None
+        if 'checkpoint' in changed:
+            loaded = load_inference_agent('context_estimator', {**self.params, **changed})
+            check_swappable('context_estimator', self.agent, loaded.agent)
+            self._pending = loaded
+
+    def _apply_live(self, changed: dict[str, Any]) -> None:
+        """Swap in the checkpoint loaded by the check; the episode's history carries over."""
+        if 'checkpoint' not in changed or self._pending is None:
+            return
+        self.loaded, self._pending = self._pending, None
+        self.agent = self.loaded.agent
+        old = self.history.arrays()
+        self.history = self.agent.new_history()
+        for slot in range(old.hist_mask.shape[0]):
+            if old.hist_mask[slot]:
+                self.history.push(old.hist_obs[slot], old.hist_action[slot],
+                                  float(old.hist_reward[slot, 0]), old.hist_next_obs[slot])
+        self.get_logger().info(f'redeployed live: {self.agent.method} checkpoint '
+                               f'{self.loaded.describe()}')
 
     def _reject(self, step: int, topic: str, error: ValueError) -> None:
         self.counts['rejected'] += 1
@@ -105,6 +134,7 @@ class ContextEstimatorNode(Node):
         msg.data = context.astype(np.float32).tolist()
         msg.history_length = len(self.history)
         msg.missing_steps = self._missing_in_episode
+        msg.checkpoint_sha256 = self.loaded.sha256
         self._pub.publish(msg)
         self.counts['estimates'] += 1
         self._rate.tick()

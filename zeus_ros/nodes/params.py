@@ -141,11 +141,14 @@ def serve_live_changes(
     values: dict[str, Any],
     apply: Callable[[dict[str, Any]], None],
     check: Callable[[dict[str, Any]], None] | None = None,
+    prepare: Callable[[dict[str, Any]], None] | None = None,
 ) -> None:
     """Validate `ros2 param set` like start-up; on success update `values` and call `apply`.
 
-    `check(all_values)` runs the node's own cross-parameter checks (raise ValueError); `apply`
-    gets only the changed values, after they were accepted. A refusal carries the reason.
+    `check(all_values)` runs the node's own cross-parameter checks (raise ValueError);
+    `prepare(changed)` then does the work a change needs before it can be accepted (loading a
+    checkpoint: raise ValueError to refuse); `apply` gets only the changed values, after they
+    were accepted. A refusal carries the reason.
     """
     name = node.get_name()
 
@@ -162,6 +165,8 @@ def serve_live_changes(
             validate(name, specs, changed)
             if check is not None:
                 check({**values, **changed})
+            if prepare is not None:
+                prepare(changed)
         except ValueError as error:
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)

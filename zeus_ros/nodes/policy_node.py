@@ -4,6 +4,10 @@ Action k answers observation k (same step, same stamp). When context k is late b
 `context_deadline` it acts on the newest context it has and counts the step as stale; with no
 context at all for `context_timeout` seconds it publishes the task's safe action. Without a
 checkpoint it is a seeded uniform-random policy (for data collection and demos).
+
+It acts only on estimates stamped with its own checkpoint's sha256: while a live redeploy has
+reached one of the pair but not the other, estimates are refused (counted as `mismatched`) and
+the safe action goes out instead.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from rclpy.node import Node
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.nodes.agent_loader import load_inference_agent
+from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
@@ -34,7 +38,9 @@ from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 
 SPECS: dict[str, Spec] = {
-    'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy)'),
+    'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '
+                       'live change loads it (same task, observations and actions) and acts '
+                       "only on estimates of the estimator's same checkpoint", live=True),
     'task': Spec('', 'task the checkpoint must be for (required without a checkpoint)'),
     'mode': Spec('lockstep', "sim_bridge's mode (sets the action QoS)",
                  choices=('lockstep', 'realtime')),
@@ -63,8 +69,11 @@ class PolicyNode(Node):
         self.params = declare_specs(self, SPECS)
         self.rng = np.random.default_rng(self.params['seed'])
         self.agent: InferenceAgent | None = None
+        self.loaded: LoadedAgent | None = None
+        self._pending: LoadedAgent | None = None
         if self.params['checkpoint']:
-            self.agent = load_inference_agent('policy', self.params)
+            self.loaded = load_inference_agent('policy', self.params)
+            self.agent = self.loaded.agent
             low, high = self.agent.action_low, self.agent.action_high
             obs_kind, obs_shape = self.agent.obs_kind, self.agent.obs_shape
             self.needs_context = self.agent.context_dim > 0
@@ -83,7 +92,8 @@ class PolicyNode(Node):
         self.low = np.asarray(low, dtype=np.float32)
         self.high = np.asarray(high, dtype=np.float32)
         self.decoder = ObservationDecoder(obs_kind, obs_shape, self.params['image_size'])
-        self.counts = dict.fromkeys(('actions', 'fresh', 'stale', 'safe', 'rejected'), 0)
+        self.counts = dict.fromkeys(
+            ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched'), 0)
         self._contexts: dict[int, np.ndarray] = {}
         self._newest_context: tuple[float, np.ndarray] | None = None
         self._waiting: tuple[int, Any, np.ndarray, float] | None = None
@@ -107,19 +117,23 @@ class PolicyNode(Node):
         steady_timer(self, 0.002, self._check_deadline)
         steady_timer(self, 1.0, self._publish_diagnostics)
         serve_live_changes(self, SPECS, self.params, self._apply_live,
-                           check=lambda values: self._parse_frozen(values['frozen_context']))
-        source = 'random policy' if self.agent is None else \
-            f'{self.agent.method} checkpoint for {self.agent.task}'
+                           check=lambda values: self._parse_frozen(values['frozen_context']),
+                           prepare=self._prepare_live)
+        source = 'random policy' if self.loaded is None else \
+            f'{self.loaded.agent.method} checkpoint for {self.loaded.agent.task}: loaded ' \
+            f'{self.loaded.describe()}'
         if self.frozen is not None:
             source += ', context FROZEN (frozen_context)'
         self.get_logger().info(f'{source}; {obs_kind} observations, '
                                f'{"waits for" if self.needs_context else "no"} context')
 
-    def _parse_frozen(self, text: str) -> np.ndarray | None:
+    def _parse_frozen(self, text: str, agent: InferenceAgent | None = None
+                      ) -> np.ndarray | None:
         """The frozen_context parameter as a vector of the agent's context size, or None."""
         if not text.strip():
             return None
-        size = 0 if self.agent is None else self.agent.context_dim
+        agent = agent or self.agent
+        size = 0 if agent is None else agent.context_dim
         try:
             values = np.asarray([float(v) for v in text.split(',')], dtype=np.float32)
         except ValueError:
@@ -130,10 +144,34 @@ class PolicyNode(Node):
                              f"(the checkpoint's context size), got {text!r}")
         return values
 
+    def _prepare_live(self, changed: dict[str, Any]) -> None:
+        """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
+        self._pending = None
+        if 'checkpoint' not in changed:
+            return
+        if self.agent is None or not changed['checkpoint']:
+            raise ValueError('policy: switching between the random policy and a checkpoint '
+                             'needs a restart')
+        loaded = load_inference_agent('policy', {**self.params, **changed})
+        check_swappable('policy', self.agent, loaded.agent)
+        if (loaded.agent.context_dim > 0) != self.needs_context:
+            raise ValueError('policy: the new checkpoint changes whether a context is used; '
+                             'restart the node to load it')
+        self._parse_frozen(changed.get('frozen_context', self.params['frozen_context']),
+                           loaded.agent)
+        self._pending = loaded
+
     def _apply_live(self, changed: dict[str, Any]) -> None:
         """Live parameter changes read through self.params; frozen_context needs parsing."""
-        if 'frozen_context' in changed:
-            self.frozen = self._parse_frozen(changed['frozen_context'])
+        if 'checkpoint' in changed and self._pending is not None:
+            self.loaded, self._pending = self._pending, None
+            self.agent = self.loaded.agent
+            self._contexts.clear()  # estimates of the old pair: never acted on again
+            self._newest_context = None
+            self.get_logger().info(f'redeployed live: {self.agent.method} checkpoint '
+                                   f'{self.loaded.describe()}')
+        if 'frozen_context' in changed or 'checkpoint' in changed:
+            self.frozen = self._parse_frozen(self.params['frozen_context'])
 
     def _become_ready(self) -> None:
         if self.needs_context and count_publishers(self, TOPICS.CONTEXT) == 0:
@@ -147,6 +185,14 @@ class PolicyNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_context(self, msg: ContextEstimate) -> None:
+        if self.loaded is not None and msg.checkpoint_sha256 != self.loaded.sha256:
+            self.counts['mismatched'] += 1
+            self.get_logger().warning(
+                f'context {msg.step} comes from checkpoint sha256 '
+                f'{msg.checkpoint_sha256[:12] or "(none)"}, the policy runs '
+                f'{self.loaded.sha256[:12]}: not acting on it (redeploy both)',
+                throttle_duration_sec=2.0)
+            return
         context = np.asarray(msg.data, dtype=np.float32)
         if self.agent is not None and context.shape != (self.agent.context_dim,):
             self._reject(msg.step, TOPICS.CONTEXT, ValueError(
@@ -231,8 +277,8 @@ class PolicyNode(Node):
     def _publish_diagnostics(self) -> None:
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
                   **self.counts}
-        problems = [f'{self.counts[key]} {key}' for key in ('stale', 'safe', 'rejected')
-                    if self.counts[key]]
+        problems = [f'{self.counts[key]} {key}'
+                    for key in ('stale', 'safe', 'rejected', 'mismatched') if self.counts[key]]
         self._pub_diag.publish(diagnostics_message(self, 'actions', values, problems))
 
 

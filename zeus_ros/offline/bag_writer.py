@@ -216,10 +216,12 @@ class StepBagWriter:
         *,
         missing_steps: int = 0,
         log_ns: int | None = None,
+        checkpoint_sha256: str = '',
     ) -> None:
         """Write /zeus/context psi(H_step)."""
         log = self.bag_time(stamp_ns if log_ns is None else log_ns)
-        msg = self.codec.estimate(step, stamp_ns, psi, history_length, missing_steps)
+        msg = self.codec.estimate(step, stamp_ns, psi, history_length, missing_steps,
+                                  checkpoint_sha256)
         self.write_serialized(TOPIC_CONTEXT, log, self.codec.serialize(msg))
 
     def close(self) -> None:

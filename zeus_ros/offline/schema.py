@@ -276,14 +276,16 @@ class Codec:
         data: np.ndarray,
         history_length: int,
         missing_steps: int = 0,
+        checkpoint_sha256: str = '',
     ) -> Any:
-        """zeus_msgs/ContextEstimate psi(H_step)."""
+        """zeus_msgs/ContextEstimate psi(H_step), from the checkpoint with that sha256."""
         return self._estimate(
             header=self.header(stamp_ns),
             step=int(step),
             data=np.ascontiguousarray(data, dtype=np.float32).reshape(-1),
             history_length=int(history_length),
             missing_steps=int(missing_steps),
+            checkpoint_sha256=checkpoint_sha256,
         )
 
 
