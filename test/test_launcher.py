@@ -204,3 +204,27 @@ def test_zeus_launch_without_params_runs_from_any_folder(tmp_path: Path) -> None
         steps = sorted(int(reader.deserialize(raw, conn.msgtype).step)
                        for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
     assert len(steps) > 50 and steps == list(range(len(steps))), steps[:10]
+
+
+def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,
+                                                             monkeypatch: Any) -> None:
+    """A node run elsewhere with the installed params finds their checkpoint in the share.
+
+    (`ros2 run ... --params-file share/zeus_ros/params/zeus.yaml`.) It knows the absolute path
+    and sha256 it loaded.
+    """
+    import hashlib
+
+    from zeus_ros.launch_defaults import share_dir
+    from zeus_ros.nodes.agent_loader import load_inference_agent
+
+    monkeypatch.chdir(tmp_path)
+    relative = 'checkpoints/cheetah_run_v0_zeus_state.pt'
+    loaded = load_inference_agent('policy', {'checkpoint': relative, 'task': 'Cheetah-Run-v0',
+                                             'device': 'cpu', 'torch_threads': 1})
+    assert loaded.path == share_dir() / relative
+    assert loaded.sha256 == hashlib.sha256(loaded.path.read_bytes()).hexdigest()
+    assert loaded.describe() == f'{loaded.path} (sha256 {loaded.sha256})'
+    with pytest.raises(ValueError, match=r"policy: parameter checkpoint 'nope.pt' not found"):
+        load_inference_agent('policy', {'checkpoint': 'nope.pt', 'task': '', 'device': 'cpu',
+                                        'torch_threads': 1})
