@@ -407,3 +407,20 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
         schedule_from_config(parse_schedule(text), task, 0).value_at(250, 1)
     assert parse_schedule('switch:train:every=100') == {
         'kind': 'switch', 'values': 'train', 'every': 100}
+
+
+def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
+    """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
+    from zeus_ros.offline.collect import main as collect
+    from zeus_ros.offline.train import main as train
+
+    assert collect(['--task', ROUND_TRIP_TASK, '--steps', '200', '--out', str(tmp_path / 'c'),
+                    '--no-progress']) == 0
+    spaced = _renamed(tmp_path / 'c' / 'bag_000', tmp_path / 'spaced', 'r1')
+    config = Path(__file__).resolve().parents[1] / 'params' / 'train' / 'state_cpu.yaml'
+    argv = ['--bags', str(spaced), '--config', str(config), '--updates', '1', '--no-eval',
+            '--no-progress']
+    assert train([*argv, '--out', str(tmp_path / 'run0')]) == 2
+    assert '--namespace r1' in capsys.readouterr().err
+    assert train([*argv, '--out', str(tmp_path / 'run1'), '--namespace', 'r1']) == 0
+    assert (tmp_path / 'run1' / 'final.pt').is_file()

@@ -107,11 +107,11 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
 
 
 def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
-               device: Any, seed: int) -> tuple[Any, Any]:
+               device: Any, seed: int, namespace: str = '') -> tuple[Any, Any]:
     from zeus_ros.offline.ingest import ingest_bags
     from zeus_ros.offline.replay import ReplayBuffer
 
-    dataset = ingest_bags(list(bags))
+    dataset = ingest_bags(list(bags), namespace=namespace)
     if task is not None and dataset.task != task:
         raise TrainError(f'--task {task} but the bags hold {dataset.task!r} '
                          f'({", ".join(dataset.report.bags)})')
@@ -169,8 +169,11 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
 
 def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
           task: str | None = None, resume: bool = False, evaluate: bool = True,
-          progress: bool = True, log: Callable[[str], None] = print) -> TrainResult:
+          progress: bool = True, log: Callable[[str], None] = print,
+          namespace: str = '') -> TrainResult:
     """Train (or continue training) an agent on the transitions in `bags`.
+
+    `namespace`: read /<namespace>/zeus/... topics (`ros2 bag record` of a namespaced system).
 
     Runs until `config.num_updates` updates in total (a resumed run counts from its
     checkpoint's step). Checkpoints every `checkpoint_interval` updates and at the end; a
@@ -183,7 +186,8 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     device = resolve_device(config.device)
     config = config.replace(device=str(device))
     resume_step = checkpoint_step(out / CHECKPOINT) if resume else 0
-    dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step)
+    dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step,
+                                 namespace)
     agent, start = _start(out, config, dataset, replay, resume)
     cfg = agent.config
     out.mkdir(parents=True, exist_ok=True)
@@ -314,6 +318,9 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='training config YAML, e.g. params/train/state_cpu.yaml')
     parser.add_argument('--out', type=Path, required=True, help='run directory, e.g. runs/x')
     parser.add_argument('--task', help='expected task (error if the bags hold another)')
+    parser.add_argument('--namespace', default='',
+                        help='namespace of the recorded system: reads /<ns>/zeus/... topics '
+                        '(bags of `ros2 bag record`; the recorder node needs none)')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
     parser.add_argument('--updates', type=int,
                         help='total updates of the run (overrides num_updates; a resumed run '
@@ -346,7 +353,8 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     try:
         train(args.bags, config, args.out, task=args.task, resume=args.resume,
-              evaluate=not args.no_eval, progress=not args.no_progress)
+              evaluate=not args.no_eval, progress=not args.no_progress,
+              namespace=args.namespace)
     except (TrainError, ConfigError, BagError, IngestError) as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 2
