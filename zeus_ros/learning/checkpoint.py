@@ -5,6 +5,8 @@ Layout (a dict of tensors and plain Python data, loadable with torch.load(weight
   config (ZeusConfig.to_dict, resolved), step, extra (plain data), state (ZeusAgent.state_dict).
 A deployment export (`export_for_deployment`) has `deploy: True` and keeps only the networks
 that act and infer the context (DEPLOY_MODULES), no optimizers: ~10x smaller, not resumable.
+Every tensor must be finite: saving refuses NaN/Inf weights and loading refuses such a file, so a
+run poisoned by bad data never reaches evaluation, export or a robot.
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 import os
 from pathlib import Path
+import pickle
+import re
 from typing import Any
 
 import torch
@@ -22,7 +26,7 @@ from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import AgentSpec
 
 __all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_deployment',
-           'load_checkpoint', 'save_checkpoint']
+           'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint']
 
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
@@ -66,10 +70,46 @@ def _check_plain(value: Any, where: str) -> None:
                         f'tensors) can be stored, got {type(value).__name__}')
 
 
+def nonfinite_tensors(value: Any, where: str = '') -> tuple[list[str], int]:
+    """(names of floating tensors holding NaN/Inf, count of all tensors) in nested data."""
+    if torch.is_tensor(value):
+        bad = value.is_floating_point() and not bool(torch.isfinite(value).all())
+        return ([where or 'tensor'] if bad else []), 1
+    items: list[tuple[str, Any]] = []
+    if isinstance(value, dict):
+        items = [(f'{where}.{key}' if where else str(key), item) for key, item in value.items()]
+    elif isinstance(value, list | tuple):
+        items = [(f'{where}[{index}]', item) for index, item in enumerate(value)]
+    names: list[str] = []
+    total = 0
+    for name, item in items:
+        found, count = nonfinite_tensors(item, name)
+        names += found
+        total += count
+    return names, total
+
+
+def _nonfinite_message(state: Any) -> str | None:
+    """One clause naming the non-finite tensors of a state, or None when all are finite."""
+    names, total = nonfinite_tensors(state)
+    if not names:
+        return None
+    return (f'{len(names)} of {total} tensors hold NaN/Inf (first: {", ".join(names[:3])}); '
+            'trained on non-finite data or diverged')
+
+
 def save_checkpoint(path: str | Path, agent: ZeusAgent, *, step: int,
                     extra: dict[str, Any] | None = None) -> Path:
-    """Write the agent atomically (temp file + rename) so a crash never leaves half a file."""
-    return _write(_payload(agent, step=step, extra={} if extra is None else extra), Path(path))
+    """Write the agent atomically (temp file + rename) so a crash never leaves half a file.
+
+    Raises:
+        CheckpointError: a weight, optimizer state or temperature is NaN/Inf (nothing written).
+    """
+    payload = _payload(agent, step=step, extra={} if extra is None else extra)
+    bad = _nonfinite_message(payload['state'])
+    if bad is not None:
+        raise _fail(Path(path), f'not saved: {bad}')
+    return _write(payload, Path(path))
 
 
 def _payload(agent: ZeusAgent, *, step: int, extra: dict[str, Any]) -> dict[str, Any]:
@@ -104,6 +144,28 @@ def _fail(path: Path, message: str) -> CheckpointError:
     return CheckpointError(f'checkpoint {path}: {message}')
 
 
+_TORCH_ADVICE = re.compile(r'weights_only|trusted source|file an issue|documentation of torch'
+                           r'|arbitrary code', re.IGNORECASE)
+
+
+def _load_error(error: Exception) -> str:
+    """What was wrong with an unloadable file, without torch's advice to load it unsafely.
+
+    torch suggests retrying with weights_only=False: that runs any code the file holds, so
+    that advice (and every line naming weights_only) is dropped; what remains says what it is.
+    """
+    kept = []
+    for line in str(error).splitlines():
+        line = line.split('WeightsUnpickler error:')[-1].strip()
+        if line and not _TORCH_ADVICE.search(line):
+            kept.append(line)
+    detail = '; '.join(kept) or 'no detail'
+    if isinstance(error, pickle.UnpicklingError) and 'GLOBAL' in detail:
+        return (f'refused: it holds more than tensors and plain data ({detail}); zeus_ros '
+                'never runs code from a checkpoint')
+    return f'unreadable or corrupt ({type(error).__name__}: {detail})'
+
+
 def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu',
                     expect_task: str | None = None, expect_obs_kind: str | None = None,
                     load_optimizers: bool = True) -> LoadedCheckpoint:
@@ -119,8 +181,7 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
     try:
         payload = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as error:  # torch raises many types for corrupt / foreign files
-        raise _fail(path, f'unreadable or corrupt ({type(error).__name__}: '
-                    f'{str(error).splitlines()[0] if str(error) else ""})') from None
+        raise _fail(path, _load_error(error)) from None
     if not isinstance(payload, dict) or 'format_version' not in payload:
         raise _fail(path, 'not a zeus_ros checkpoint (no format_version)')
     version = payload['format_version']
@@ -138,6 +199,9 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
                           f"found '{payload['obs_kind']}'")
     if mismatches:
         raise _fail(path, '; '.join(mismatches))
+    bad = _nonfinite_message(payload['state'])
+    if bad is not None:
+        raise _fail(path, f'refused: {bad}')
     try:
         spec = AgentSpec.from_dict(payload['spec'])
         config = config_from_dict(upgrade_stored_config(payload['config']), source=str(path))

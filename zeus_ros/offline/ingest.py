@@ -9,6 +9,13 @@ on either side become separate episodes, so no transition or history spans a hol
 A bag recorded with `ros2 bag record` from a namespaced system holds /<ns>/zeus/... topics:
 ingest it with `namespace=` (`zeus ingest --namespace <ns>`). What metadata.yaml counts and what
 was read must agree; a difference is reported like a gap.
+
+Every numeric field is checked: a value that is NaN, infinite or beyond MAX_ABS, or a vector
+whose length differs from what the bag's first message of that topic set, makes its data
+unusable. A bad state or context drops its step (both transitions touching it); a bad reward or
+applied action in StepFeedback k+1 drops transition k only. Either way the episode is cut there,
+so no history contains the bad value. Each (topic, field) is reported once with its count and
+first steps; `strict` refuses the bag instead.
 """
 
 from __future__ import annotations
@@ -47,6 +54,10 @@ __all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
 _MAX_LISTED = 20
+_FIRST_STEPS = 5
+MAX_ABS = 1e9
+"""Largest magnitude accepted in a float field: beyond it a value is no more usable than Inf
+(no simulator state, reward or applied action comes near; float32 loses the units digit)."""
 
 
 class IngestWarning(UserWarning):
@@ -61,7 +72,7 @@ class Issue:
     topic: str
     step: int | None
     kind: str
-    """gap | duplicate | stamp_mismatch | episode | schema | count."""
+    """gap | duplicate | stamp_mismatch | episode | schema | count | nonfinite | length."""
     detail: str
 
     def __str__(self) -> str:
@@ -81,6 +92,8 @@ class IngestReport:
     messages: int = 0
     steps: int = 0
     seconds: float = 0.0
+    dropped: int = 0
+    """Transitions dropped for non-finite or wrong-length values (histories cut there too)."""
 
     @property
     def mb_per_s(self) -> float:
@@ -99,6 +112,7 @@ class IngestReport:
             f'{self.file_bytes / 1e6:.1f} MB in {self.seconds:.2f} s '
             f'({self.mb_per_s:.1f} MB/s, {self.steps_per_s:.0f} steps/s); '
             f'{len(self.issues)} issue(s), {len(self.skipped)} corrupt bag(s) skipped'
+            + (f', {self.dropped} transition(s) dropped for bad values' if self.dropped else '')
         )
 
 
@@ -373,14 +387,100 @@ def _match_images(
     return frames
 
 
+def _bad_value(value: Any, length: int | None) -> str | None:
+    """Why a numeric field is unusable ('length' / 'nonfinite'), or None when it is fine."""
+    arr = np.asarray(value, np.float64)
+    if length is not None and arr.size != length:
+        return 'length'
+    if not np.all(np.isfinite(arr)) or (arr.size and float(np.abs(arr).max()) > MAX_ABS):
+        return 'nonfinite'
+    return None
+
+
+def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
+               ) -> dict[str, list[int]]:
+    """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
+    bad: dict[str, list[int]] = {}
+    values = [getattr(msg, name) for _, msg in checked]
+    if length is not None:
+        sized = np.fromiter((len(v) == length for v in values), bool, len(values))
+        if not sized.all():
+            bad['length'] = [checked[i][0] for i in np.flatnonzero(~sized)]
+        rows = np.zeros((len(values), length))
+        if sized.any():
+            rows[sized] = np.stack([v for v, ok in zip(values, sized, strict=True) if ok])
+    else:
+        rows = np.asarray(values, np.float64).reshape(-1, 1)
+    with np.errstate(invalid='ignore', over='ignore'):
+        wrong = ~(np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
+    if wrong.any():
+        bad['nonfinite'] = [checked[i][0] for i in np.flatnonzero(wrong)]
+    return bad
+
+
+_FIELDS: tuple[tuple[str, str, bool, bool], ...] = (
+    # topic, field, is a vector, bad data cuts before its step only (transition into it)
+    (TOPIC_STATE, 'data', True, False),
+    (TOPIC_CONTEXT_TRUTH, 'values', True, False),
+    (TOPIC_STEP, 'reward', False, True),
+    (TOPIC_STEP, 'applied_action', True, True),
+    (TOPIC_ACTION, 'data', True, False),
+)
+
+
+def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
+                  meta: dict[str, Any], namespace: str = '') -> tuple[set[int], set[int]]:
+    """Find non-finite, huge and wrong-length fields; return (steps to drop, steps to cut before).
+
+    The first message of each topic sets the vector lengths (for applied_action the first that
+    is not an episode start, which carries none). /zeus/action is the policy's request, not
+    training data: a bad one is reported and read as absent. Lengths must also match earlier
+    bags, else the bag is refused (IngestError): it was recorded on another task or robot.
+    """
+    drop: set[int] = set()
+    cut: set[int] = set()
+    lengths = meta.setdefault('lengths', {})
+    for topic, name, vector, cuts in _FIELDS:
+        by_step = topics[topic].by_step
+        checked = [(s, m) for s, (_, m) in sorted(by_step.items())
+                   if not (topic == TOPIC_STEP and m.first)]
+        if not checked:
+            continue
+        length = len(getattr(checked[0][1], name)) if vector else None
+        key = f'{topic} {name}'
+        if length is not None and lengths.setdefault(key, length) != length:
+            raise IngestError(f'{path}: {bag_topic(topic, namespace)} {name} has {length} '
+                              f'values, earlier bags {lengths[key]}: recorded on another task '
+                              'or robot; ingest them apart')
+        bad = _bad_steps(checked, name, length)
+        for why, steps in bad.items():
+            if topic == TOPIC_ACTION:
+                effect = 'read as absent (the policy request is not trained on)'
+            elif cuts:
+                effect = 'the transition into each step is dropped'
+                cut.update(steps)
+            else:
+                effect = "each step's transitions are dropped"
+                drop.update(steps)
+            detail = (f"{len(steps)} message(s) of another length than the first's {length}"
+                      if why == 'length' else
+                      f'{len(steps)} message(s) with NaN, Inf or |x| > {MAX_ABS:g}')
+            first = ', '.join(map(str, steps[:_FIRST_STEPS]))
+            more = ', ...' if len(steps) > _FIRST_STEPS else ''
+            report.issues.append(Issue(str(path), bag_topic(topic, namespace), steps[0], why,
+                                       f'{name}: {detail} at steps {first}{more}; {effect}'))
+    return drop, cut
+
+
 def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
-            report: IngestReport) -> list[list[int]]:
-    """Split usable steps into contiguous runs of one episode each."""
+            report: IngestReport, cut: set[int] | None = None) -> list[list[int]]:
+    """Split usable steps into contiguous runs of one episode each (and before `cut` steps)."""
+    cut = cut or set()
     pieces: list[list[int]] = []
     prev: int | None = None
     for step in steps:
         msg = fb[step][1]
-        cont = (prev is not None and step == prev + 1 and not msg.first
+        cont = (prev is not None and step == prev + 1 and not msg.first and step not in cut
                 and not fb[prev][1].last and msg.episode == fb[prev][1].episode)
         if cont and msg.episode_step != fb[prev][1].episode_step + 1:
             report.issues.append(Issue(str(path), TOPIC_STEP, step, 'episode',
@@ -402,7 +502,7 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
     for i, s in enumerate(piece):
-        if s in acts and acts[s][1].data.shape[0] == action_dim:
+        if s in acts and _bad_value(acts[s][1].data, action_dim) is None:
             policy[i] = acts[s][1].data
     pix = None
     if frames is not None:
@@ -450,14 +550,21 @@ def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any],
     if read['images']:
         frames = _match_images(path, sorted(usable), topics, read['images'], report)
         usable &= frames.keys()
+    drop, cut = _check_values(path, topics, report, meta, namespace)
+    before = _pieces(path, sorted(usable), fb, IngestReport()) if drop or cut else []
+    usable -= drop
     steps = sorted(usable)
     report.steps += len(steps)
-    action_dims = {m.applied_action.shape[0] for s in steps if not (m := fb[s][1]).first}
+    action_dims = {m.applied_action.shape[0] for s in steps
+                   if not (m := fb[s][1]).first and s not in cut}
     if len(action_dims) > 1:
         raise IngestError(f'{path}: {TOPIC_STEP} applied_action lengths differ: {action_dims}')
     action_dim = action_dims.pop() if action_dims else 0
-    return [_build_episode(path, p, topics, frames, action_dim)
-            for p in _pieces(path, steps, fb, report)]
+    pieces = _pieces(path, steps, fb, report, cut)
+    if drop or cut:
+        report.dropped += (sum(len(p) - 1 for p in before)
+                           - sum(len(p) - 1 for p in pieces))
+    return [_build_episode(path, p, topics, frames, action_dim) for p in pieces]
 
 
 def ingest_bags(
@@ -498,7 +605,8 @@ def ingest_bags(
             listed = '\n  '.join(map(str, new[:_MAX_LISTED]))
             more = f'\n  ... and {len(new) - _MAX_LISTED} more' if len(new) > _MAX_LISTED else ''
             if strict:
-                raise IngestError(f'{bag}: {len(new)} issue(s):\n  {listed}{more}')
+                raise IngestError(f'{bag}: {len(new)} issue(s) (--strict: the bag is refused):'
+                                  f'\n  {listed}{more}')
             warnings.warn(f'{bag}: {len(new)} issue(s):\n  {listed}{more}', IngestWarning,
                           stacklevel=2)
     report.seconds = time.perf_counter() - start

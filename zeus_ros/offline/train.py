@@ -4,6 +4,8 @@ Training reads bags only. The data decide the observation normalisation; the tas
 supplies the action bounds (bags carry applied actions, not the bounds). A run directory holds:
   checkpoint.pt (latest, what --resume continues), final.pt (end of the run), config.yaml
   (resolved), metrics.csv + losses.png, and with periodic evaluation eval.csv + eval_returns.png.
+A non-finite loss or parameter (from a non-finite gradient) stops the run at that update with
+NonFiniteError naming the last good checkpoint; no checkpoint with NaN/Inf is ever written.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 import sys
 import time
@@ -25,8 +28,8 @@ from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
 from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines, plot_metric_grid
 
-__all__ = ['RUN_CONTROL_FIELDS', 'TrainError', 'TrainResult', 'apply_overrides', 'build_spec',
-           'main', 'train']
+__all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
+           'build_spec', 'main', 'train']
 
 CHECKPOINT = 'checkpoint.pt'
 FINAL = 'final.pt'
@@ -40,6 +43,32 @@ SHOWN_LOSSES = ('loss/critic', 'loss/actor', 'loss/context', 'loss/dynamics', 'l
 
 class TrainError(Exception):
     """A training run cannot start or continue (bad data, task or resume mismatch)."""
+
+
+class NonFiniteError(TrainError):
+    """An update produced a NaN/Inf loss or parameter: the run stopped, nothing was saved after."""
+
+
+def _nonfinite_losses(row: dict[str, float]) -> list[str]:
+    """The metrics of one update that are NaN or infinite, as 'name=value'."""
+    return [f'{key}={value}' for key, value in row.items()
+            if isinstance(value, float) and not math.isfinite(value)]
+
+
+def _nonfinite_modules(agent: Any) -> list[str]:
+    """Modules whose parameters hold NaN/Inf (one fused sum per module: ~0.3 ms an update).
+
+    After an optimizer step a NaN or Inf gradient always shows up in the parameters, so this
+    catches a non-finite gradient in the update that produced it.
+    """
+    import torch
+
+    bad = [name for name, module in agent.modules.items()
+           if (params := [p.detach().sum() for p in module.parameters()])
+           and not bool(torch.isfinite(torch.stack(params).sum()))]
+    if not bool(torch.isfinite(agent.log_alpha.detach()).all()):
+        bad.append('log_alpha')
+    return bad
 
 
 @dataclass
@@ -207,8 +236,17 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     begin = window_start = time.perf_counter()
     window_steps = 0
 
+    last_good = (out / CHECKPOINT, start) if resume else None
+
     def save(name: str = CHECKPOINT) -> Path:
-        return save_checkpoint(out / name, agent, step=step, extra=extra)
+        nonlocal last_good
+        try:
+            path = save_checkpoint(out / name, agent, step=step, extra=extra)
+        except CheckpointError as error:  # non-finite weights: the check below missed nothing
+            raise NonFiniteError(f'update {step}: {error}; {_last_good(last_good)}') from None
+        if name == CHECKPOINT:
+            last_good = (path, step)
+        return path
 
     bar = tqdm(total=cfg.num_updates, initial=start, unit='upd', desc='train',
                disable=not progress, dynamic_ncols=True)
@@ -216,7 +254,19 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
         while step < cfg.num_updates:
             batch = replay.sample(cfg.batch_size)
             pair = replay.sample(cfg.batch_size) if needs_pair else None
-            window.add(agent.update(batch, pair, step))
+            losses = agent.update(batch, pair, step)
+            bad = _nonfinite_losses(losses)
+            modules = _nonfinite_modules(agent)
+            if bad or modules:
+                metrics.flush()
+                what = ', '.join(bad) if bad else 'losses finite'
+                params = (f'; non-finite parameters in {", ".join(modules)} (a NaN/Inf '
+                          'gradient)' if modules else '')
+                raise NonFiniteError(
+                    f'update {step + 1}: {what}{params}. Training stopped; nothing of this '
+                    f'update was saved; {_last_good(last_good)}. Check the data (zeus ingest '
+                    '--strict) and the learning rates')
+            window.add(losses)
             step += 1
             window_steps += 1
             bar.update(1)
@@ -256,6 +306,13 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     log(f'train: {step - start} updates in {seconds:.1f} s ({result.updates_per_s:.1f}/s); '
         f'checkpoints {out / CHECKPOINT}, {final}; metrics {metrics.path}')
     return result
+
+
+def _last_good(last: tuple[Path, int] | None) -> str:
+    """Where the run can be continued from, for error messages."""
+    if last is None:
+        return 'no checkpoint was saved before it'
+    return f'the last good checkpoint is {last[0]} (update {last[1]})'
 
 
 def provenance() -> dict[str, str | None]:
@@ -355,6 +412,9 @@ def main(argv: list[str] | None = None) -> int:
         train(args.bags, config, args.out, task=args.task, resume=args.resume,
               evaluate=not args.no_eval, progress=not args.no_progress,
               namespace=args.namespace)
+    except NonFiniteError as error:
+        print(f'zeus train: {error}', file=sys.stderr)
+        return 1
     except (TrainError, ConfigError, BagError, IngestError) as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 2
