@@ -121,6 +121,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus demo: checkpoint {checkpoint} not found; train one (README, "Record -> '
               'retrain -> redeploy") or pass --random-policy', file=sys.stderr)
         return 2
+    if checkpoint is not None:
+        from zeus_ros.learning.checkpoint import load_checkpoint
+        from zeus_ros.learning.errors import CheckpointError
+
+        try:  # before any node starts or any file is written: a bad file leaves no results
+            load_checkpoint(checkpoint, expect_task=args.task, load_optimizers=False)
+        except CheckpointError as error:
+            print(f'zeus demo: --checkpoint: {error}', file=sys.stderr)
+            return 2
     domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
     env = ros_env(domain)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')

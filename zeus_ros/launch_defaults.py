@@ -175,16 +175,53 @@ def _node_sections(params: Mapping[str, Any], name: str) -> list[Mapping[str, An
 
 
 def read_params(params_file: Path) -> dict[str, Any]:
-    """The params file as a mapping; ValueError when it is missing or not a ROS params file."""
+    """The params file as a mapping; ValueError (one line) when it is not a ROS params file.
+
+    Checked here what rcl's parser would refuse in every node with a traceback each: text that
+    is not UTF-8 YAML, an empty file, sections without ros__parameters, values that are not a
+    bool, number, string or non-empty list of one of these.
+    """
     if not params_file.is_file():
         raise ValueError(f'params file {params_file} does not exist')
+    where = f'params file {params_file}'
     try:
-        data = yaml.safe_load(params_file.read_text()) or {}
+        text = params_file.read_bytes().decode('utf-8')
+    except UnicodeDecodeError as error:
+        raise ValueError(f'{where}: not a text file (byte {error.object[error.start]:#04x} at '
+                         f'offset {error.start} is not UTF-8)') from None
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as error:
-        raise ValueError(f'params file {params_file}: not valid YAML: {error}') from error
+        mark = getattr(error, 'problem_mark', None)
+        at = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        raise ValueError(f'{where}: not valid YAML{at}: '
+                         f'{getattr(error, "problem", None) or error}') from None
+    if data is None:
+        raise ValueError(f'{where}: the file is empty; expected node_name: ros__parameters: ...')
     if not isinstance(data, dict):
-        raise ValueError(f'params file {params_file}: expected node_name: ros__parameters: ...')
+        raise ValueError(f'{where}: expected node_name: ros__parameters: ...')
+    for node, section in data.items():
+        if not isinstance(section, dict) or 'ros__parameters' not in section \
+                or not isinstance(section['ros__parameters'], dict | None):
+            raise ValueError(f'{where}: {node}: expected a ros__parameters: mapping under it')
+        _check_values(section['ros__parameters'] or {}, f'{where}: {node}')
     return data
+
+
+def _check_values(params: Mapping[str, Any], where: str, prefix: str = '') -> None:
+    """Every parameter value is one rcl can read: a scalar or a non-empty list of one type."""
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            _check_values(value, where, f'{name}.')
+        elif isinstance(value, list):
+            kinds = {type(item) for item in value}
+            if not value or len(kinds) > 1 or not kinds <= {bool, int, float, str}:
+                raise ValueError(f'{where}: parameter {name}: {value!r} is not a non-empty list '
+                                 'of bools, integers, floats or strings (one type)')
+        elif not isinstance(value, bool | int | float | str):
+            raise ValueError(f'{where}: parameter {name}: {value!r} is not a bool, number, '
+                             'string or list')
 
 
 def plan(

@@ -213,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
             checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
             nodes=names)
     except ValueError as error:
-        parser.error(str(error))
+        print(f'zeus launch: {error}', file=sys.stderr)
+        return 2
     print(f'[zeus launch] params {launch.params_file}; ' + '; '.join(
         f'{node.name} {node.parameters}' for node in launch.nodes if node.parameters),
         flush=True)

@@ -293,9 +293,19 @@ def main(argv: list[str] | None = None) -> int:
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
+    from zeus_ros.learning.errors import CheckpointError
 
-    task = make_task(args.task, seed=args.seed)
-    schedule = schedule_from_config(schedule_config, task, args.seed)
+    try:
+        task = make_task(args.task, seed=args.seed)
+    except (KeyError, ValueError) as exc:
+        print(f'zeus collect: --task {args.task}: {exc}', file=sys.stderr)
+        return 2
+    try:
+        schedule = schedule_from_config(schedule_config, task, args.seed)
+    except (KeyError, TypeError, ValueError) as exc:
+        task.close()
+        print(f'zeus collect: --schedule {args.schedule}: {exc}', file=sys.stderr)
+        return 2
     env = ScheduledEnv(task, schedule)
     policy = random_policy(task, args.seed)
     if args.checkpoint is not None:
@@ -306,8 +316,14 @@ def main(argv: list[str] | None = None) -> int:
         # One thread, as the policy and estimator nodes run: the same float results (a live
         # recording and a collection of the same schedule ingest to identical arrays).
         torch.set_num_threads(1)
-        agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name)
+        try:
+            agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name)
+        except CheckpointError as exc:
+            task.close()
+            print(f'zeus collect: --checkpoint: {exc}', file=sys.stderr)
+            return 2
         if agent.obs_kind == 'pixels' and not args.pixels:
+            task.close()
             print(f'zeus collect: {args.checkpoint} is a pixel agent; add --pixels',
                   file=sys.stderr)
             return 2

@@ -25,7 +25,14 @@ from zeus_ros.offline.collect import (
     parse_schedule,
     random_policy,
 )
-from zeus_ros.offline.train import CHECKPOINT, TrainError, apply_overrides, train
+from zeus_ros.offline.train import (
+    CHECKPOINT,
+    TrainError,
+    apply_overrides,
+    check_device,
+    read_config,
+    train,
+)
 
 __all__ = ['main', 'run_loop']
 
@@ -129,7 +136,6 @@ def _build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus loop`; returns the process exit code."""
-    from zeus_ros.learning.config import load_config
     from zeus_ros.learning.errors import CheckpointError, ConfigError
     from zeus_ros.offline.errors import BagError, IngestError
 
@@ -143,8 +149,10 @@ def main(argv: list[str] | None = None) -> int:
               'or choose another --out', file=sys.stderr)
         return 2
     try:
-        config = apply_overrides(load_config(args.config), method=args.method, seed=args.seed,
+        config = apply_overrides(read_config(args.config), method=args.method, seed=args.seed,
                                  device=args.device)
+        check_device(config.device, '--device' if args.device else
+                     f'--config {args.config}: device')
         schedule = parse_schedule(args.schedule)
     except (ConfigError, ValueError) as error:
         print(f'zeus loop: {error}', file=sys.stderr)

@@ -29,7 +29,7 @@ from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
 from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines, plot_metric_grid
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
-           'build_spec', 'main', 'train']
+           'build_spec', 'check_device', 'main', 'read_config', 'train']
 
 CHECKPOINT = 'checkpoint.pt'
 FINAL = 'final.pt'
@@ -99,6 +99,59 @@ def apply_overrides(config: ZeusConfig, *, method: str | None = None,
         if value is not None:
             changes[name] = value
     return config.replace(**changes) if changes else config
+
+
+def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
+    """load_config, but a binary or empty file is a ConfigError naming the flag, not a default.
+
+    An empty config would silently train with every default: refused, so a truncated or
+    wrongly named file cannot pass for a deliberate choice.
+    """
+    try:
+        text = Path(path).read_bytes().decode('utf-8')
+    except OSError as error:
+        raise ConfigError(f'{flag} {path}: cannot read it ({error.strerror})') from None
+    except UnicodeDecodeError as error:
+        raise ConfigError(f'{flag} {path}: not a text file (byte {error.object[error.start]:#04x} '
+                          f'at offset {error.start} is not UTF-8); expected a YAML training '
+                          'config such as params/train/state_cpu.yaml') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, 'problem_mark', None)
+        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        raise ConfigError(f'{flag} {path}: not valid YAML{where}: '
+                          f'{getattr(error, "problem", None) or error}') from None
+    if data is None:
+        raise ConfigError(f'{flag} {path}: the file is empty (no keys); refusing to train with '
+                          'every default by accident: start from params/train/state_cpu.yaml')
+    if not isinstance(data, dict):
+        raise ConfigError(f'{flag} {path}: expected a mapping of config keys, got a '
+                          f'{type(data).__name__}')
+    return load_config(path)
+
+
+def check_device(device: str, flag: str = '--device') -> None:
+    """Refuse a device this machine's torch cannot use, before any data is read."""
+    import torch
+
+    try:
+        wanted = torch.device(device) if device != 'auto' else None
+    except (RuntimeError, ValueError) as error:
+        raise ConfigError(f'{flag} {device}: not a device ({error}); use auto, cpu or '
+                          'cuda[:N]') from None
+    if wanted is None or wanted.type == 'cpu':
+        return
+    if wanted.type != 'cuda':
+        raise ConfigError(f'{flag} {device}: only auto, cpu and cuda[:N] are supported')
+    if not torch.cuda.is_available():
+        why = ('this torch build has no CUDA support' if torch.version.cuda is None
+               else 'no CUDA device is visible')
+        raise ConfigError(f'{flag} {device}: {why} (torch {torch.__version__}); use --device '
+                          'cpu or auto')
+    if wanted.index is not None and wanted.index >= torch.cuda.device_count():
+        raise ConfigError(f'{flag} {device}: only {torch.cuda.device_count()} CUDA device(s) '
+                          'are visible')
 
 
 def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
@@ -399,8 +452,10 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.offline.errors import BagError, IngestError
 
     try:
-        config = apply_overrides(load_config(args.config), method=args.method,
+        config = apply_overrides(read_config(args.config), method=args.method,
                                  updates=args.updates, seed=args.seed, device=args.device)
+        check_device(config.device, '--device' if args.device else
+                     f'--config {args.config}: device')
     except ConfigError as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 2
