@@ -189,11 +189,12 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
 
 
 def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
-               device: Any, seed: int, namespace: str = '') -> tuple[Any, Any]:
+               device: Any, seed: int, namespace: str = '', strict: bool = False
+               ) -> tuple[Any, Any]:
     from zeus_ros.offline.ingest import ingest_bags
     from zeus_ros.offline.replay import ReplayBuffer
 
-    dataset = ingest_bags(list(bags), namespace=namespace)
+    dataset = ingest_bags(list(bags), namespace=namespace, strict=strict)
     if task is not None and dataset.task != task:
         raise TrainError(f'--task {task} but the bags hold {dataset.task!r} '
                          f'({", ".join(dataset.report.bags)})')
@@ -252,10 +253,12 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
 def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
           task: str | None = None, resume: bool = False, evaluate: bool = True,
           progress: bool = True, log: Callable[[str], None] = print,
-          namespace: str = '') -> TrainResult:
+          namespace: str = '', strict: bool = False) -> TrainResult:
     """Train (or continue training) an agent on the transitions in `bags`.
 
     `namespace`: read /<namespace>/zeus/... topics (`ros2 bag record` of a namespaced system).
+    `strict`: refuse bags with any issue (gaps, NaN/Inf, wrong lengths) instead of dropping
+    the affected transitions.
 
     Runs until `config.num_updates` updates in total (a resumed run counts from its
     checkpoint's step). Checkpoints every `checkpoint_interval` updates and at the end; a
@@ -269,7 +272,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     config = config.replace(device=str(device))
     resume_step = checkpoint_step(out / CHECKPOINT) if resume else 0
     dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step,
-                                 namespace)
+                                 namespace, strict)
     agent, start = _start(out, config, dataset, replay, resume)
     cfg = agent.config
     out.mkdir(parents=True, exist_ok=True)
@@ -431,6 +434,9 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--namespace', default='',
                         help='namespace of the recorded system: reads /<ns>/zeus/... topics '
                         '(bags of `ros2 bag record`; the recorder node needs none)')
+    parser.add_argument('--strict', action='store_true',
+                        help='refuse bags with any issue (gaps, NaN/Inf or wrong-length values) '
+                        'instead of dropping the affected transitions and their histories')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
     parser.add_argument('--updates', type=int,
                         help='total updates of the run (overrides num_updates; a resumed run '
@@ -444,6 +450,24 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='torch CPU threads (0: torch default)')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
     return parser
+
+
+def _print_ingest_warnings() -> Callable[..., None]:
+    """Show what ingest found (dropped values, gaps) as plain lines; returns the old hook."""
+    import warnings
+
+    from zeus_ros.offline.ingest import IngestWarning
+
+    default = warnings.showwarning
+
+    def show(message: Any, category: Any, *args: Any, **kwargs: Any) -> None:
+        if issubclass(category, IngestWarning):
+            print(f'zeus train: warning: {message}', file=sys.stderr)
+        else:
+            default(message, category, *args, **kwargs)
+
+    warnings.showwarning = show
+    return default
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -463,10 +487,13 @@ def main(argv: list[str] | None = None) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
+    import warnings
+
+    default_showwarning = _print_ingest_warnings()
     try:
         train(args.bags, config, args.out, task=args.task, resume=args.resume,
               evaluate=not args.no_eval, progress=not args.no_progress,
-              namespace=args.namespace)
+              namespace=args.namespace, strict=args.strict)
     except NonFiniteError as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 1
@@ -475,6 +502,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    finally:
+        warnings.showwarning = default_showwarning
     return 0
 
 
