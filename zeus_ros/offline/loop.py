@@ -5,7 +5,10 @@ the newest checkpoint plus exploration noise (the policy as deployed, via collec
 appends that bag and resumes training on all bags. `--resume` continues a stopped or finished
 loop up to --rounds: rounds whose bag exists are not collected again, rounds whose updates are
 in the checkpoint are not trained again (round i always collects with seed + i, so a loop
-extended from 5 to 10 rounds is the 10-round loop). Layout under --out:
+extended from 5 to 10 rounds is the 10-round loop). A resume after a kill during collection
+recovers the unfinished bag (as `zeus recover` does; one without a single complete step is moved
+to unfinished/) and collects the steps the round still lacks into bag_NNN_restK before training.
+Layout under --out:
   bags/bag_NNN (one bag per round)   run/ (the `zeus train` run directory: checkpoints, metrics)
 """
 
@@ -13,6 +16,8 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+import re
+import shutil
 import signal
 import sys
 from typing import Any
@@ -37,9 +42,64 @@ from zeus_ros.offline.train import (
 __all__ = ['main', 'run_loop']
 
 
+_ROUND_BAG = re.compile(r'bag_(\d+)')
+
+
+def _round_bags(bags: Path, index: int) -> list[Path]:
+    """Round `index`'s bag and those that completed it after an interruption (bag_NNN_restK)."""
+    return sorted(p for p in bags.glob(f'bag_{index:03d}*') if p.is_dir()
+                  and re.fullmatch(rf'bag_{index:03d}(_rest\d+)?', p.name))
+
+
+def _bag_steps(bag: Path) -> int:
+    """Control steps in a closed bag: the /zeus/step messages its metadata counts."""
+    from rosbags.rosbag2 import Reader
+
+    from zeus_ros.offline.schema import TOPIC_STEP
+
+    reader = Reader(bag)
+    reader.open()
+    try:
+        return sum(int(c.msgcount) for c in reader.connections if c.topic == TOPIC_STEP)
+    finally:
+        reader.close()
+
+
+def _recover_unfinished(out: Path, bags: Path) -> None:
+    """Recover bags a kill left without metadata or footer; move aside those with no step.
+
+    Without this, training would stop on the unfinished bag (or, after a manual recover,
+    silently train on a cut round).
+    """
+    from zeus_ros.offline.errors import BagError
+    from zeus_ros.offline.recover import needs_recovery, recover_bag
+
+    for bag in sorted(p for p in bags.glob('bag_*') if p.is_dir()):
+        if not needs_recovery(bag):
+            continue
+        print(f'loop: {bag} is unfinished (not closed: the collection was killed); '
+              'recovering it as `zeus recover` does')
+        try:
+            report = recover_bag(bag)
+            steps = _bag_steps(bag)
+        except (BagError, OSError, ValueError) as error:
+            report, steps = None, 0
+            print(f'loop: {bag} cannot be recovered ({error})')
+        except Exception as error:  # rosbags' ReaderError on a bag with no complete message
+            report, steps = None, 0
+            print(f'loop: {bag} cannot be read after recovery ({error})')
+        if steps == 0:
+            aside = out / 'unfinished' / bag.name
+            aside.parent.mkdir(parents=True, exist_ok=True)
+            shutil.move(bag, aside)
+            print(f'loop: {bag} held no complete step; moved it to {aside}')
+        elif report is not None:
+            print(f'loop: {report.summary()}')
+
+
 def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: int, *,
                    seed: int, checkpoint: Path | None, noise: float, pixels: bool,
-                   progress: bool, stochastic: bool = False) -> Path:
+                   progress: bool, stochastic: bool = False, bag: Path | None = None) -> Path:
     """One collection: random without a checkpoint, else the agent (sampled, or mode + noise)."""
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
@@ -56,7 +116,7 @@ def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: 
             agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task.name)
             policy = AgentPolicy(agent, noise=0.0 if stochastic else noise, seed=seed,
                                  stochastic=stochastic)
-        bag = next_bag_path(bags, append=True)
+        bag = bag or next_bag_path(bags, append=True)
         bags.mkdir(parents=True, exist_ok=True)
         with StepBagWriter(bag, pixels=pixels) as writer:
             stats = collect(env, task, policy, writer, steps, progress=progress)
@@ -76,7 +136,10 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
     out = Path(out)
     bags, run = out / 'bags', out / 'run'
     pixels = config.obs_kind == 'pixels'
-    done_bags = len([p for p in bags.glob('bag_*') if p.is_dir()]) if resume else 0
+    if resume and bags.is_dir():
+        _recover_unfinished(out, bags)
+    done_bags = len([p for p in bags.glob('bag_*') if p.is_dir()
+                     and _ROUND_BAG.fullmatch(p.name)]) if resume else 0
     done_updates = checkpoint_step(run / CHECKPOINT) if resume else 0
     if resume:
         print(f'loop: resuming {out}: {done_bags} bag(s), checkpoint at update {done_updates}')
@@ -95,6 +158,19 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
             _collect_round(task, schedule, bags, count, seed=seed + index,
                            checkpoint=checkpoint, noise=noise, pixels=pixels,
                            progress=progress, stochastic=stochastic)
+        else:
+            held = _round_bags(bags, index)
+            have = sum(_bag_steps(b) for b in held)
+            if have < count:
+                part = len(held)
+                print(f'\nloop: round {index + 1}/{rounds}: {", ".join(b.name for b in held)} '
+                      f'hold(s) {have} of the {count} steps requested (the collection was '
+                      f'interrupted); collecting the missing {count - have} with {what}')
+                _collect_round(task, schedule, bags, count - have,
+                               seed=seed + index + 7919 * part, checkpoint=checkpoint,
+                               noise=noise, pixels=pixels, progress=progress,
+                               stochastic=stochastic,
+                               bag=bags / f'bag_{index:03d}_rest{part}')
         print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
                              resume=index > 0 or done_updates > 0, evaluate=evaluate,
@@ -144,9 +220,11 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) < 1:
             print(f'zeus loop: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
-    if (args.out / 'run' / CHECKPOINT).exists() and not args.resume:
-        print(f'zeus loop: {args.out} already holds a loop run; pass --resume to continue it '
-              'or choose another --out', file=sys.stderr)
+    started = (args.out / 'run' / CHECKPOINT).exists() or any((args.out / 'bags').glob('bag_*'))
+    if started and not args.resume:
+        print(f'zeus loop: {args.out} already holds a loop run (bags or a checkpoint); pass '
+              '--resume to continue it (an unfinished bag is recovered and completed) or '
+              'choose another --out', file=sys.stderr)
         return 2
     try:
         config = apply_overrides(read_config(args.config), method=args.method, seed=args.seed,

@@ -29,7 +29,7 @@ from zeus_ros.offline.schema import MSGTYPES, typestore
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-__all__ = ['STEP_TOPICS', 'RecoveryReport', 'main', 'recover_bag',
+__all__ = ['STEP_TOPICS', 'RecoveryReport', 'main', 'needs_recovery', 'recover_bag',
            'stamp_from_cdr', 'step_from_cdr']
 
 STEP_TOPICS = frozenset(t for t, typ in MSGTYPES.items() if typ.startswith('zeus_msgs/'))
@@ -260,7 +260,8 @@ def _tally(report: RecoveryReport, messages: Iterable[tuple[str, bytes]],
                 report.last_step[topic] = step
 
 
-def _needs_recovery(bag: Path) -> bool:
+def needs_recovery(bag: Path) -> bool:
+    """True when a bag directory was not closed (no or provisional metadata, unreadable)."""
     meta = bag / 'metadata.yaml'
     if not meta.exists():
         return True
@@ -286,7 +287,7 @@ def recover_bag(path: Path | str, *, dry_run: bool = False,
         raise BagError(bag, f'expected one .mcap or .db3 file in the bag, found {len(files)}')
     storage = 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
     report = RecoveryReport(bag, storage, 'would-recover' if dry_run else 'intact')
-    if not _needs_recovery(bag):
+    if not needs_recovery(bag):
         report.status = 'intact'
         return report
     if storage == 'mcap':

@@ -1,0 +1,72 @@
+"""Fault matrix, resume rows: `zeus loop --resume` after kill -9 during collection."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+import yaml
+
+from zeus_ros.offline.ingest import ingest_bags
+
+from ros_harness import REPO
+
+TASK = 'Cheetah-Run-v0'
+TINY = {
+    'method': 'zeus', 'obs_kind': 'state', 'k': 3, 'context_dim': 4, 'transition_dim': 8,
+    'context_hidden_dim': 16, 'feature_dim': 8, 'encoder_hidden_dim': 32, 'hidden_dim': 32,
+    'model_hidden_dim': 32, 'batch_size': 32, 'num_updates': 4, 'eval_interval': 1000,
+    'eval_episodes': 1, 'checkpoint_interval': 2, 'log_interval': 2, 'device': 'cpu',
+}
+STEPS = 12000
+
+
+def _loop(out: Path, config: Path, *extra: str) -> list[str]:
+    return [sys.executable, '-m', 'zeus_ros.cli', 'loop', '--task', TASK, '--config',
+            str(config), '--out', str(out), '--rounds', '1', '--random-steps', str(STEPS),
+            '--updates', '4', '--no-eval', '--no-progress', *extra]
+
+
+def test_loop_resume_after_kill_during_collection_recovers_and_completes_the_round(
+        tmp_path: Path) -> None:
+    """Kill -9 mid-collection, then --resume: the unfinished bag is named and recovered.
+
+    The missing steps go to bag_000_rest1 and training sees the full round; a rerun without
+    --resume is refused.
+    """
+    config = tmp_path / 'tiny.yaml'
+    config.write_text(yaml.safe_dump(TINY))
+    out = tmp_path / 'loop'
+    mcap = out / 'bags' / 'bag_000' / 'bag_000.mcap'
+    with subprocess.Popen(_loop(out, config), cwd=REPO, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL) as proc:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if mcap.is_file() and mcap.stat().st_size > 2_500_000:
+                os.kill(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.05)
+        assert proc.wait(30) == -signal.SIGKILL, 'the collection ended before the kill'
+    assert not (out / 'bags' / 'bag_000' / 'metadata.yaml').exists()
+
+    again = subprocess.run(_loop(out, config), cwd=REPO, capture_output=True, text=True,
+                           timeout=120, check=False)
+    assert again.returncode == 2 and 'pass --resume' in again.stderr, again.stderr
+
+    result = subprocess.run(_loop(out, config, '--resume'), cwd=REPO, capture_output=True,
+                            text=True, timeout=300, check=False)
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text
+    assert f'{out / "bags" / "bag_000"} is unfinished' in text and 'recovered' in text
+    held = int(text.split('bag_000 hold(s) ')[1].split(' ')[0])
+    assert 0 < held < STEPS
+    assert f'of the {STEPS} steps requested' in text
+    assert f'collecting the missing {STEPS - held}' in text
+    assert (out / 'bags' / 'bag_000_rest1' / 'metadata.yaml').is_file()
+    data = ingest_bags(out / 'bags')
+    assert data.report.steps == STEPS
+    assert 'train: ' in text and 'from 2 bag(s)' in text and (out / 'run' / 'final.pt').is_file()
