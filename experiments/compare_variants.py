@@ -164,7 +164,7 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def export_runs(root: Path, variant: str, task: str, target: Path) -> None:
+def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) -> None:
     """Ship each finished run of the variant as a deployment checkpoint with its card."""
     from zeus_ros.learning.checkpoint import load_checkpoint
     from zeus_ros.offline.export import export
@@ -175,8 +175,9 @@ def export_runs(root: Path, variant: str, task: str, target: Path) -> None:
             continue
         loaded = load_checkpoint(final, load_optimizers=False)
         group = group_name(task, loaded.step)
-        out = target / variant / group / f'{loaded.config.method}_s{loaded.config.seed}.pt'
-        export(final, out, evals=None)
+        name = f'{loaded.config.method}_s{loaded.config.seed}'
+        export(final, target / variant / group / f'{name}.pt',
+               evals=evals / variant / group / name)
 
 
 def main() -> None:
@@ -201,7 +202,7 @@ def main() -> None:
         if folder is not None:
             tables[variant] = folder
             if args.export:
-                export_runs(args.root, variant, args.task, args.export)
+                export_runs(args.root, variant, args.task, args.export, args.evals)
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task)

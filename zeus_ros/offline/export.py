@@ -67,6 +67,10 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'{train_values}) |',
         f'| method | `{config.method}` (alpha_psi = {config.alpha_psi}), k = {config.k}, '
         f'`{config.aggregation}` aggregation, context dim {loaded.agent.context_dim} |',
+        f'| context options | context_norm `{config.context_norm}`, context_loss '
+        f'`{config.context_loss}`, critic_context_grad `{config.critic_context_grad}`, '
+        f'context_consistency {config.context_consistency}, exploration '
+        f'`{config.exploration}` |',
         f'| observations | {obs} |',
         f'| networks | {config.hidden_dim}-wide actor/critic, {config.model_hidden_dim}-wide '
         f'T/R, {config.context_hidden_dim}-wide psi, feature dim {config.feature_dim} |',
@@ -79,17 +83,22 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
     ]
     rows = _eval_rows(evals)
     if rows:
-        lines += ['', 'Measured (`zeus eval`, one deterministic episode per context value, '
-                  'evaluation seed 100; the switching episode changes the context unannounced; '
-                  'uniform random policy for scale):', '',
+        episodes = rows[0][1].get('episodes') or 1
+        lines += ['', f'Measured (`zeus eval`, {_fmt(episodes, 0)} deterministic episode(s) per '
+                  'context value, evaluation seed 100; the switching episode changes the context '
+                  'unannounced; uniform random policy for scale; context sensitivity and value '
+                  'of adaptation as in docs/results.md):', '',
                   '| split | return | random | switching episode | adaptation latency (steps) '
-                  '| Spearman |', '|---|---|---|---|---|---|']
+                  '| Spearman | context sensitivity | value of adaptation (frozen to mean) |',
+                  '|---|---|---|---|---|---|---|---|']
         for split, agent, random in rows:
             lines.append(f'| {split} | {_fmt(agent["mean_return"])} | '
                          f'{_fmt(random.get("mean_return"))} | '
                          f'{_fmt(agent.get("switching_return"))} | '
                          f'{_fmt(agent.get("mean_latency"))} | '
-                         f'{_fmt(agent.get("spearman"), 2)} |')
+                         f'{_fmt(agent.get("spearman"), 2)} | '
+                         f'{_fmt(agent.get("sensitivity"), 3)} | '
+                         f'{_fmt(agent.get("adaptation_value_mean"))} |')
     else:
         lines += ['', 'Not evaluated yet: `zeus eval --checkpoint '
                   f'{pt} --split all --out <folder>`.']
