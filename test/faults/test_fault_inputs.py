@@ -132,6 +132,10 @@ def test_device_cuda_without_cuda_is_one_line(tmp_path: Path, capsys: Any) -> No
                       '--device', 'cuda']) == 2
     _one_line(capsys, 'zeus loop: --device cuda: ', 'use --device cpu or auto')
     assert not (tmp_path / 'run').exists() and not (tmp_path / 'loop').exists()
+    shipped = REPO / 'checkpoints' / 'cheetah_run_v0_zeus_state.pt'
+    with pytest.raises(CheckpointError, match="cannot load on device 'cuda': this torch build "
+                       'has no CUDA support; use device cpu'):
+        load_checkpoint(shipped, map_location='cuda')  # what a node with device: cuda does
 
 
 @pytest.mark.parametrize('text, needle', [

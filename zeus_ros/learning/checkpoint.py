@@ -179,6 +179,14 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
     if not path.is_file():
         raise _fail(path, 'no such file')
     try:
+        device = torch.device(map_location)
+    except (RuntimeError, ValueError) as error:
+        raise _fail(path, f'cannot load on device {map_location!r} ({error})') from None
+    if device.type == 'cuda' and not torch.cuda.is_available():
+        raise _fail(path, f'cannot load on device {map_location!r}: '
+                    + ('this torch build has no CUDA support' if torch.version.cuda is None
+                       else 'no CUDA device is visible') + '; use device cpu')
+    try:
         payload = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as error:  # torch raises many types for corrupt / foreign files
         raise _fail(path, _load_error(error)) from None
