@@ -70,3 +70,35 @@ def test_loop_resume_after_kill_during_collection_recovers_and_completes_the_rou
     data = ingest_bags(out / 'bags')
     assert data.report.steps == STEPS
     assert 'train: ' in text and 'from 2 bag(s)' in text and (out / 'run' / 'final.pt').is_file()
+
+
+def test_loop_resume_after_kill_during_training_continues_from_the_last_checkpoint(
+        tmp_path: Path) -> None:
+    """Kill -9 once checkpoint.pt exists; --resume trains from its update to the round's total."""
+    from zeus_ros.learning.checkpoint import load_checkpoint
+
+    config = tmp_path / 'tiny.yaml'
+    config.write_text(yaml.safe_dump(TINY | {'checkpoint_interval': 5}))
+    out = tmp_path / 'loop'
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'loop', '--task', TASK, '--config',
+            str(config), '--out', str(out), '--rounds', '1', '--random-steps', '400',
+            '--updates', '40', '--no-eval', '--no-progress']
+    checkpoint = out / 'run' / 'checkpoint.pt'
+    with subprocess.Popen(argv, cwd=REPO, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL) as proc:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if checkpoint.is_file():
+                os.kill(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.02)
+        assert proc.wait(30) == -signal.SIGKILL, 'training ended before the kill'
+    saved = load_checkpoint(checkpoint).step
+    assert 0 < saved < 40 and not (out / 'run' / 'final.pt').exists()
+    result = subprocess.run([*argv, '--resume'], cwd=REPO, capture_output=True, text=True,
+                            timeout=300, check=False)
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text
+    assert f'checkpoint at update {saved}' in text and f'updates {saved} -> 40' in text
+    assert 'is unfinished' not in text and 'collect' not in text.split('resuming')[1]
+    assert load_checkpoint(out / 'run' / 'final.pt').step == 40
