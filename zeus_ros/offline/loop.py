@@ -173,7 +173,8 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
                                bag=bags / f'bag_{index:03d}_rest{part}')
         print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
-                             resume=index > 0 or done_updates > 0, evaluate=evaluate,
+                             resume=index > 0 or done_updates > 0
+                             or (run / CHECKPOINT).exists(), evaluate=evaluate,
                              progress=progress))
     print(f'\nloop: done: {rounds} round(s); deploy {run / CHECKPOINT}')
     return results
