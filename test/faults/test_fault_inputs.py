@@ -96,6 +96,11 @@ def test_collect_random_bytes_and_bad_schedules(files: dict[str, Path], tmp_path
                              ('constant:value=banana', 'banana')):
         assert collect.main([*base, '--schedule', schedule]) == 2, schedule
         _one_line(capsys, f'--schedule {schedule}: ', needle)
+    for name, needle in (('binary.yaml', 'is not a text file'),
+                         ('broken.yaml', 'is not valid YAML at line 2, column 6'),
+                         ('empty.yaml', 'must hold a mapping')):
+        assert collect.main([*base, '--schedule', str(files[name])]) == 2, name
+        _one_line(capsys, f'--schedule: {files[name]} ', needle)
     assert collect.main([*base[:1], 'Nope-v0', *base[2:]]) == 2
     _one_line(capsys, '--task Nope-v0', 'unknown task')
     assert not out.exists()

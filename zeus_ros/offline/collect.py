@@ -77,7 +77,17 @@ def parse_schedule(text: str) -> dict[str, Any]:
     if path.suffix in {'.yaml', '.yml'} or path.is_file():
         if not path.is_file():
             raise ValueError(f'--schedule: no such YAML file {path}')
-        config = yaml.safe_load(path.read_text())
+        try:
+            config = yaml.safe_load(path.read_bytes().decode('utf-8'))
+        except UnicodeDecodeError as error:
+            raise ValueError(f'--schedule: {path} is not a text file (byte '
+                             f'{error.object[error.start]:#04x} at offset {error.start} is not '
+                             'UTF-8)') from None
+        except yaml.YAMLError as error:
+            mark = getattr(error, 'problem_mark', None)
+            where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+            raise ValueError(f'--schedule: {path} is not valid YAML{where}: '
+                             f'{getattr(error, "problem", None) or error}') from None
         if not isinstance(config, dict):
             kind = type(config).__name__
             raise ValueError(f'--schedule: {path} must hold a mapping, got {kind}')
