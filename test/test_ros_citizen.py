@@ -196,10 +196,17 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
 
         result = call(probe, policy.set_parameters([Parameter('noise', value=0.5)])).results[0]
         assert result.successful, result.reason
-        changed_at = max(states)
-        assert spin_until(probe, lambda: len([s for s in gaps if s > changed_at + 2]) > 20, 60)
-        noisy = [gap for step, gap in gaps.items() if step > changed_at + 2]
-        assert min(noisy) > 1e-3, 'noise=0.5 did not reach the actions'
+        changed_at = max(states)  # the probe may lag the loop: find where noise starts
+
+        def first_noisy() -> int | None:
+            return min((s for s, g in gaps.items() if s > changed_at and g > 1e-3), default=None)
+
+        assert spin_until(probe, lambda: first_noisy() is not None and len(
+            [s for s in gaps if s > first_noisy()]) > 20, 60), 'noise=0.5 never reached actions'
+        start = first_noisy()
+        noisy = np.asarray([gap for step, gap in gaps.items() if step > start])
+        # an action already at its bound can be clipped back onto it in every dimension
+        assert np.mean(noisy > 1e-3) > 0.8, f'actions after the change not noisy: {noisy}'
 
         stop_at = max(states) + 30
         result = call(probe, bridge_params.set_parameters(
