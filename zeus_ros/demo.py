@@ -1,8 +1,8 @@
-"""The live demo: the full system while the physics changes unannounced (default Cheetah-Run-v0).
+"""The live demo: the full system while the physics changes unannounced (default Cheetah-Run-v1).
 
-sim_bridge switches the context (torso length by default; --task picks another family) in the
-middle of episodes through training and extrapolation values; context_estimator and policy run
-the task's shipped ZeUS checkpoint; this process watches the topics (subscribe only, like
+sim_bridge switches the context (the target velocity by default; --task picks another family) in
+the middle of episodes through training and extrapolation values; context_estimator and policy
+run the task's shipped ZeUS checkpoint; this process watches the topics (subscribe only, like
 `zeus inspect`), then prints the per-segment summary and saves the inspection figure and
 per-step CSV under --out.
 
@@ -33,8 +33,10 @@ DEMO_CHECKPOINTS = {
     'Walker-Walk-v0': 'comparison/walker_walk_v0_10k/zeus_s0.pt',
     'Walker-Walk-v1': 'comparison/walker_walk_v1_10k/zeus_s0.pt',
     'Finger-Spin-v0': 'comparison/finger_spin_v0_10k/zeus_s0.pt',
-    'Cheetah-Run-v1': 'comparison/cheetah_run_v1_10k/zeus_s0.pt',
+    'Cheetah-Run-v1': 'issue10/paper/cheetah_run_v1_10k/zeus_s0.pt',
 }
+DEFAULT_TASK = 'Cheetah-Run-v1'
+"""The demo's family: where a ZeUS policy measurably reacts to its context (docs/results.md)."""
 """Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
 
 # Cheetah-Run-v0: training values (0.7-1.15) alternating with extrapolation values (1.2-1.5).
@@ -43,7 +45,7 @@ DEMO_CHECKPOINTS = {
 CHEETAH_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
 
 
-def default_checkpoint(task: str = 'Cheetah-Run-v0') -> Path:
+def default_checkpoint(task: str = DEFAULT_TASK) -> Path:
     """The task's shipped checkpoint: in this checkout, else in share/zeus_ros of a prefix."""
     name = DEMO_CHECKPOINTS[task]
     candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / name]
@@ -97,13 +99,14 @@ def main(argv: list[str] | None = None) -> int:
     """Run the demo; exit code 1 if a node died."""
     parser = argparse.ArgumentParser(prog='zeus demo', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--task', choices=sorted(DEMO_CHECKPOINTS), default='Cheetah-Run-v0',
+    parser.add_argument('--task', choices=sorted(DEMO_CHECKPOINTS), default=DEFAULT_TASK,
                         help='task family (default: %(default)s)')
     parser.add_argument('--checkpoint', type=Path, default=None,
                         help="default: the task's shipped checkpoint (checkpoints/README.md)")
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
-    parser.add_argument('--steps', type=int, default=2000, help='control steps to run')
+    parser.add_argument('--steps', type=int,
+                        help='control steps to run (default 2000; 400 for 40-step episodes)')
     parser.add_argument('--every', type=int,
                         help='steps between switches (default 150; 20 for 40-step episodes)')
     parser.add_argument('--seed', type=int, default=0)
@@ -114,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.every is None:
         args.every = 20 if args.task == 'Cheetah-Run-v1' else 150
+    if args.steps is None:
+        args.steps = 400 if args.task == 'Cheetah-Run-v1' else 2000
     checkpoint = None
     if not args.random_policy:
         checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
