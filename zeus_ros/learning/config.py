@@ -97,9 +97,10 @@ class ZeusConfig:
     running statistics of the training batches; 'none': feed it raw (the paper)."""
     context_norm_momentum: float = 0.01
     """Update rate of the running context statistics."""
-    critic_context_grad: bool = True
-    """Let the critic's TD loss train psi too (psi then encodes what matters for value);
-    False: psi is trained by its method's objective only and reaches actor and critic detached."""
+    critic_context_grad: bool = False
+    """True: the critic's TD loss trains psi too. Measured harmful at every budget we ran
+    (docs/results.md); False: psi is trained by its method's objective only and reaches actor and
+    critic detached."""
     exploration: str = 'stochastic'
     """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
     paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
