@@ -33,7 +33,7 @@ DEMO_CHECKPOINTS = {
     'Walker-Walk-v0': 'comparison/walker_walk_v0_10k/zeus_s0.pt',
     'Walker-Walk-v1': 'comparison/walker_walk_v1_10k/zeus_s0.pt',
     'Finger-Spin-v0': 'comparison/finger_spin_v0_10k/zeus_s0.pt',
-    'Cheetah-Run-v1': 'issue10/paper/cheetah_run_v1_10k/zeus_s0.pt',
+    'Cheetah-Run-v1': 'issue10/no_critic_grad/cheetah_run_v1_10k/zeus_s0.pt',
 }
 DEFAULT_TASK = 'Cheetah-Run-v1'
 """The demo's family: where a ZeUS policy measurably reacts to its context (docs/results.md)."""
@@ -56,13 +56,19 @@ def default_checkpoint(task: str = DEFAULT_TASK) -> Path:
 
 
 def schedule_values(task: str) -> list[float]:
-    """Context values the demo cycles through: train and extrapolation, alternating."""
+    """Context values the demo cycles through, alternating between two splits.
+
+    Cheetah-Run-v0: CHEETAH_VALUES. Cheetah-Run-v1: train and interpolation values (the target
+    velocities where adapting is measured to pay at this budget; beyond 3 m/s not even the
+    oracle gains from knowing it, docs/results.md). Others: train and extrapolation values.
+    """
     if task == 'Cheetah-Run-v0':
         return list(CHEETAH_VALUES)
     from sim_bridge.presets import load_preset
 
+    other = 'interpolation' if task == 'Cheetah-Run-v1' else 'extrapolation'
     train = [next(iter(v.values())) for v in load_preset(task, 'train')]
-    extra = [next(iter(v.values())) for v in load_preset(task, 'extrapolation')]
+    extra = [next(iter(v.values())) for v in load_preset(task, other)]
     values = []
     for index in range(max(len(train), len(extra))):
         values += [train[index % len(train)], extra[index % len(extra)]]
