@@ -31,6 +31,7 @@ from zeus_ros.offline.report import (
     method_order_key,
     paired_difference,
     per_run,
+    wall_time_table,
 )
 
 REFERENCE_VARIANT = 'default'
@@ -206,11 +207,16 @@ def main() -> None:
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task)
+    walls = [f'**{variant}**\n\n{wall_time_table(per_run(folder))}'
+             for variant, folder in tables.items()]
+    Path(f'{stem}_wall_times.md').write_text(
+        'Seconds of training (`zeus loop`: collection + updates) + evaluation (all splits), '
+        'two runs sharing the two cores:\n\n' + '\n\n'.join(walls) + '\n')
     write_csv(stem.with_suffix('.csv'), rows)
     stem.with_suffix('.md').write_text(markdown(rows))
     plot(rows, stem.with_suffix('.png'), f'{args.task}: configs and methods')
     print(markdown(rows))
-    print(f'wrote {stem}.csv, .md and .png')
+    print(f'wrote {stem}.csv, .md, .png and {stem.name}_wall_times.md')
 
 
 if __name__ == '__main__':
