@@ -26,6 +26,10 @@ from typing import IO
 from zeus_ros import launch_defaults
 from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
 
+RECORDER_DRAIN_S = 0.5
+"""Pause between the producers' exit and the recorder's signal: DDS may still be delivering
+the last steps the producers published, and a bag must hold every one of them."""
+
 
 @dataclass
 class NodeProcess:
@@ -128,6 +132,8 @@ class Supervisor:
         producers = [node for node in self.nodes if node.name not in RECORDS_OTHERS]
         recorders = [node for node in self.nodes if node.name in RECORDS_OTHERS]
         for group in (producers, recorders):
+            if group is recorders and recorders and producers:
+                time.sleep(RECORDER_DRAIN_S)  # the producers' last messages are still in flight
             for node in group:
                 if node.process is not None and node.process.poll() is None:
                     with contextlib.suppress(ProcessLookupError):
