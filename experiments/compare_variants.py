@@ -181,6 +181,14 @@ def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) 
                evals=evals / variant / group / name)
 
 
+def _with_train_seconds(runs: list[dict[str, Any]], folder: Path) -> list[dict[str, Any]]:
+    """Evaluation rows with the training seconds their run folder recorded (.done_train)."""
+    for run in runs:
+        marker = folder / f'{run["method"]}_s{run["seed"]}' / '.done_train'
+        run['train_seconds'] = marker.read_text().strip() if marker.is_file() else ''
+    return runs
+
+
 def main() -> None:
     """Evaluate, compare and (optionally) export every variant of one task."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -207,8 +215,10 @@ def main() -> None:
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task)
-    walls = [f'**{variant}**\n\n{wall_time_table(per_run(folder))}'
-             for variant, folder in tables.items()]
+    walls = []
+    for variant, folder in tables.items():
+        runs = _with_train_seconds(per_run(folder), args.root / variant / _task_folder(args.task))
+        walls.append(f'**{variant}**\n\n{wall_time_table(runs)}')
     Path(f'{stem}_wall_times.md').write_text(
         'Seconds of training (`zeus loop`: collection + updates) + evaluation (all splits), '
         'two runs sharing the two cores:\n\n' + '\n\n'.join(walls) + '\n')
