@@ -39,7 +39,7 @@ def _config(method: str, **changes: object) -> ZeusConfig:
 def test_registry_entry_decides_what_the_agent_builds(name: str) -> None:
     """The context encoder exists iff the context is learned; declared models; one normaliser."""
     spec = method_spec(name)
-    agent = make_agent(_config(name), SyntheticSystem(k=3).spec())
+    agent = make_agent(_config(name, context_norm='running'), SyntheticSystem(k=3).spec())
     assert ('psi' in agent.modules) == (spec.context_source == 'psi')
     for model in ('transition', 'reward', 'backward'):
         assert (model in agent.modules) == (model in spec.models), model

@@ -36,7 +36,8 @@ DEMO_CHECKPOINTS = {
     'Cheetah-Run-v1': 'issue10/no_critic_grad/cheetah_run_v1_10k/zeus_s0.pt',
 }
 DEFAULT_TASK = 'Cheetah-Run-v1'
-"""The demo's family: where a ZeUS policy measurably reacts to its context (docs/results.md)."""
+"""The demo's family: where a ZeUS policy measurably gains from its context (docs/results.md);
+its checkpoint is the config with the largest value of adaptation there (no_critic_grad)."""
 """Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
 
 # Cheetah-Run-v0: training values (0.7-1.15) alternating with extrapolation values (1.2-1.5).

@@ -92,9 +92,11 @@ class ZeusConfig:
     context_consistency: float = 0.0
     """Weight of the consistency loss (representation.consistency_loss): psi should drift little
     from one step to the next of an episode relative to its spread across the batch. 0: off."""
-    context_norm: str = 'running'
+    context_norm: str = 'none'
     """'running': standardise the context (psi or the true one) at the actor/critic input with
-    running statistics of the training batches; 'none': feed it raw (the paper)."""
+    running statistics of the training batches; 'none': feed it raw (the paper, and the default:
+    where psi carries no signal the normaliser turns its noise into unit-size inputs, which broke
+    learning on Cheetah-Run-v0, docs/results.md)."""
     context_norm_momentum: float = 0.01
     """Update rate of the running context statistics."""
     critic_context_grad: bool = False
