@@ -68,3 +68,23 @@ def test_zeus_eval_reproduces_the_results_table_from_a_shipped_checkpoint(tmp_pa
     measured = result['summary'][0]['mean_return']
     # Same machine type: identical; another CPU's float rounding may move a 500-step rollout.
     assert measured == pytest.approx(float(recorded['mean_return']), rel=0.05)
+
+
+def test_an_issue10_checkpoint_reproduces_its_card(tmp_path: Path) -> None:
+    """`zeus eval` on a shipped issue-10 export gives the train numbers of its card."""
+    import re
+
+    import torch
+
+    from zeus_ros.offline.evaluate import evaluate
+
+    torch.set_num_threads(1)
+    path = ROOT / 'checkpoints' / 'issue10' / 'scale_free_only' / 'cheetah_run_v1_10k' / 'x'
+    row = re.search(r'^\| train \| (\S+) \| \S+ \| \S+ \| \S+ \| \S+ \| (\S+) \| (\S+) \|$',
+                    path.with_suffix('.md').read_text(), re.M)
+    assert row, 'card without a train row'
+    summary = evaluate(path, split='train', probe_steps=0, seed=100, out=tmp_path,
+                       progress=False)['summary'][0]
+    assert summary['mean_return'] == pytest.approx(float(row[1]), abs=0.15)
+    assert summary['sensitivity'] == pytest.approx(float(row[2]), abs=2e-3)
+    assert summary['adaptation_value_mean'] == pytest.approx(float(row[3]), abs=0.15)
