@@ -79,7 +79,8 @@ def test_an_issue10_checkpoint_reproduces_its_card(tmp_path: Path) -> None:
     from zeus_ros.offline.evaluate import evaluate
 
     torch.set_num_threads(1)
-    path = ROOT / 'checkpoints' / 'issue10' / 'scale_free_only' / 'cheetah_run_v1_10k' / 'x'
+    path = ROOT / 'checkpoints' / 'issue10' / 'scale_free_only' / 'cheetah_run_v1_10k'
+    path = path / 'zeus_s0.pt'
     row = re.search(r'^\| train \| (\S+) \| \S+ \| \S+ \| \S+ \| \S+ \| (\S+) \| (\S+) \|$',
                     path.with_suffix('.md').read_text(), re.M)
     assert row, 'card without a train row'
