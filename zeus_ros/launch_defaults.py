@@ -17,6 +17,8 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.yaml_text import YamlTextError, load_yaml_text
+
 __all__ = ['AGENT_NODES', 'ARGUMENTS', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'share_dir']
@@ -185,17 +187,9 @@ def read_params(params_file: Path) -> dict[str, Any]:
         raise ValueError(f'params file {params_file} does not exist')
     where = f'params file {params_file}'
     try:
-        text = params_file.read_bytes().decode('utf-8')
-    except UnicodeDecodeError as error:
-        raise ValueError(f'{where}: not a text file (byte {error.object[error.start]:#04x} at '
-                         f'offset {error.start} is not UTF-8)') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        at = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
-        raise ValueError(f'{where}: not valid YAML{at}: '
-                         f'{getattr(error, "problem", None) or error}') from None
+        data = load_yaml_text(params_file)
+    except YamlTextError as error:
+        raise ValueError(f'{where}: {error}') from None
     if data is None:
         raise ValueError(f'{where}: the file is empty; expected node_name: ros__parameters: ...')
     if not isinstance(data, dict):

@@ -27,6 +27,7 @@ from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_c
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
 from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines, plot_metric_grid
+from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
            'build_spec', 'check_device', 'main', 'read_config', 'train']
@@ -108,20 +109,13 @@ def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
     wrongly named file cannot pass for a deliberate choice.
     """
     try:
-        text = Path(path).read_bytes().decode('utf-8')
+        data = load_yaml_text(path)
     except OSError as error:
         raise ConfigError(f'{flag} {path}: cannot read it ({error.strerror})') from None
-    except UnicodeDecodeError as error:
-        raise ConfigError(f'{flag} {path}: not a text file (byte {error.object[error.start]:#04x} '
-                          f'at offset {error.start} is not UTF-8); expected a YAML training '
-                          'config such as params/train/state_cpu.yaml') from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
-        raise ConfigError(f'{flag} {path}: not valid YAML{where}: '
-                          f'{getattr(error, "problem", None) or error}') from None
+    except YamlTextError as error:
+        hint = ('; expected a YAML training config such as params/train/state_cpu.yaml'
+                if error.binary else '')
+        raise ConfigError(f'{flag} {path}: {error}{hint}') from None
     if data is None:
         raise ConfigError(f'{flag} {path}: the file is empty (no keys); refusing to train with '
                           'every default by accident: start from params/train/state_cpu.yaml')
