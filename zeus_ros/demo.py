@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from sim_bridge.registry import TASK_NAMES
+from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspect import Inspector, write_csv
 from zeus_ros.inspection import format_segments, percentile, plot_inspection
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
@@ -104,10 +106,12 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
 
 def main(argv: list[str] | None = None) -> int:
     """Run the demo; exit code 1 if a node died."""
-    parser = argparse.ArgumentParser(prog='zeus demo', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--task', choices=sorted(DEMO_CHECKPOINTS), default=DEFAULT_TASK,
-                        help='task family (default: %(default)s)')
+    parser = ZeusArgumentParser(prog='zeus demo', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--task', choices=TASK_NAMES, default=DEFAULT_TASK,
+                        help='task family (default: %(default)s; shipped checkpoints for '
+                        f'{", ".join(DEMO_CHECKPOINTS)}; for another pass --checkpoint or '
+                        '--random-policy)')
     parser.add_argument('--checkpoint', type=Path, default=None,
                         help="default: the task's shipped checkpoint (checkpoints/README.md)")
     parser.add_argument('--random-policy', action='store_true',
@@ -127,6 +131,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.steps is None:
         args.steps = 400 if args.task == 'Cheetah-Run-v1' else 2000
     checkpoint = None
+    if not args.random_policy and args.checkpoint is None and args.task not in DEMO_CHECKPOINTS:
+        print(f'zeus demo: --task {args.task}: no shipped checkpoint for {args.task}; pass '
+              '--checkpoint FILE or --random-policy', file=sys.stderr)
+        return 2
     if not args.random_policy:
         checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
     if checkpoint is not None and not checkpoint.is_file():

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspection import StepLog, format_segments, percentile, plot_inspection
 
 
@@ -145,8 +146,8 @@ class Inspector:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus inspect`."""
-    parser = argparse.ArgumentParser(prog='zeus inspect', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ZeusArgumentParser(prog='zeus inspect', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--duration', type=float, default=None, help='stop after N seconds')
     parser.add_argument('--steps', type=int, default=None, help='stop after N steps')
     parser.add_argument('--png', type=Path, default=None, help='save the figure here at the end')

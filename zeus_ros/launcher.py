@@ -24,6 +24,7 @@ import time
 from typing import IO
 
 from zeus_ros import launch_defaults
+from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
 
 RECORDER_DRAIN_S = 0.5
@@ -189,8 +190,8 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus launch`."""
-    parser = argparse.ArgumentParser(prog='zeus launch', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ZeusArgumentParser(prog='zeus launch', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--params', type=Path, default=None,
                         help='ROS 2 params file for all nodes (/**/node_name: ros__parameters: '
                         f'...); default: the installed {launch_defaults.default_params_file()}')

@@ -19,6 +19,7 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
 from zeus_ros.offline.bag_writer import StepBagWriter, StepRecord
 from zeus_ros.offline.schema import StepFeedbackFields, ns_from_sim_time
 
@@ -264,14 +265,14 @@ class AgentPolicy:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus collect',
         description='Run a task with a context schedule in-process and write a rosbag2 bag '
         'with the topics and stamps the live nodes publish (no ROS needed).',
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=SCHEDULE_HELP,
     )
-    parser.add_argument('--task', required=True, help='task name, e.g. Cheetah-Run-v0')
+    parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
     parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
     parser.add_argument('--steps', type=int, required=True, help='control steps to record')
     parser.add_argument('--seed', type=int, default=0, help='seeds task, schedule and policy')

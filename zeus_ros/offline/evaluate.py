@@ -28,13 +28,15 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+from zeus_ros.labels import context_label
 from zeus_ros.offline.collect import AgentPolicy, Policy, random_policy
 from zeus_ros.offline.metrics import format_table, plot_heatmaps, write_csv
 from zeus_ros.offline.probe import ProbeResult, Rollout, probe_context
 
 __all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
-           'evaluate_contexts', 'main', 'parse_values', 'run_steps', 'split_values',
-           'switching_order']
+           'evaluate_contexts', 'main', 'mid_episode_switches', 'parse_values', 'run_steps',
+           'split_values', 'switching_order']
 
 SPLITS = ('train', 'interpolation', 'extrapolation')
 RECOVERY_TOLERANCE = 0.10
@@ -170,14 +172,20 @@ def steady_reward(trace: Trace) -> float:
     return float(rewards[len(rewards) // 2:].mean())
 
 
-def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
-                         ) -> list[dict[str, Any]]:
-    """One row per mid-episode switch: steps until the smoothed reward is back near steady.
+SWITCH_COLUMNS = ('step', 'from', 'to', 'steady_reward', 'latency', 'recovered', 'judged')
+"""switches.csv: one row per mid-episode switch; `judged` says why one has no latency."""
 
-    A switch whose segment ends (next switch or episode end) first is reported censored with
-    the segment length as its latency. A switch to a context where the policy's steady reward
-    is negligible (|r| < 1e-3 per step, e.g. a finger that never spins) is skipped: there is
-    nothing to recover to, and a reward that stays 0 would read as instant recovery.
+
+def mid_episode_switches(trace: Trace, steady: dict[tuple[float, ...], float]
+                         ) -> list[dict[str, Any]]:
+    """One row per mid-episode switch (each one switching.png marks), with its latency.
+
+    Latency: steps until the smoothed reward is back near its steady value on the new context.
+    A switch whose segment ends (next switch or episode end) first is censored: the segment
+    length, not recovered. Not judged (latency and recovered left empty, `judged` says why): a
+    switch to a context where the policy's steady reward is negligible (|r| < 1e-3 per step,
+    e.g. a finger that never spins: a reward that stays 0 would read as instant recovery), or
+    one cut off by the end of the run after fewer than SMOOTHING steps.
     """
     rows = []
     episode = np.cumsum(trace.first)
@@ -187,14 +195,22 @@ def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
             continue
         key = tuple(np.round(trace.context[s], 6))
         target = steady.get(key)
+        row: dict[str, Any] = {
+            'step': int(s), 'from': float(trace.context[s - 1][0]),
+            'to': float(trace.context[s][0]),
+            'steady_reward': float('nan') if target is None else target,
+            'latency': None, 'recovered': None, 'judged': 'yes'}
+        rows.append(row)
         if target is None or abs(target) < NEGLIGIBLE_REWARD:
+            row['judged'] = 'no: steady reward ~0 on the new context'
             continue
         end = s + 1
         while end < len(trace.reward) and trace.segment[end] == trace.segment[s] \
                 and episode[end] == episode[s]:
             end += 1
         if end - s < SMOOTHING:
-            continue  # cut off by the end of the run: too short to judge
+            row['judged'] = 'no: cut off by the end of the run'
+            continue
         tolerance = RECOVERY_TOLERANCE * abs(target)
         latency, recovered = end - s, False
         for t in range(s, end):
@@ -202,10 +218,14 @@ def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
             if t - s + 1 >= SMOOTHING and abs(window.mean() - target) <= tolerance:
                 latency, recovered = t - s, True
                 break
-        rows.append({'step': int(s), 'from': float(trace.context[s - 1][0]),
-                     'to': float(trace.context[s][0]), 'steady_reward': target,
-                     'latency': latency, 'recovered': recovered})
+        row.update(latency=latency, recovered=recovered)
     return rows
+
+
+def adaptation_latencies(trace: Trace, steady: dict[tuple[float, ...], float]
+                         ) -> list[dict[str, Any]]:
+    """The judged switches of mid_episode_switches: those with an adaptation latency."""
+    return [row for row in mid_episode_switches(trace, steady) if row['judged'] == 'yes']
 
 
 def context_rank_correlation(true: np.ndarray, learned: np.ndarray
@@ -323,7 +343,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                               progress=progress)
     finally:
         sim.close()
-    switches = adaptation_latencies(switching, steady)
+    switches = mid_episode_switches(switching, steady)
+    judged = [s for s in switches if s['judged'] == 'yes']
     learned = mean_context_per_value(traces, agent.k)
     true = np.asarray([list(v.values()) for v in values], float)
     rho = float('nan')
@@ -352,12 +373,12 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
     agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
     random_ret = [r['return'] for r in rows if r['policy'] == 'random']
-    recovered = [s['latency'] for s in switches if s['recovered']]
+    recovered = [s['latency'] for s in judged if s['recovered']]
     summary = [{
         'policy': 'agent', 'method': agent.method, 'split': split,
         'mean_return': float(np.mean(agent_ret)), 'std_return': float(np.std(agent_ret)),
         'switching_return': float(np.mean(switching.episode_returns()[:switch_episodes])),
-        'switches': len(switches), 'recovered': len(recovered),
+        'switches': len(switches), 'judged': len(judged), 'recovered': len(recovered),
         'mean_latency': float(np.mean(recovered)) if recovered else float('nan'),
         'spearman': rho,
         'probe_mse': probe.mse if probe else float('nan'),
@@ -368,7 +389,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         {'policy': 'random', 'method': 'uniform', 'split': split,
          'mean_return': float(np.mean(random_ret)), 'std_return': float(np.std(random_ret))}]
     write_csv(out / 'contexts.csv', rows)
-    write_csv(out / 'switches.csv', switches or [{'step': None}])
+    write_csv(out / 'switches.csv', switches, columns=SWITCH_COLUMNS)
     write_csv(out / 'summary.csv', summary)
     policies = ['agent', *(f'frozen_{kind}' for kind in frozen or {}), 'random']
     per_value = {policy: [float(np.mean([r['return'] for r in rows if r['policy'] == policy
@@ -376,21 +397,23 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                           for v in values] for policy in policies}
     plot_bars(labels, per_value, out / 'returns.png', xlabel=name, ylabel='episode return',
               title=f'{agent.task} {split}: return per context value ({agent.method})')
-    plot_trace(switching.reward, {name: switching.context[:, 0]},
+    plot_trace(switching.reward, {context_label(name, 'true '): switching.context[:, 0]},
                marks=[s['step'] for s in switches], path=out / 'switching.png',
-               title=f'per-step reward under switches every {switch_every} steps')
+               title=f'{agent.task} {split}: per-step reward, {len(switches)} switches every '
+               f'{switch_every} steps ({len(judged)} judged, {len(recovered)} recovered)')
     return {'out': out, 'summary': summary, 'per_value': per_value, 'values': labels,
             'switches': switches, 'probe': probe}
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus eval', description='Evaluate a checkpoint in-process on a context split.')
     parser.add_argument('--checkpoint', type=Path, nargs='+', required=True,
                         help='checkpoint file(s) or folder(s) of them; several (or a folder, or '
                         '--split all) evaluate each into OUT/<task>/<method>_s<seed>/ and '
                         'write the tables over seeds (OUT/tables.md)')
-    parser.add_argument('--task', help='expected task (error if the checkpoint has another)')
+    parser.add_argument('--task', type=task_name,
+                        help=f'expected task (error if the checkpoint has another); {TASK_HELP}')
     parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
                         help="context split; 'all': every split the task's preset defines")
     parser.add_argument('--values',
@@ -452,7 +475,7 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(table, ['context', *per_value]))
     print()
     print(format_table(result['summary'], ['policy', 'split', 'mean_return', 'std_return',
-                                           'switching_return', 'recovered', 'switches',
+                                           'switching_return', 'switches', 'judged', 'recovered',
                                            'mean_latency', 'spearman', 'probe_mse',
                                            'probe_mean_mse']))
     print()

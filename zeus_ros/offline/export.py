@@ -11,12 +11,13 @@ summaries, when present next to the run).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
 from pathlib import Path
 import sys
 from typing import Any
+
+from zeus_ros.cli_args import ZeusArgumentParser
 
 __all__ = ['card_text', 'export', 'main']
 
@@ -121,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus export`; returns the process exit code."""
     from zeus_ros.learning.errors import CheckpointError
 
-    parser = argparse.ArgumentParser(prog='zeus export', description=__doc__.splitlines()[0])
+    parser = ZeusArgumentParser(prog='zeus export', description=__doc__.splitlines()[0])
     parser.add_argument('--checkpoint', type=Path, required=True, help='training checkpoint')
     parser.add_argument('--out', type=Path, required=True, help='deployment checkpoint (.pt)')
     parser.add_argument('--evals', type=Path,

@@ -20,7 +20,6 @@ first steps; `strict` refuses the bag instead.
 
 from __future__ import annotations
 
-import argparse
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +32,7 @@ import warnings
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.offline.errors import BagError, IngestError
 from zeus_ros.offline.schema import (
     MSGTYPES,
@@ -622,7 +622,7 @@ def _bag_files(bag: Path) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     """`zeus ingest BAG...`: read bags as training would and say what they hold or lack."""
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus ingest', description='Read bags exactly as `zeus train` does and report '
         'steps, episodes and every gap, duplicate or count mismatch (exit 1 if unusable).')
     parser.add_argument('bags', nargs='+', type=Path,

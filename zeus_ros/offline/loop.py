@@ -15,6 +15,7 @@ Layout under --out:
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 import re
 import shutil
@@ -22,6 +23,8 @@ import signal
 import sys
 from typing import Any
 
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
+from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.collect import (
     SCHEDULE_HELP,
     AgentPolicy,
@@ -32,6 +35,7 @@ from zeus_ros.offline.collect import (
 )
 from zeus_ros.offline.train import (
     CHECKPOINT,
+    FINAL,
     TrainError,
     apply_overrides,
     check_device,
@@ -176,39 +180,88 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
                              resume=index > 0 or done_updates > 0
                              or (run / CHECKPOINT).exists(), evaluate=evaluate,
                              progress=progress))
-    print(f'\nloop: done: {rounds} round(s); deploy {run / CHECKPOINT}')
+    print(f'\nloop: done: {rounds} round(s); deploy {run / FINAL} (export it: zeus export '
+          f'--checkpoint {run / FINAL} --out my_policy.pt)')
     return results
 
 
+LOOP_JSON = 'loop.json'
+"""The loop's flags, stored in --out at the start, so `--resume` needs only --out and --rounds."""
+DEFAULTS: dict[str, Any] = {'random_steps': 1500, 'steps': 1500, 'updates': None,
+                            'noise': 0.2, 'schedule': 'switch:train:every=100', 'method': None,
+                            'seed': None, 'device': None, 'no_eval': False}
+STORED = ('task', 'config', *DEFAULTS)
+
+
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus loop', formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Random collection -> train -> collect with the new policy -> retrain '
-        '(resume), appending bags, for N rounds.', epilog=SCHEDULE_HELP)
-    parser.add_argument('--task', required=True, help='task name, e.g. Cheetah-Run-v0')
-    parser.add_argument('--config', type=Path, required=True, help='training config YAML')
+        '(resume), appending bags, for N rounds. The flags are stored in OUT/loop.json; '
+        '--resume reads them, so `zeus loop --out OUT --rounds 6 --resume` continues a loop '
+        '(a flag given again overrides the stored one).', epilog=SCHEDULE_HELP)
+    parser.add_argument('--task', type=task_name, help=f'{TASK_HELP} (required unless --resume)')
+    parser.add_argument('--config', type=Path,
+                        help='training config YAML, e.g. params/train/state_cpu.yaml (found in '
+                        'the package share too; required unless --resume)')
     parser.add_argument('--out', type=Path, required=True, help='folder for bags/ and run/')
     parser.add_argument('--rounds', type=int, default=2, help='collect+train rounds')
-    parser.add_argument('--random-steps', type=int, default=1500,
-                        help='uniform-random steps of round 1 (paper: 1500 seed steps)')
-    parser.add_argument('--steps', type=int, default=1500,
-                        help='steps collected with the policy in each later round')
+    parser.add_argument('--random-steps', type=int,
+                        help="uniform-random steps of round 1 (default 1500, the paper's seed "
+                        'steps)')
+    parser.add_argument('--steps', type=int,
+                        help='steps collected with the policy in each later round (default 1500)')
     parser.add_argument('--updates', type=int,
                         help='updates per round (default: the config num_updates)')
-    parser.add_argument('--noise', type=float, default=0.2,
-                        help='exploration noise, fraction of half the action range (with the '
-                        "config's exploration: noise; exploration: stochastic samples the "
-                        'SAC policy instead)')
-    parser.add_argument('--schedule', default='switch:values=train,every=100',
-                        help='context schedule while collecting (default: %(default)s)')
-    parser.add_argument('--method', help='override the config method')
+    parser.add_argument('--noise', type=float,
+                        help='exploration noise, fraction of half the action range (default 0.2; '
+                        "with the config's exploration: noise; exploration: stochastic samples "
+                        'the SAC policy instead)')
+    parser.add_argument('--schedule',
+                        help='context schedule while collecting (default: '
+                        f'{DEFAULTS["schedule"]}; grammar below)')
+    parser.add_argument('--method', choices=METHODS, help='override the config method')
     parser.add_argument('--seed', type=int, help='override the config seed')
-    parser.add_argument('--device', help='override the config device')
+    parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
-                        help='continue the loop in --out up to --rounds (same flags as before)')
-    parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
+                        help='continue the loop in --out up to --rounds with its stored flags')
+    parser.add_argument('--no-eval', action='store_true', default=None,
+                        help='skip periodic evaluation')
     parser.add_argument('--no-progress', action='store_true', help='hide progress bars')
     return parser
+
+
+def settle_flags(args: argparse.Namespace) -> argparse.Namespace:
+    """Fill the loop's flags: given > stored in OUT/loop.json (on --resume) > defaults.
+
+    Raises ValueError for a fresh loop without --task/--config or a resume with another task.
+    """
+    stored: dict[str, Any] = {}
+    path = args.out / LOOP_JSON
+    if args.resume and path.is_file():
+        try:
+            stored = json.loads(path.read_text())
+        except (OSError, ValueError) as error:
+            raise ValueError(f'{path}: cannot read the stored flags ({error}); repeat the '
+                             'flags of the first run') from None
+    if args.task is not None and stored.get('task') not in (None, args.task):
+        raise ValueError(f'--task {args.task}: the loop in {args.out} runs {stored["task"]}')
+    for key in STORED:
+        if getattr(args, key) is None:
+            setattr(args, key, stored.get(key, DEFAULTS.get(key)))
+    missing = [f'--{key}' for key in ('task', 'config') if getattr(args, key) is None]
+    if missing:
+        where = f' ({path} is missing)' if args.resume else ''
+        raise ValueError(f'{" and ".join(missing)} required{where}')
+    args.config = input_path(args.config, '--config').resolve()
+    return args
+
+
+def _store_flags(args: argparse.Namespace) -> None:
+    args.out.mkdir(parents=True, exist_ok=True)
+    flags = {key: str(value) if isinstance(value, Path) else value
+             for key, value in vars(args).items() if key in STORED}
+    (args.out / LOOP_JSON).write_text(json.dumps(flags, indent=1) + '\n')
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -217,6 +270,11 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.offline.errors import BagError, IngestError
 
     args = _build_parser().parse_args(argv)
+    try:
+        args = settle_flags(args)
+    except ValueError as error:
+        print(f'zeus loop: {error}', file=sys.stderr)
+        return 2
     for flag in ('rounds', 'random_steps', 'steps'):
         if getattr(args, flag) < 1:
             print(f'zeus loop: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
@@ -236,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, ValueError) as error:
         print(f'zeus loop: {error}', file=sys.stderr)
         return 2
+    _store_flags(args)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         run_loop(args.task, config, args.out, rounds=args.rounds,

@@ -47,11 +47,16 @@ def _cell(value: Any) -> Any:
     return value
 
 
-def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> Path:
-    """Write `rows` (columns = union of their keys) atomically, so readers never see half."""
+def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]],
+              columns: Sequence[str] | None = None) -> Path:
+    """Write `rows` atomically, so readers never see half.
+
+    Columns: `columns` (then a file without rows still has its header), else the union of the
+    rows' keys.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    columns = _columns(rows)
+    columns = list(columns) if columns is not None else _columns(rows)
     tmp = path.with_name(f'.{path.name}.tmp')
     with tmp.open('w', newline='') as handle:
         writer = csv.DictWriter(handle, fieldnames=columns)

@@ -6,7 +6,6 @@ The writer side of crash durability (periodic flush, provisional metadata.yaml) 
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +20,7 @@ from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
+from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.bag_writer import BAG_VERSION, JazzyWriter
 from zeus_ros.offline.durable import STATE_KEY, bag_metadata, replace_text
 from zeus_ros.offline.errors import BagError
@@ -310,12 +310,13 @@ def _bag_dirs(path: Path) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     """`zeus recover BAG...`: restore bags cut off by a crash, say what was kept and lost."""
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus recover', description='Restore rosbag2 bags cut off by a crash (SIGKILL, '
         'power loss of the process): rebuild the mcap summary / metadata.yaml from the data '
         'on disk. Bags closed properly are left untouched.')
-    parser.add_argument('bags', nargs='+', type=Path,
-                        help='bag directories, or a recorder output directory of split bags')
+    flag_or_positional(parser, '--bags', many=True, type=Path,
+                       help='bag directories, or a recorder output directory of split bags '
+                       '(also accepted without --bags, the old spelling)')
     parser.add_argument('--dry-run', action='store_true', help='report only, change nothing')
     parser.add_argument('--keep-original', action='store_true',
                         help='keep the damaged mcap next to the rebuilt one as *.mcap.orig')

@@ -10,7 +10,6 @@ the markdown table (as in docs/results.md).
 
 from __future__ import annotations
 
-import argparse
 from collections import defaultdict
 import csv
 from pathlib import Path
@@ -20,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
+from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.diagnostics import DIAGNOSTICS
 
@@ -289,16 +290,18 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
             writer.writeheader()
             writer.writerows(headroom)
         (out / 'headroom.md').write_text(headroom_table(headroom) + '\n')
-    _plot(rows, title or folder.name, out / 'returns.png')
+    _plot(rows, title or task_label(folder.name), out / 'returns.png')
     return rows
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus report`; returns the process exit code."""
-    parser = argparse.ArgumentParser(prog='zeus report', description=__doc__.splitlines()[0])
-    parser.add_argument('folder', type=Path, help='experiment folder of one task')
+    parser = ZeusArgumentParser(prog='zeus report', description=__doc__.splitlines()[0])
+    flag_or_positional(parser, '--folder', many=False, type=Path,
+                       help='experiment folder of one task (also accepted without --folder, '
+                       'the old spelling)')
     parser.add_argument('--out', type=Path, required=True, help='folder for CSV, MD and PNG')
-    parser.add_argument('--title', help='plot title (default: the folder name)')
+    parser.add_argument('--title', help="plot title (default: the folder's task name)")
     args = parser.parse_args(argv)
     try:
         rows = write_report(args.folder, args.out, args.title)

@@ -23,6 +23,7 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
 from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
@@ -106,12 +107,16 @@ def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
     """load_config, but a binary or empty file is a ConfigError naming the flag, not a default.
 
     An empty config would silently train with every default: refused, so a truncated or
-    wrongly named file cannot pass for a deliberate choice.
+    wrongly named file cannot pass for a deliberate choice. A relative path not in the working
+    directory is looked up in the package share (params/train/... from any folder).
     """
     try:
+        path = input_path(path, flag)
         data = load_yaml_text(path)
     except OSError as error:
         raise ConfigError(f'{flag} {path}: cannot read it ({error.strerror})') from None
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
     except YamlTextError as error:
         hint = ('; expected a YAML training config such as params/train/state_cpu.yaml'
                 if error.binary else '')
@@ -159,7 +164,8 @@ def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
         task = make_task(dataset.task)
     except (KeyError, ValueError) as error:
         raise TrainError(f'bags name task {dataset.task!r}, which the task registry does not '
-                         f'know ({error}); record with a registered task') from None
+                         f'know ({error}); record with a registered task, or pass the file that '
+                         'declares it with --task-file') from None
     try:
         low, high = task.action_bounds
         if len(low) != dataset.action_dim:
@@ -284,6 +290,8 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     window = RunningMean()
     step = start
     begin = window_start = time.perf_counter()
+    # A resumed run's wall time continues from its last logged row (loop rounds add up).
+    time_before = float(metrics.rows[-1].get('time_s') or 0.0) if metrics.rows else 0.0
     window_steps = 0
 
     last_good = (out / CHECKPOINT, start) if resume else None
@@ -322,7 +330,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
             bar.update(1)
             if step % cfg.log_interval == 0 or step == cfg.num_updates:
                 now = time.perf_counter()
-                row = {'step': step, 'time_s': round(now - begin, 3),
+                row = {'step': step, 'time_s': round(time_before + now - begin, 3),
                        'updates_per_s': window_steps / max(now - window_start, 1e-9),
                        **window.pop()}
                 window_start, window_steps = now, 0
@@ -417,14 +425,18 @@ def _plot(out: Path, metrics: MetricsLog, evals: MetricsLog) -> None:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ZeusArgumentParser(
         prog='zeus train', description='Train a ZeUS (or baseline) agent from bags.')
     parser.add_argument('--bags', nargs='+', required=True,
                         help='bag directories, .mcap/.db3 files, or folders of bags')
     parser.add_argument('--config', type=Path, required=True,
                         help='training config YAML, e.g. params/train/state_cpu.yaml')
     parser.add_argument('--out', type=Path, required=True, help='run directory, e.g. runs/x')
-    parser.add_argument('--task', help='expected task (error if the bags hold another)')
+    parser.add_argument('--task', type=task_name,
+                        help=f'expected task (error if the bags hold another); {TASK_HELP}')
+    parser.add_argument('--task-file', type=Path, default=None,
+                        help='YAML task file declaring the task the bags name (a robot: its '
+                        'robot_bridge params; see params/robot_bridge.yaml)')
     parser.add_argument('--namespace', default='',
                         help='namespace of the recorded system: reads /<ns>/zeus/... topics '
                         '(bags of `ros2 bag record`; the recorder node needs none)')
@@ -483,6 +495,14 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     import warnings
 
+    if args.task_file is not None:
+        from sim_bridge.registry import register_task_file
+
+        try:
+            register_task_file(args.task_file)
+        except ValueError as error:
+            print(f'zeus train: --task-file: {error}', file=sys.stderr)
+            return 2
     default_showwarning = _print_ingest_warnings()
     try:
         train(args.bags, config, args.out, task=args.task, resume=args.resume,

@@ -1,0 +1,119 @@
+"""One error style for every `zeus` command, task names in --help, paths from any folder."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+import pytest
+
+from sim_bridge.registry import TASK_NAMES
+from zeus_ros.cli import SUBCOMMANDS
+
+
+def _run(command: str, argv: list[str]) -> int:
+    main = importlib.import_module(SUBCOMMANDS[command][0]).main
+    try:
+        return int(main(argv) or 0)
+    except SystemExit as stop:
+        return int(stop.code or 0)
+
+
+BAD_VALUES = [
+    ('collect', ['--task', 'cheetah-run-v0', '--steps', '5', '--out', 'x'], '--task',
+     "did you mean 'Cheetah-Run-v0'"),
+    ('collect', ['--task', 'Cheetah-Run-v0', '--steps', 'many', '--out', 'x'], '--steps',
+     "invalid int value: 'many'"),
+    ('collect', ['--task', 'Cheetah-Run-v0', '--steps', '5', '--out', 'x', '--storage', 'zip'],
+     '--storage', "(choose from 'mcap', 'sqlite3')"),
+    ('collect', ['--task', 'Cheetah-Run-v0', '--steps', '5', '--out', 'x', '--schedule',
+                 'swich:train:every=10'], '--schedule', 'allowed: constant, switch'),
+    ('train', ['--bags', 'b', '--config', 'c.yaml', '--out', 'o', '--method', 'zeuss'],
+     '--method', "did you mean 'zeus'"),
+    ('train', ['--bags', 'b', '--config', 'c.yaml', '--out', 'o', '--task', 'finger'],
+     '--task', 'Finger-Spin-v0'),
+    ('eval', ['--checkpoint', 'c.pt', '--split', 'extrapolate'], '--split',
+     "did you mean 'extrapolation'"),
+    ('loop', ['--task', 'Cheetah-Run-v0', '--config', 'c.yaml', '--out', 'o', '--method', 'x'],
+     '--method', "choose from 'zeus'"),
+    ('launch', ['--log-level', 'loud'], '--log-level', "choose from 'debug'"),
+    ('inspect', ['--duration', 'soon'], '--duration', "invalid float value: 'soon'"),
+    ('demo', ['--task', 'Cheetah-Run-v2'], '--task', "did you mean 'Cheetah-Run-v1'"),
+    ('report', ['--out', 'o'], '--folder', 'required'),
+    ('recover', ['--dry-run'], '--bags', 'required'),
+    ('export', ['--checkpoint', 'c.pt'], '--out', 'required'),
+    ('ingest', ['--strict'], 'bags', 'required'),
+]
+
+
+@pytest.mark.parametrize(('command', 'argv', 'flag', 'hint'), BAD_VALUES,
+                         ids=[f'{c}-{f}' for c, _a, f, _h in BAD_VALUES])
+def test_a_bad_value_is_one_line_naming_the_flag_and_the_choices(
+        command: str, argv: list[str], flag: str, hint: str, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """Exit 2, one stderr line `zeus <cmd>: ... <flag> ... <choices/nearest>`, no traceback."""
+    monkeypatch.chdir(tmp_path)
+    assert _run(command, argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1, err
+    assert err.startswith(f'zeus {command}: ') and flag in err and hint in err, err
+    assert not (tmp_path / 'x').exists()
+
+
+@pytest.mark.parametrize('command', ['collect', 'loop', 'train', 'eval'])
+def test_help_lists_the_task_names(command: str, capsys: pytest.CaptureFixture) -> None:
+    """--help of every command taking --task names every task family."""
+    assert _run(command, ['--help']) == 0
+    text = ' '.join(capsys.readouterr().out.split())
+    for name in TASK_NAMES:
+        # argparse may wrap a name at its hyphens: compare without the wrapping spaces
+        assert name in text.replace('- ', '-'), (command, name)
+
+
+def test_schedule_is_spelled_one_way_in_every_help(capsys: pytest.CaptureFixture) -> None:
+    """`zeus collect` and `zeus loop` show the same grammar; loop's default is written in it."""
+    from zeus_ros.offline.collect import parse_schedule
+
+    _run('loop', ['--help'])
+    text = capsys.readouterr().out
+    assert 'switch:train:every=100' in text and 'values=train' not in text
+    assert parse_schedule('switch:train:every=100') == {'kind': 'switch', 'values': 'train',
+                                                        'every': 100}
+
+
+def test_demo_offers_every_task_family(capsys: pytest.CaptureFixture) -> None:
+    """Every registered family is a demo --task choice (Sawyer without a shipped checkpoint)."""
+    _run('demo', ['--help'])
+    text = ' '.join(capsys.readouterr().out.split())
+    for name in TASK_NAMES:
+        assert name in text, name
+    assert _run('demo', ['--task', 'Sawyer-Peg-v0', '--no-frozen']) == 2
+    err = capsys.readouterr().err
+    assert 'no shipped checkpoint for Sawyer-Peg-v0' in err and '--random-policy' in err
+
+
+def test_train_config_is_found_in_the_package_share_from_any_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--config params/train/state_cpu.yaml works outside the repository; a typo names both."""
+    from zeus_ros.learning.errors import ConfigError
+    from zeus_ros.offline.train import read_config
+
+    monkeypatch.chdir(tmp_path)
+    assert read_config(Path('params/train/state_cpu.yaml')).method
+    with pytest.raises(ConfigError, match=r'--config params/train/nope.yaml: not found in .* '
+                       'nor in the package share'):
+        read_config(Path('params/train/nope.yaml'))
+
+
+def test_old_positional_spellings_still_work(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    """`zeus recover BAG` and `zeus report FOLDER` (the old spelling) equal the flags."""
+    missing = tmp_path / 'nothing'
+    assert _run('recover', [str(missing)]) == 1
+    positional = capsys.readouterr().err
+    assert _run('recover', ['--bags', str(missing)]) == 1
+    assert capsys.readouterr().err == positional
+    assert _run('report', [str(missing), '--out', str(tmp_path / 'r')]) == 2
+    positional = capsys.readouterr().err
+    assert _run('report', ['--folder', str(missing), '--out', str(tmp_path / 'r')]) == 2
+    assert capsys.readouterr().err == positional

@@ -1,0 +1,109 @@
+"""What every `zeus` command shares on its command line: one error style, task names, paths.
+
+A bad value is one line on stderr naming the command, the flag, the value and the choices (or
+the nearest one), then exit 2: no usage block, no traceback. A relative input path is found
+where a user expects it: in the working directory, else in the installed package share (so
+`--config params/train/state_cpu.yaml` works from any folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable, Sequence
+import difflib
+import os
+from pathlib import Path
+from typing import Any, NoReturn
+
+__all__ = ['TASK_HELP', 'ZeusArgumentParser', 'flag_or_positional', 'input_path', 'nearest',
+           'task_name']
+
+
+def _task_names() -> tuple[str, ...]:
+    from sim_bridge.registry import TASK_NAMES
+
+    return TASK_NAMES
+
+
+TASK_HELP = 'task family: ' + ', '.join(_task_names())
+
+
+def nearest(value: str, choices: Iterable[str]) -> str:
+    """'; did you mean X?' for the closest choice (case-insensitive), else ''."""
+    options = list(choices)
+    lowered = {c.lower(): c for c in options}
+    match = difflib.get_close_matches(value.lower(), list(lowered), n=1, cutoff=0.5)
+    return f"; did you mean '{lowered[match[0]]}'?" if match else ''
+
+
+def task_name(value: str) -> str:
+    """The argparse type of --task: a registered task name, else the choices and the nearest."""
+    names = _task_names()
+    if value in names:
+        return value
+    raise argparse.ArgumentTypeError(
+        f"unknown task '{value}' (choose from {', '.join(names)}){nearest(value, names)}")
+
+
+def input_path(value: str | os.PathLike[str], flag: str) -> Path:
+    """An existing input file or folder, found where a user expects it.
+
+    As given (absolute, or relative to the working directory), else relative to the installed
+    package share; a ValueError names both places.
+    """
+    from zeus_ros.launch_defaults import share_dir
+
+    path = Path(os.path.expanduser(os.fspath(value)))
+    if path.is_absolute() or path.exists():
+        return path
+    shared = share_dir() / path
+    if shared.exists():
+        return shared
+    raise ValueError(f'{flag} {value}: not found in {Path.cwd()} nor in the package share '
+                     f'{share_dir()}')
+
+
+class ZeusArgumentParser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line `zeus X: argument --f: ... (choose from ...)`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._zeus_aliases: list[tuple[str, str, bool]] = []
+
+    def parse_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
+                   namespace: argparse.Namespace | None = None) -> argparse.Namespace:
+        """Parse, then fold the deprecated positional spellings into their flags."""
+        parsed = super().parse_args(args, namespace)
+        for flag, dest, many in self._zeus_aliases:
+            given, old = getattr(parsed, dest), getattr(parsed, f'_{dest}')
+            delattr(parsed, f'_{dest}')
+            values = [*(given if many and given else [] if given is None else [given]), *old]
+            if not values:
+                self.error(f'the following arguments are required: {flag}')
+            if not many and len(values) > 1:
+                self.error(f'argument {flag}: expected one value, got {len(values)}')
+            setattr(parsed, dest, values if many else values[0])
+        return parsed
+
+    def error(self, message: str) -> NoReturn:
+        """Print one line (with the nearest choice for an invalid one) and exit 2."""
+        if 'invalid choice:' in message and '(choose from' in message:
+            value = message.split('invalid choice:', 1)[1].split('(choose from', 1)[0]
+            value = value.strip().strip("'\"")
+            choices = [c.strip().strip("'\"") for c in
+                       message.rsplit('(choose from', 1)[1].rstrip(')').split(',')]
+            message += nearest(value, choices)
+        self.exit(2, f'{self.prog}: {message} (see {self.prog} --help)\n')
+
+
+def flag_or_positional(parser: ZeusArgumentParser, flag: str, *, many: bool,
+                       **kwargs: object) -> None:
+    """Add `--flag VALUE` plus the old positional spelling, kept as a silent alias.
+
+    Call `parser.parse_args` through ZeusArgumentParser.parse_args, which merges the two.
+    """
+    dest = flag.lstrip('-').replace('-', '_')
+    parser.add_argument(flag, nargs='+' if many else None, dest=dest, **kwargs)
+    parser.add_argument(f'_{dest}', nargs='*', help=argparse.SUPPRESS,
+                        type=kwargs.get('type'))
+    parser._zeus_aliases.append((flag, dest, many))
