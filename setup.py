@@ -46,6 +46,7 @@ setup(
             'context_estimator_node = zeus_ros.nodes.context_estimator_node:main',
             'policy_node = zeus_ros.nodes.policy_node:main',
             'recorder_node = zeus_ros.nodes.recorder_node:main',
+            'robot_bridge_node = zeus_ros.nodes.robot_bridge_node:main',
             'zeus = zeus_ros.cli:main',
         ],
     },

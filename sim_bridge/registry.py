@@ -1,13 +1,20 @@
-"""Task names -> task classes; the one way to build a task (the node, collect and eval use it)."""
+"""Task names -> task classes; the one way to build a task (the node, collect and eval use it).
+
+Besides the built-in families, a task can be declared in a YAML file (sim_bridge/task_files.py):
+`make_task('path/to/task.yaml')` builds it, and `register_task_file(path)` makes its name known
+(so bags that name it can be trained on).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 import importlib
+from pathlib import Path
 
 from sim_bridge.core import ContextualTask
 
-__all__ = ['TASK_NAMES', 'make_task']
+__all__ = ['TASK_NAMES', 'is_simulated', 'is_task_file', 'make_task', 'register_task_file',
+           'task_class']
 
 _TASKS: dict[str, tuple[str, str]] = {
     'Cheetah-Run-v0': ('sim_bridge.cheetah', 'CheetahRunTask'),
@@ -18,12 +25,42 @@ _TASKS: dict[str, tuple[str, str]] = {
     'Sawyer-Peg-v0': ('sim_bridge.sawyer', 'SawyerPegTask'),
 }
 TASK_NAMES: tuple[str, ...] = tuple(_TASKS)
+_FILE_TASKS: dict[str, Path] = {}
+"""Task name -> the YAML file that declares it (registered with register_task_file)."""
+
+
+def is_task_file(name: str) -> bool:
+    """True when `name` is a path to a YAML task file rather than a task name."""
+    return name.endswith(('.yaml', '.yml'))
+
+
+def register_task_file(path: str | Path) -> str:
+    """Read a task file, remember it under its task name and return that name (ValueError)."""
+    from sim_bridge.task_files import load_task_file
+
+    declared = load_task_file(Path(path))
+    _FILE_TASKS[declared.name] = Path(path).resolve()
+    return declared.name
+
+
+def is_simulated(name: str) -> bool:
+    """False for a task that only a robot can step (declared by robot_bridge params)."""
+    if is_task_file(name) or name in _FILE_TASKS:
+        from sim_bridge.task_files import load_task_file
+
+        return load_task_file(_FILE_TASKS.get(name, Path(name))).simulated
+    return name in _TASKS
 
 
 def task_class(name: str) -> Callable[..., ContextualTask]:
     """The class of a task, imported on demand (MuJoCo models load only when used)."""
+    if is_task_file(name) or name in _FILE_TASKS:
+        from sim_bridge.task_files import load_task_file
+
+        return load_task_file(_FILE_TASKS.get(name, Path(name))).factory
     if name not in _TASKS:
-        raise ValueError(f'unknown task {name!r}; valid tasks: {", ".join(TASK_NAMES)}')
+        raise ValueError(f'unknown task {name!r}; valid tasks: {", ".join(TASK_NAMES)}, '
+                         'or a task file (.yaml)')
     module, cls = _TASKS[name]
     try:
         return getattr(importlib.import_module(module), cls)
@@ -33,5 +70,5 @@ def task_class(name: str) -> Callable[..., ContextualTask]:
 
 def make_task(name: str, *, seed: int | None = None,
               context: Mapping[str, float] | None = None) -> ContextualTask:
-    """Build a task by its paper name, optionally with a starting context."""
+    """Build a task by its paper name or task file, optionally with a starting context."""
     return task_class(name)(seed=seed, context=context)

@@ -29,9 +29,12 @@ NODES: dict[str, str] = {
     'context_estimator': 'zeus_ros.nodes.context_estimator_node',
     'policy': 'zeus_ros.nodes.policy_node',
     'recorder': 'zeus_ros.nodes.recorder_node',
+    'robot_bridge': 'zeus_ros.nodes.robot_bridge_node',
 }
 """Node name -> module; the installed executable is `<name>_node`."""
 DEFAULT_NODES = ('sim_bridge', 'context_estimator', 'policy')
+STEP_SOURCES = frozenset({'sim_bridge', 'robot_bridge'})
+"""Nodes that publish the steps (a launch runs one): they wait for every other node."""
 AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
@@ -248,7 +251,7 @@ def plan(
     planned = []
     for name in names:
         overrides: dict[str, Any] = {}
-        if name == 'sim_bridge':
+        if name in STEP_SOURCES:
             overrides['min_observers'] = len(names) - 1
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:

@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 import time
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -40,6 +40,7 @@ __all__ = [
     'diagnostics_message',
     'image_from_array',
     'image_qos',
+    'missing_peers',
     'run_node',
     'seconds_from_stamp',
     'stamp_from_seconds',
@@ -102,6 +103,38 @@ class WaitReport:
             self._last = now
             self._node.get_logger().warning(
                 f'still waiting after {now - self._start:.0f} s: {what}')
+
+
+def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int
+                  ) -> list[str]:
+    """What a step producer still waits for before step 0 (empty: start).
+
+    `outputs` are its publishers, the StepFeedback one first, then the observations. Graph
+    counts say who was discovered; the matched counts of our own endpoints say whose data path
+    is ready. Starting before they agree would drop step 0 for a late peer (the estimator would
+    miss it and the policy would act on no context). `min_observers` names how many step
+    subscribers a launch expects (estimator, policy, recorder, ...), so a peer that is still
+    starting up is waited for rather than missed. Counted on the names as the node resolved
+    them: namespace and remaps applied.
+    """
+    step_pub, observations = outputs[0], outputs[1:]
+    observers = sum(node.count_subscribers(pub.topic_name) for pub in observations)
+    unmatched = [pub.topic_name for pub in outputs
+                 if pub.get_subscription_count() < node.count_subscribers(pub.topic_name)]
+    action_topic = action_sub.topic_name
+    actions = node.count_publishers(action_topic)
+    listening = step_pub.get_subscription_count()
+    missing = []
+    if actions == 0:
+        missing.append(f'a policy publishing on {action_topic}')
+    if observers == 0:
+        missing.append(f'a subscriber of {observations[0].topic_name}')
+    if listening < min_observers:
+        missing.append(f'{min_observers} subscribers of {step_pub.topic_name} (min_observers; '
+                       f'{listening} so far)')
+    if unmatched or action_sub.get_publisher_count() < actions:
+        missing.append(f'DDS to match the endpoints of {unmatched or [action_topic]}')
+    return missing
 
 
 def step_qos(depth: int = 10) -> QoSProfile:

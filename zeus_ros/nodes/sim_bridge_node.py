@@ -30,6 +30,7 @@ from zeus_ros.nodes.common import (
     action_qos,
     diagnostics_message,
     image_from_array,
+    missing_peers,
     image_qos,
     run_node,
     stamp_from_seconds,
@@ -132,37 +133,13 @@ class SimBridgeNode(Node):
 
     # -- step protocol ----------------------------------------------------------------------
     def _peers_ready(self) -> bool:
-        """True once a policy publishes actions, someone observes, and DDS matched them all.
-
-        Graph counts say who was discovered; the matched counts of our own endpoints say whose
-        data path is ready. Starting before they agree would drop step 0 for a late peer (the
-        estimator would miss it and the policy would act on no context). `min_observers` names
-        how many /zeus/step subscribers a launch expects (estimator, policy, recorder, ...), so
-        a peer that is still starting up is waited for rather than missed.
-        """
+        """True once a policy publishes actions, someone observes, and DDS matched them all."""
         if not self.params['wait_for_peers']:
             return True
-        # Counted on the names as this node resolved them: namespace and remaps applied.
-        outputs = [self._pub_state, self._pub_step]
+        outputs = [self._pub_step, self._pub_state]
         if self._pub_image is not None:
             outputs.append(self._pub_image)
-        observations = [pub for pub in outputs if pub is not self._pub_step]
-        observers = sum(self.count_subscribers(pub.topic_name) for pub in observations)
-        unmatched = [pub.topic_name for pub in outputs
-                     if pub.get_subscription_count() < self.count_subscribers(pub.topic_name)]
-        action_topic = self._sub_action.topic_name
-        actions = self.count_publishers(action_topic)
-        listening = self._pub_step.get_subscription_count()
-        missing = []
-        if actions == 0:
-            missing.append(f'a policy publishing on {action_topic}')
-        if observers == 0:
-            missing.append(f'a subscriber of {observations[0].topic_name}')
-        if listening < self.params['min_observers']:
-            missing.append(f'{self.params["min_observers"]} subscribers of '
-                           f'{self._pub_step.topic_name} (min_observers; {listening} so far)')
-        if unmatched or self._sub_action.get_publisher_count() < actions:
-            missing.append(f'DDS to match the endpoints of {unmatched or [action_topic]}')
+        missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing

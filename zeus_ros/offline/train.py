@@ -275,6 +275,11 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
                                  namespace, strict)
     agent, start = _start(out, config, dataset, replay, resume)
     cfg = agent.config
+    from sim_bridge.registry import is_simulated
+
+    if evaluate and not is_simulated(dataset.task):
+        log(f'train: {dataset.task} is a robot (no simulator here): no periodic evaluation')
+        evaluate = False
     out.mkdir(parents=True, exist_ok=True)
     (out / 'config.yaml').write_text(yaml.safe_dump(cfg.to_dict(), sort_keys=False))
     log(f'train: {dataset.task}, method {cfg.method}, {len(replay)} transitions in '

@@ -1,0 +1,153 @@
+"""robot_bridge with a fake ros2_control robot: record -> train -> redeploy, and its safety layer.
+
+Real processes on a loopback-only domain: test/fake_robot.py (JointState at 50 Hz in another
+joint order, a payload sensor, a forward command controller with a first-order plant),
+robot_bridge_node, the unchanged context_estimator and policy nodes in realtime mode, and the
+recorder; `zeus train` on what was recorded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+import json
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from live_fixtures import node
+from ros_harness import REPO, ProcessGroup, python_module, require_ros
+
+pytestmark = pytest.mark.ros
+PARAMS = REPO / 'params' / 'robot_bridge.yaml'
+TINY = {
+    'method': 'zeus', 'obs_kind': 'state', 'k': 3, 'context_dim': 4, 'transition_dim': 8,
+    'context_hidden_dim': 16, 'feature_dim': 8, 'encoder_hidden_dim': 32, 'hidden_dim': 32,
+    'model_hidden_dim': 32, 'batch_size': 16, 'num_updates': 30, 'eval_interval': 1000,
+    'checkpoint_interval': 30, 'log_interval': 10, 'device': 'cpu', 'alpha_psi': 1.0,
+    'adam_beta1': 0.9,
+}
+ACTION_TO_CONTROLLER = [1, 0]
+"""action order (shoulder, elbow) -> the controller's order (elbow, shoulder)."""
+
+
+@pytest.fixture
+def robot_processes() -> Iterator[ProcessGroup]:
+    """A process group on a domain of this issue's range (180-199), always cleaned up."""
+    require_ros()
+    group = ProcessGroup(domain_id=random.SystemRandom().randint(180, 199))
+    try:
+        yield group
+    finally:
+        group.stop_all()
+
+
+def robot_node(name: str, *params: str) -> list[str]:
+    """A zeus_ros node reading params/robot_bridge.yaml, with extra `key:=value` overrides."""
+    argv = node(name, *params)
+    return [*argv[:argv.index('--ros-args') + 1], '--params-file', str(PARAMS),
+            *argv[argv.index('--ros-args') + 1:]]
+
+
+def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
+             checkpoint: Path | None) -> tuple[Path, list[list[float]]]:
+    """Fake robot + bridge + (estimator) + policy + recorder for `steps` steps: bag, commands."""
+    bag, commands = tmp / f'bag_{tag}', tmp / f'commands_{tag}.json'
+    fake = group.start(f'fake_robot_{tag}', [sys.executable, str(REPO / 'test' / 'fake_robot.py'),
+                                             str(commands)])
+    recorder = group.start(f'recorder_{tag}', node('recorder', f'output:={bag}'))
+    agents = []
+    if checkpoint is None:
+        agents.append(group.start(f'policy_{tag}', robot_node('policy', f'task:={PARAMS}')))
+    else:
+        agents.append(group.start(f'estimator_{tag}', robot_node(
+            'context_estimator', f'checkpoint:={checkpoint}')))
+        agents.append(group.start(f'policy_{tag}', robot_node(
+            'policy', f'checkpoint:={checkpoint}')))
+    group.wait_for_log(f'recorder_{tag}', 'recording ')
+    group.wait_for_log(f'fake_robot_{tag}', 'fake robot up')
+    observers = len(agents) + 1
+    bridge = group.start(f'robot_bridge_{tag}', [
+        *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
+        '--params-file', str(PARAMS), '-p', f'max_steps:={steps}',
+        '-p', f'min_observers:={observers}'])
+    assert bridge.wait(timeout=120) == 0, group.log_text(f'robot_bridge_{tag}')[-3000:]
+    for process in agents:
+        group.stop(process)
+    assert group.stop(recorder, signal.SIGINT) == 0, group.log_text(f'recorder_{tag}')
+    group.stop(fake)
+    return bag, json.loads(commands.read_text())['commands']
+
+
+def zeus_train(bags: list[Path], out: Path, tmp: Path) -> Path:
+    """A tiny `zeus train` run on the bags (the robot's task from its params file)."""
+    config = tmp / 'tiny.yaml'
+    config.write_text(yaml.safe_dump(TINY))
+    argv = [*python_module('zeus_ros.cli', 'train', '--bags', *map(str, bags), '--config',
+                           str(config), '--task-file', str(PARAMS), '--out', str(out),
+                           '--no-progress', '--threads', '1')]
+    result = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return out / 'final.pt'
+
+
+def read_bag(bag: Path) -> dict[str, dict[int, object]]:
+    """Messages of the step topics by step index."""
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, dict[int, object]] = {}
+    bags = sorted(path.parent for path in bag.rglob('metadata.yaml'))
+    with AnyReader(bags) as reader:
+        for connection, _t, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            if hasattr(msg, 'step'):
+                out.setdefault(connection.topic, {})[msg.step] = msg
+    return out
+
+
+def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
+                                                 tmp_path: Path) -> None:
+    """Random policy records, the bag trains, the checkpoint drives the robot 300 steps."""
+    from zeus_ros.offline.ingest import ingest_bags
+
+    bag_a, _ = run_live(robot_processes, tmp_path, 'random', 120, None)
+    checkpoint = zeus_train([bag_a], tmp_path / 'run_a', tmp_path)
+    steps = 300
+    bag_b, commands = run_live(robot_processes, tmp_path, 'zeus', steps, checkpoint)
+
+    topics = read_bag(bag_b)
+    assert sorted(topics['/zeus/step']) == list(range(steps + 1))
+    feedback, states = topics['/zeus/step'], topics['/zeus/observation/state']
+    for step in range(steps + 1):
+        obs = np.asarray(states[step].data)
+        # Layout: positions (shoulder, elbow), velocities (shoulder, elbow), payload sensor.
+        assert obs.shape == (5,) and obs[4] == pytest.approx(0.5)
+        if not feedback[step].first:  # reward velocity:shoulder is the shoulder's velocity
+            assert feedback[step].reward == pytest.approx(obs[2])
+    assert [feedback[s].first for s in (0, 101, 202)] == [True] * 3  # episode_length 100
+    truth = topics['/zeus/context_truth'][steps]
+    assert list(truth.names) == ['payload_kg'] and list(truth.values) == [0.5]
+    contexts = topics['/zeus/context']
+    assert len(contexts) >= 0.95 * steps, 'the estimator answered too few steps'
+
+    # Actions arrive at the plant in the controller's joint order, clipped into the limits.
+    actions = [np.asarray(msg.data, np.float64) for _, msg in sorted(topics['/zeus/action']
+                                                                     .items())]
+    assert len(actions) >= 0.95 * steps
+    sent = {tuple(np.round(np.clip(a, -1, 1)[ACTION_TO_CONTROLLER], 6)) for a in actions}
+    received = [tuple(np.round(c, 6)) for c in commands]
+    assert all(len(c) == 2 for c in received)
+    policy_commands = [c for c in received if c != (0.0, 0.0)]  # (0, 0): the safe command
+    assert set(policy_commands) <= sent, 'a command reached the robot in the wrong order'
+    assert len(set(policy_commands)) >= 0.9 * len(sent), 'actions were lost on the way'
+    assert any(abs(a[0] - a[1]) > 0.1 for a in actions), 'the order must be observable'
+
+    # record -> retrain: the new bag trains (with the first one).
+    dataset = ingest_bags([bag_b])
+    assert dataset.task == 'FakeArm-v0' and dataset.context_names == ('payload_kg',)
+    assert zeus_train([bag_a, bag_b], tmp_path / 'run_b', tmp_path).is_file()
