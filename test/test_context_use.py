@@ -13,7 +13,7 @@ from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
 from zeus_ros.learning.models import RewardModel, TransitionModel
-from zeus_ros.learning.representation import context_loss
+from zeus_ros.learning.representation import context_loss, representation_losses
 from zeus_ros.learning.synthetic import SyntheticSystem
 from zeus_ros.offline.diagnostics import (
     context_sensitivity,
@@ -113,6 +113,33 @@ def test_critic_gradient_reaches_psi_only_when_configured() -> None:
         agent.update(batch, pair, 0)
         psi[flag] = [p.detach().clone() for p in agent.modules['psi'].parameters()]
     assert any(not torch.equal(a, b) for a, b in zip(psi[False], psi[True], strict=True))
+
+
+def test_psi_target_trails_psi_and_feeds_the_td_target() -> None:
+    """context_target_tau > 0: a slow copy of psi trails it and encodes H_{t+1}.
+
+    It moves towards psi by tau per target update and takes no gradient; tau = 0: no copy.
+    """
+    system = SyntheticSystem(k=3)
+    assert 'psi_target' not in make_agent(_config('zeus'), system.spec()).modules
+    agent = make_agent(_config('zeus', context_target_tau=0.5, target_update_freq=1),
+                       system.spec())
+    psi, target = agent.modules['psi'], agent.modules['psi_target']
+    assert not any(p.requires_grad for p in target.parameters())
+    before = [p.detach().clone() for p in target.parameters()]
+    batch, pair = system.sample(8), system.sample(8)
+    agent.update(batch, pair, 0)
+    for old, new, online in zip(before, target.parameters(), psi.parameters(), strict=True):
+        torch.testing.assert_close(new, 0.5 * old + 0.5 * online.detach())
+    metrics: dict[str, torch.Tensor] = {}
+    losses = representation_losses(agent, batch, pair, metrics)
+    history, (feat, next_feat) = agent.history_features(
+        batch.hist_obs, batch.hist_action, batch.hist_reward, batch.hist_next_obs,
+        batch.hist_mask, batch.obs, batch.next_obs)
+    next_history = history.detach().shifted(feat.detach(), agent.normalize_action(batch.action),
+                                            batch.reward, next_feat.detach())
+    with torch.no_grad():
+        torch.testing.assert_close(losses.next_context, target(next_history))
 
 
 def test_old_checkpoints_keep_the_config_they_were_trained_with() -> None:

@@ -12,6 +12,8 @@ trains what (one place to read it):
   by one ContextNormalizer when `context_norm: running`.
 - the actor sees [phi(o), c] detached (SAC-AE/drqv2: the encoder is trained via the critic).
 - T and R get no gradient from the context loss: d(c1, c2) is computed under no_grad.
+- psi(H_{t+1}) for the TD target comes from psi, or from its slow copy `psi_target` when
+  `context_target_tau` > 0.
 
 The dynamics loss is the Gaussian NLL of mtrl (dynamics_loss='gaussian_nll'): its optimum in mu
 is the same conditional mean that eq. 1's MSE targets, and it also fits sigma, without which the
@@ -128,8 +130,11 @@ class ZeusAgent:
                                                              cfg.context_norm_momentum)
         self.modules['encoder_target'] = copy.deepcopy(self.modules['encoder'])
         self.modules['critic_target'] = copy.deepcopy(self.modules['critic'])
-        for name in ('encoder_target', 'critic_target'):
-            self.modules[name].requires_grad_(False)
+        if 'psi' in self.modules and cfg.context_target_tau > 0:
+            self.modules['psi_target'] = copy.deepcopy(self.modules['psi'])
+        for name in ('encoder_target', 'critic_target', 'psi_target'):
+            if name in self.modules:
+                self.modules[name].requires_grad_(False)
         for module in self.modules.values():
             module.to(self.device)
         self.log_alpha = torch.tensor(math.log(cfg.init_temperature), device=self.device,
@@ -280,6 +285,8 @@ class ZeusAgent:
             m = self.modules
             soft_update_params(m['critic'], m['critic_target'], self.config.critic_tau)
             soft_update_params(m['encoder'], m['encoder_target'], self.config.encoder_tau)
+            if 'psi_target' in m:
+                soft_update_params(m['psi'], m['psi_target'], self.config.context_target_tau)
         names = list(metrics)
         values = torch.stack([metrics[n].detach().float() for n in names]).cpu().tolist()
         return dict(zip(names, values, strict=True))

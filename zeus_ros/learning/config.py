@@ -103,6 +103,10 @@ class ZeusConfig:
     """True: the critic's TD loss trains psi too. Measured harmful at every budget we ran
     (docs/results.md); False: psi is trained by its method's objective only and reaches actor and
     critic detached."""
+    context_target_tau: float = 0.0
+    """> 0: a slow (EMA) copy of psi encodes H_{t+1} for the TD target, updated with this rate
+    at `target_update_freq` like the critic's and encoder's targets (SAC-AE), so that with
+    `critic_context_grad` the target does not move with every psi step. 0: online psi."""
     exploration: str = 'stochastic'
     """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
     paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
@@ -206,7 +210,7 @@ class ZeusConfig:
                      'model_lr', 'alpha_lr', 'init_temperature'):
             _check_float(name, getattr(self, name), low=0.0, low_open=True)
         for name in ('critic_tau', 'encoder_tau', 'discount', 'up_osi_warmup_fraction',
-                     'context_norm_momentum'):
+                     'context_norm_momentum', 'context_target_tau'):
             _check_float(name, getattr(self, name), low=0.0, high=1.0)
         for name in ('cadm_beta', 'decoder_latent_lambda', 'decoder_weight_decay',
                      'context_consistency'):

@@ -169,7 +169,7 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
     with torch.no_grad():
         next_history = history.detach().shifted(feat.detach(), action, batch.reward,
                                                 target_next)
-        next_context = m['psi'](next_history)
+        next_context = m.get('psi_target', m['psi'])(next_history)
     if cfg.context_consistency > 0:
         consistency = consistency_loss(psi1, next_context, batch.not_done)
         total = total + cfg.context_consistency * consistency

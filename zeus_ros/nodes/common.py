@@ -225,14 +225,19 @@ class RateMeter:
 
 
 def diagnostics_message(
-    node: Node, name: str, values: dict[str, object], problems: Sequence[str] = ()
+    node: Node, name: str, values: dict[str, object], problems: Sequence[str] = (),
+    errors: Sequence[str] = (),
 ) -> DiagnosticArray:
-    """One DiagnosticStatus (WARN when `problems` is not empty) wrapped in a DiagnosticArray."""
+    """One DiagnosticStatus (ERROR with `errors`, WARN with `problems`, else OK) in an array.
+
+    `problems` are faults the node covers and counts; `errors` need someone to act.
+    """
     status = DiagnosticStatus()
     status.name = f'{node.get_fully_qualified_name()}: {name}'
     status.hardware_id = 'zeus_ros'
-    status.level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
-    status.message = '; '.join(problems) if problems else 'ok'
+    status.level = (DiagnosticStatus.ERROR if errors else
+                    DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
+    status.message = '; '.join([*errors, *problems]) or 'ok'
     status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
     array = DiagnosticArray()
     array.header.stamp = node.get_clock().now().to_msg()

@@ -27,19 +27,20 @@ from zeus_ros.nodes.common import (
     NodeFinished,
     RateMeter,
     WaitReport,
-    action_qos,
     diagnostics_message,
     image_from_array,
-    missing_peers,
     image_qos,
+    missing_peers,
     run_node,
     stamp_from_seconds,
     steady_timer,
     step_qos,
 )
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
 MODES = ('lockstep', 'realtime')
+ACTION_BACKLOG = 1000  # reader history of zeus/action: room for a flood between two takes
 SCHEDULE_PREFIX = 'schedule.'
 SPECS: dict[str, Spec] = {
     'task': Spec('Cheetah-Run-v0', 'contextual MuJoCo task', choices=TASK_NAMES),
@@ -59,6 +60,8 @@ SPECS: dict[str, Spec] = {
                        live=True, low=0.0),
     'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
                           live=True, low=0),
+    'action_sender': Spec('', 'node whose actions are applied, e.g. /policy (empty: the only '
+                          'action publisher at step 0); others are refused (docs/security.md)'),
     'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
                       live=True, low=0),
 }
@@ -76,7 +79,8 @@ class SimBridgeNode(Node):
         self.mode: str = self.params['mode']
         self.exit_code = 0
         self.counts = dict.fromkeys(
-            ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected'), 0
+            ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected', 'foreign'),
+            0
         )
         self._rate = RateMeter()
         self._awaiting: int | None = None
@@ -98,8 +102,13 @@ class SimBridgeNode(Node):
         from diagnostic_msgs.msg import DiagnosticArray
 
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self._sub_action = self.create_subscription(Action, TOPICS.ACTION, self._on_action,
-                                                    action_qos(self.mode))
+        # Only the paired sender's actions get through (by publisher GID); a deep reader
+        # history keeps its action while a flood from elsewhere is drained and counted.
+        self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.ACTION),
+                                      self.params['action_sender'], what='actions')
+        self._sub_action = SenderSubscription(self, Action, TOPICS.ACTION,
+                                              step_qos(depth=ACTION_BACKLOG), self._on_action,
+                                              admit=self._senders.accepts)
         self._period = self._control_period(task)
         tick = self._period if self.mode == 'realtime' else 0.005
         # Steady clocks: with use_sim_time, ROS time only moves once we publish /clock.
@@ -150,8 +159,8 @@ class SimBridgeNode(Node):
             if math.isinf(self._start_after) and self._peers_ready():
                 self._start_after = now + self.params['peer_grace']
             if now >= self._start_after:
-                if not self._peers_ready():  # someone appeared during the grace period
-                    self._start_after = math.inf
+                if not self._peers_ready() or not self._pair_sender():
+                    self._start_after = math.inf  # someone appeared during the grace period
                     return
                 self._started = True
                 self._publish(self.env.reset())
@@ -166,6 +175,15 @@ class SimBridgeNode(Node):
                 throttle_duration_sec=5.0,
             )
             self._advance(None)
+
+    def _pair_sender(self) -> bool:
+        """Pair with the one action publisher (or action_sender) before step 0."""
+        if not self.params['wait_for_peers'] or self._senders.paired is not None:
+            return True
+        problem = self._senders.pair()
+        if problem is not None:
+            self._wait_report.waiting(problem)
+        return problem is None
 
     def _on_action(self, msg: Action) -> None:
         if self.mode == 'realtime':
@@ -266,11 +284,21 @@ class SimBridgeNode(Node):
         self._deadline = time.monotonic() + self.params['action_timeout']
 
     def _publish_diagnostics(self) -> None:
-        problems = [f'{self.counts[key]} {key}' for key in ('timeouts', 'rejected', 'stale')
-                    if self.counts[key]]
+        self.counts['foreign'] = self._senders.refused
+        problems = [f'{self.counts[key]} {key}' for key in
+                    ('timeouts', 'rejected', 'stale', 'foreign') if self.counts[key]]
+        others = self._senders.others()
+        errors = [f'{len(others)} other publisher(s) on {self._senders.topic}: '
+                  f'{", ".join(map(str, others))}; their actions are refused'] if others else []
         values = {'mode': self.mode, 'task': self.params['task'],
-                  'rate_hz': f'{self._rate.rate:.1f}', **self.counts}
-        self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems))
+                  'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
+                  **self.counts}
+        self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems, errors))
+
+    def destroy_node(self) -> None:
+        """The action subscription is ours (not rclpy's): it goes before the node."""
+        self._sub_action.destroy()
+        super().destroy_node()
 
     def close(self) -> None:
         """Release the renderer; say how far the loop got (what a recording should hold)."""

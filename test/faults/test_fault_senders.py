@@ -1,0 +1,121 @@
+"""Fault matrix, sender rows: only the paired policy drives the robot.
+
+Real processes: sim_bridge (lockstep), a random policy, and a second process publishing on
+zeus/action as fast as it can (flood_actions.py: well-formed actions for the awaited step,
+NaN, Inf, 1e30, wrong lengths, wrong steps). None of its actions may be applied or even
+validated, the loop keeps stepping, /diagnostics says ERROR while the intruder exists and
+names it, and the log names it once.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import signal
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from live_fixtures import TASK, node
+from ros_harness import ProcessGroup, driver_node, spin_until
+
+pytestmark = pytest.mark.ros
+
+FLOODER = Path(__file__).with_name('flood_actions.py')
+FLOOD_SECONDS = 5
+
+
+def _bridge_statuses(diagnostics: list[Any]) -> list[Any]:
+    return [s for array in diagnostics for s in array.status
+            if s.name.lstrip('/').startswith('sim_bridge')]
+
+
+def _watch(probe: Any, steps: list[tuple[float, Any]], diagnostics: list[Any]) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+    from zeus_msgs.msg import StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    probe.create_subscription(StepFeedback, TOPICS.STEP,
+                              lambda m: steps.append((time.monotonic(), m)), step_qos(100))
+    probe.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, diagnostics.append, 50)
+
+
+def test_a_flooding_second_publisher_never_drives_the_robot(
+        ros_processes: ProcessGroup) -> None:
+    """Its actions are never applied, the loop keeps stepping, ERROR on /diagnostics, one log."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from flood_actions import MARK
+    from zeus_msgs.msg import StepFeedback
+
+    ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}'))
+    ros_processes.start('policy', node('policy', f'task:={TASK}'))
+    steps: list[tuple[float, Any]] = []
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        _watch(probe, steps, diagnostics)
+        assert spin_until(probe, lambda: len(steps) > 150, timeout=90), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+        calm = [t for t, _ in steps[50:]]
+        calm_rate = (len(calm) - 1) / (calm[-1] - calm[0])
+        flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER),
+                                                   str(FLOOD_SECONDS), '6'])
+        assert spin_until(probe, lambda: 'flooding' in ros_processes.log_text('intruder'), 60)
+        flood_start = time.monotonic()
+        assert spin_until(probe, lambda: flooder.poll() is not None, FLOOD_SECONDS + 60)
+        flood_end = time.monotonic()
+        assert spin_until(probe, lambda: any(
+            s.level == DiagnosticStatus.ERROR for s in _bridge_statuses(diagnostics)), 10)
+        # Once the intruder has left the graph, the ERROR goes away.
+        seen = len(diagnostics)
+        assert spin_until(probe, lambda: any(
+            s.level != DiagnosticStatus.ERROR for s in _bridge_statuses(diagnostics[seen:])),
+            30), 'sim_bridge still reports ERROR after the intruder left'
+
+    published = int(ros_processes.log_text('intruder').split('published ')[1].split()[0])
+    flood = [(t, m) for t, m in steps if flood_start <= t <= flood_end]
+    applied = np.asarray([m.applied_action for _, m in flood if len(m.applied_action)])
+    assert len(flood) > 20 and published > 1000, (len(flood), published)
+    assert not np.isclose(applied, MARK, atol=1e-6).all(axis=1).any(), 'an intruder drove'
+    # No step waited out action_timeout (the 2 s stall of the issue): every step got the
+    # policy's action. NONE: an episode's first step.
+    statuses = {m.action_status for _, m in flood}
+    assert statuses <= {StepFeedback.ACTION_OK, StepFeedback.ACTION_NONE}, \
+        f'foreign actions reached the checks or the loop timed out: {statuses}'
+    times = [t for t, _ in flood]
+    flood_rate = (len(times) - 1) / (times[-1] - times[0])
+    assert flood_rate > 0.25 * calm_rate, (flood_rate, calm_rate)
+
+    errors = [s for s in _bridge_statuses(diagnostics) if s.level == DiagnosticStatus.ERROR]
+    assert '/intruder' in errors[0].message and 'refused' in errors[0].message
+    refused = max(int({kv.key: kv.value for kv in s.values}['foreign']) for s in errors)
+    assert refused > 0
+    log = ros_processes.log_text('sim_bridge')
+    assert log.count('a second publisher on /zeus/action: /intruder') == 1, log[-3000:]
+    print(f'flood: {published} actions in {FLOOD_SECONDS} s, {refused}+ refused, loop '
+          f'{flood_rate:.0f} steps/s (calm {calm_rate:.0f}), longest step gap '
+          f'{max(np.diff(times)) * 1000:.0f} ms')
+
+
+def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
+    """SIGKILL to the paired policy: safe actions (timeouts), then its restart is re-paired."""
+    ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}',
+                                           'action_timeout:=0.2'))
+    policy = ros_processes.start('policy', node('policy', f'task:={TASK}'))
+    steps: list[tuple[float, Any]] = []
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        _watch(probe, steps, diagnostics)
+        assert spin_until(probe, lambda: len(steps) > 50, timeout=90)
+        ros_processes.stop(policy, signal.SIGKILL)
+        killed = len(steps)
+        assert spin_until(probe, lambda: len(steps) > killed + 10, timeout=30)
+        ros_processes.start('policy2', node('policy', f'task:={TASK}'))
+        restarted = len(steps)
+        assert spin_until(probe, lambda: sum(
+            m.action_status == m.ACTION_OK for _, m in steps[restarted:]) > 50, timeout=90), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+    log = ros_processes.log_text('sim_bridge')
+    assert '/policy restarted' in log and 'a second publisher' not in log, log[-2000:]

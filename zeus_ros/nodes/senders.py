@@ -1,0 +1,309 @@
+"""Who sent a message: a subscription that sees each message's publisher, and a pairing.
+
+A robot must be driven by its own policy only. DDS lets any process on the domain publish on
+`zeus/action`, and the message itself says nothing about who sent it; the publisher's GID
+(`rmw_message_info_t.publisher_gid`) does. rclpy in Jazzy does not hand that field to Python
+(rclpy#1466 adds it in later releases), so `SenderSubscription` takes each message through
+rcl's serialized take with ctypes, which fills the whole message info, and deserializes it with
+rclpy. `SenderPairing` then pairs the topic with one publisher of the ROS graph (a configured
+node, or the only publisher at start-up), follows that node when it restarts (a new GID, the
+same name), refuses and counts everything else, and names every other publisher once.
+
+This is a guard against mistakes and stray processes, not access control: a process that
+takes the paired node's name after it died is believed. The real answer is SROS2 (enclaves
+and a permissions file that lets only the policy publish `zeus/action`): docs/security.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+import ctypes
+from dataclasses import dataclass
+import time
+from typing import TYPE_CHECKING, Any
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.serialization import deserialize_message
+from rclpy.type_support import check_is_valid_msg_type
+from rclpy.waitable import NumberOfEntities, Waitable
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+
+__all__ = ['Sender', 'SenderPairing', 'SenderSubscription']
+
+_GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
+_TAKE_OK = 0
+_TAKE_EMPTY = 401  # RCL_RET_SUBSCRIPTION_TAKE_FAILED: nothing to take
+_UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
+_MAX_TAKE = 256  # per wake-up: a flood cannot keep the executor in one callback forever
+
+
+class _Allocator(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_void_p) for name in
+                ('allocate', 'deallocate', 'reallocate', 'zero_allocate', 'state')]
+
+
+class _Bytes(ctypes.Structure):
+    """rcutils_uint8_array_t (= rmw_serialized_message_t)."""
+
+    _fields_ = [('buffer', ctypes.POINTER(ctypes.c_uint8)), ('buffer_length', ctypes.c_size_t),
+                ('buffer_capacity', ctypes.c_size_t), ('allocator', _Allocator)]
+
+
+class _Gid(ctypes.Structure):
+    _fields_ = [('implementation_identifier', ctypes.c_char_p),
+                ('data', ctypes.c_uint8 * _GID_SIZE)]
+
+
+class _MessageInfo(ctypes.Structure):
+    """rmw_message_info_t of Jazzy."""
+
+    _fields_ = [('source_timestamp', ctypes.c_int64), ('received_timestamp', ctypes.c_int64),
+                ('publication_sequence_number', ctypes.c_uint64),
+                ('reception_sequence_number', ctypes.c_uint64), ('publisher_gid', _Gid),
+                ('from_intra_process', ctypes.c_bool)]
+
+
+class _Rcl:
+    """The three C functions we need, from the librcl/librcutils rclpy has already loaded."""
+
+    def __init__(self) -> None:
+        rcl = ctypes.CDLL('librcl.so')
+        rcutils = ctypes.CDLL('librcutils.so')
+        self.take = rcl.rcl_take_serialized_message
+        self.take.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Bytes),
+                              ctypes.POINTER(_MessageInfo), ctypes.c_void_p]
+        self.take.restype = ctypes.c_int32
+        self.default_allocator = rcutils.rcutils_get_default_allocator
+        self.default_allocator.restype = _Allocator
+        self.init = rcutils.rcutils_uint8_array_init
+        self.init.argtypes = [ctypes.POINTER(_Bytes), ctypes.c_size_t,
+                              ctypes.POINTER(_Allocator)]
+        self.fini = rcutils.rcutils_uint8_array_fini
+        self.fini.argtypes = [ctypes.POINTER(_Bytes)]
+
+
+_RCL: _Rcl | None = None
+
+
+def _rcl() -> _Rcl:
+    global _RCL
+    if _RCL is None:
+        _RCL = _Rcl()
+    return _RCL
+
+
+class SenderSubscription(Waitable):
+    """A subscription that admits only messages whose publisher GID `admit` accepts.
+
+    A refused message is never deserialized: a flood costs one C call per message, so the
+    paired sender's messages are taken before the reader's history overflows. Resolves its
+    topic like `create_subscription` (namespace, remaps) and shows in the graph like any
+    subscription. `destroy()` before the node is destroyed.
+    """
+
+    def __init__(self, node: Node, msg_type: Any, topic: str, qos: QoSProfile,
+                 callback: Callable[[Any], None], admit: Callable[[bytes], bool]) -> None:
+        check_is_valid_msg_type(msg_type)
+        with node.handle:
+            self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
+                                               qos.get_c_qos_profile())
+        super().__init__(node.default_callback_group)
+        self._node = node
+        self._msg_type = msg_type
+        self._callback = callback
+        self._admit = admit
+        self._index: int | None = None
+        self._buffer = _Bytes()
+        allocator = _rcl().default_allocator()
+        if _rcl().init(ctypes.byref(self._buffer), 256, ctypes.byref(allocator)) != _TAKE_OK:
+            raise MemoryError('could not allocate a serialized-message buffer')
+        node.add_waitable(self)
+
+    @property
+    def topic_name(self) -> str:
+        """The resolved topic name (namespace and remaps applied)."""
+        with self._handle:
+            return self._handle.get_topic_name()
+
+    def get_publisher_count(self) -> int:
+        """Publishers DDS has matched with this subscription."""
+        with self._handle:
+            return self._handle.get_publisher_count()
+
+    def destroy(self) -> None:
+        """Leave the executor and free the subscription and its buffer."""
+        self._node.remove_waitable(self)
+        self._handle.destroy_when_not_in_use()
+        _rcl().fini(ctypes.byref(self._buffer))
+
+    # -- Waitable API (called by the executor) ---------------------------------------------
+    def __enter__(self) -> None:
+        self._handle.__enter__()
+
+    def __exit__(self, *exc: object) -> None:
+        self._handle.__exit__(*exc)
+
+    def is_ready(self, wait_set: Any) -> bool:
+        """True when the wait set says a message is waiting."""
+        return self._index is not None and wait_set.is_ready('subscription', self._index)
+
+    def take_data(self) -> list[Any]:
+        """Take what is waiting (at most _MAX_TAKE); keep the admitted messages."""
+        taken = []
+        info = _MessageInfo()
+        for _ in range(_MAX_TAKE):
+            with self._handle:
+                result = _rcl().take(self._handle.pointer, ctypes.byref(self._buffer),
+                                     ctypes.byref(info), None)
+            if result == _TAKE_EMPTY:
+                break
+            if result != _TAKE_OK:
+                raise RuntimeError(f'rcl_take_serialized_message on {self.topic_name} '
+                                   f'returned {result}')
+            if self._admit(bytes(info.publisher_gid.data)):
+                data = ctypes.string_at(self._buffer.buffer, self._buffer.buffer_length)
+                taken.append(deserialize_message(data, self._msg_type))
+        return taken
+
+    async def execute(self, taken_data: list[Any]) -> None:
+        """Hand each admitted message to the callback."""
+        for msg in taken_data:
+            self._callback(msg)
+
+    def get_num_entities(self) -> NumberOfEntities:
+        """One subscription."""
+        return NumberOfEntities(num_subs=1)
+
+    def add_to_wait_set(self, wait_set: Any) -> None:
+        """Add the subscription; remember its index."""
+        self._index = wait_set.add_subscription(self._handle)
+
+
+@dataclass(frozen=True)
+class Sender:
+    """One publisher in the ROS graph: its GID and its node's fully qualified name."""
+
+    gid: bytes
+    node: str  # '' while the graph knows the endpoint but not yet its node
+
+    def __str__(self) -> str:
+        return f'{self.node or "a node not yet named"} (gid {self.gid.hex()[-8:]})'
+
+
+class SenderPairing:
+    """Which publisher of a topic may drive this node; counts and names everyone else.
+
+    `expected` ('' or a fully qualified node name such as /r1/policy) says whom to pair with;
+    empty means the only publisher on the topic when `pair()` is called (start-up). A paired
+    node that restarts publishes under a new GID: its new publisher (same node name) is paired
+    once the old one has left the graph or has been silent for `takeover_after` seconds (a
+    killed process stays in the graph until its DDS lease ends, ~20 s). Everything else is
+    refused (`refused` counts it) and named once.
+    """
+
+    def __init__(self, node: Node, topic: str, expected: str = '', what: str = 'messages',
+                 takeover_after: float = 1.0) -> None:
+        self._node = node
+        self.topic = topic
+        self.expected = expected
+        self.what = what
+        self.paired: Sender | None = None
+        self.refused = 0
+        self.takeover_after = takeover_after
+        self._heard = time.monotonic()
+        self._retired: set[bytes] = set()  # earlier paired publishers (a restarted node's)
+        self._graph: dict[bytes, Sender] = {}
+        self._graph_at = -1.0
+        self._named: set[bytes] = set()
+
+    def publishers(self, max_age: float = 0.0) -> dict[bytes, Sender]:
+        """The topic's publishers from the graph, re-read when older than `max_age` seconds."""
+        now = time.monotonic()
+        if now - self._graph_at > max_age:
+            self._graph = {}
+            for info in self._node.get_publishers_info_by_topic(self.topic):
+                name = '' if info.node_name == _UNKNOWN_NODE else \
+                    info.node_namespace.rstrip('/') + '/' + info.node_name
+                gid = bytes(info.endpoint_gid)[:_GID_SIZE]
+                self._graph[gid] = Sender(gid, name)
+            self._graph_at = now
+        return self._graph
+
+    def pair(self) -> str | None:
+        """Pair with the expected node's publisher or the only one; else say what is wrong."""
+        graph = list(self.publishers().values())
+        candidates = [s for s in graph if s.node == self.expected] if self.expected else graph
+        wanted = self.expected or 'a publisher'
+        if not candidates:
+            return f'{wanted} on {self.topic}' + (
+                f' (action_sender; found {", ".join(map(str, graph))})' if graph else '')
+        if any(not s.node for s in candidates):
+            return f'the ROS graph to name the publishers of {self.topic}'
+        if len(candidates) > 1:
+            return (f'one publisher on {self.topic}, found {len(candidates)}: '
+                    f'{", ".join(map(str, candidates))}; stop the extra ones or set '
+                    'action_sender to the node that drives the robot')
+        self.paired = candidates[0]
+        self._heard = time.monotonic()
+        self._node.get_logger().info(
+            f'paired with {self.paired} on {self.topic}: only its {self.what} are applied')
+        return None
+
+    def accepts(self, gid: bytes) -> bool:
+        """True for the paired publisher (re-pairing after a restart); else count and name."""
+        if self.paired is not None and gid == self.paired.gid:
+            self._heard = time.monotonic()
+            return True
+        graph = self.publishers(max_age=0.1)
+        if gid not in graph:
+            graph = self.publishers(max_age=0.02)  # a newcomer: the graph may just be late
+        sender = graph.get(gid)
+        if sender is not None and self._may_take_over(sender, graph):
+            old, self.paired = self.paired, sender
+            self._heard = time.monotonic()
+            if old is not None:
+                self._retired.add(old.gid)
+                self._node.get_logger().warning(
+                    f'{sender} now drives {self.topic}: {old.node} restarted')
+            return True
+        self.refused += 1
+        if sender is not None:
+            self._name_once(sender)
+        return False
+
+    def _may_take_over(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
+        """The paired node restarted (its old publisher is gone), or nothing is paired yet."""
+        if self.paired is None:
+            return self.pair() is None and self.paired is not None and \
+                self.paired.gid == sender.gid
+        return self._successor(sender, graph)
+
+    def _successor(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
+        """The paired node under a new GID, its old publisher gone or silent: a restart."""
+        if self.paired is None or sender.node != self.paired.node:
+            return False
+        silent = time.monotonic() - self._heard >= self.takeover_after
+        return self.paired.gid not in graph or silent
+
+    def others(self) -> list[Sender]:
+        """Publishers on the topic besides the paired one (each is named once in the log)."""
+        if self.paired is None:  # before pairing, extra publishers are what pair() names
+            return []
+        graph = self.publishers(max_age=0.5)
+        found = [s for gid, s in graph.items() if gid not in self._retired
+                 and gid != self.paired.gid and not self._successor(s, graph)]
+        for sender in found:
+            self._name_once(sender)
+        return found
+
+    def _name_once(self, sender: Sender) -> None:
+        if sender.gid in self._named or not sender.node:  # named once the graph knows it
+            return
+        self._named.add(sender.gid)
+        paired = self.paired or self.expected or 'nobody yet'
+        self._node.get_logger().error(
+            f'a second publisher on {self.topic}: {sender}; its {self.what} are refused '
+            f'(paired with {paired}). Use SROS2 to keep it off the domain (docs/security.md)')
