@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 import json
+import math
 from pathlib import Path
 import random
 import signal
@@ -21,7 +22,7 @@ import pytest
 import yaml
 
 from live_fixtures import node
-from ros_harness import REPO, ProcessGroup, python_module, require_ros
+from ros_harness import REPO, ProcessGroup, driver_node, python_module, require_ros, spin_until
 
 pytestmark = pytest.mark.ros
 PARAMS = REPO / 'params' / 'robot_bridge.yaml'
@@ -151,3 +152,53 @@ def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
     dataset = ingest_bags([bag_b])
     assert dataset.task == 'FakeArm-v0' and dataset.context_names == ('payload_kg',)
     assert zeus_train([bag_a, bag_b], tmp_path / 'run_b', tmp_path).is_file()
+
+
+def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
+        robot_processes: ProcessGroup, tmp_path: Path) -> None:
+    """NaN and wrong-length actions -> safe command; too large -> clipped; silence -> stale."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64MultiArray
+    from zeus_msgs.msg import Action, StateVector, StepFeedback
+
+    from zeus_ros.nodes.common import step_qos
+
+    robot_processes.start('fake_robot_safety', [sys.executable, str(REPO / 'test' /
+                                                                    'fake_robot.py'),
+                                                str(tmp_path / 'commands.json')])
+    robot_processes.start('robot_bridge_safety', [
+        *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
+        '--params-file', str(PARAMS), '-p', 'safe_command:=0.1,-0.1'])
+    plan = {3: [0.3, -0.2], 4: [float('nan'), 0.0], 5: [5.0, -5.0], 6: [0.1, 0.2, 0.3]}
+    commands: list[tuple[float, ...]] = []
+    feedback: dict[int, int] = {}
+    diagnostics: list[dict[str, str]] = []
+    with driver_node(robot_processes.domain_id, 'fake_policy') as driver:
+        publisher = driver.create_publisher(Action, 'zeus/action', step_qos(depth=1))
+
+        def act(msg: StateVector) -> None:
+            if msg.step <= 6:  # then silence: the bridge must fall back to the safe command
+                publisher.publish(Action(step=msg.step, data=plan.get(msg.step, [0.0, 0.0])))
+
+        driver.create_subscription(StateVector, 'zeus/observation/state', act, step_qos())
+        driver.create_subscription(StepFeedback, 'zeus/step', lambda m: feedback.__setitem__(
+            m.step, m.action_status), step_qos())
+        driver.create_subscription(Float64MultiArray, 'forward_command_controller/commands',
+                                   lambda m: commands.append(tuple(np.round(m.data, 5))),
+                                   step_qos())
+        driver.create_subscription(DiagnosticArray, '/diagnostics', lambda m: diagnostics.extend(
+            {kv.key: kv.value for kv in s.values} for s in m.status
+            if 'robot_bridge' in s.name), 10)
+        assert spin_until(driver, lambda: len(feedback) > 40 and any(
+            int(d.get('stale', 0)) > 0 for d in diagnostics), 60), \
+            robot_processes.log_text('robot_bridge_safety')[-2000:]
+    safe = (0.1, -0.1)
+    assert (-0.2, 0.3) in commands  # controller order: elbow, shoulder
+    assert (-1.0, 1.0) in commands  # [5, -5] clipped, then reordered
+    assert not any(math.isnan(v) for c in commands for v in c)
+    assert all(len(c) == 2 for c in commands)
+    assert commands[-1] == (safe[1], safe[0])  # silence: the configured safe command
+    statuses = set(feedback.values())
+    assert {1, 2, 3, 5} <= statuses  # ok, clipped, rejected, stale reached StepFeedback
+    last = diagnostics[-1]
+    assert int(last['rejected']) == 2 and int(last['clipped']) == 1 and int(last['stale']) > 0
