@@ -17,6 +17,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'report': ('zeus_ros.offline.report', 'mean ± s.e. over seeds of evaluations'),
     'export': ('zeus_ros.offline.export', 'small deployment checkpoint + card'),
     'loop': ('zeus_ros.offline.loop', 'random collection -> train -> collect -> retrain'),
+    'sweep': ('zeus_ros.offline.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
     'inspect': ('zeus_ros.inspect', 'live view of the context topics (subscribe only)'),
     'recover': ('zeus_ros.offline.recover', 'restore a bag cut off by a crash'),

@@ -1,0 +1,188 @@
+"""`zeus sweep` on the real Ray runtime (a local loopback-only instance, started once here).
+
+Tiny trials (one round of 100 random steps, a few dozen updates, one evaluation split of
+Cheetah-Run-v1's 40-step episodes): a 2x2 sweep finishes, equals the same trials run one after
+another, and a rerun skips it; a trial killed mid-run is retried and one that keeps failing is
+reported with its log; Ray's sockets stay on loopback.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import threading
+import time
+from typing import Any
+
+import pytest
+import torch
+import yaml
+
+from zeus_ros.learning.config import config_from_dict
+from zeus_ros.offline.sweep import main as sweep_main
+from zeus_ros.offline.sweep import parse_seeds, parse_sets, plan, run_sweep
+from zeus_ros.offline.trial import LoopProtocol, run_trial
+
+TASK = 'Cheetah-Run-v1'
+TINY = {
+    'method': 'zeus', 'obs_kind': 'state', 'k': 5, 'context_dim': 4, 'transition_dim': 16,
+    'context_hidden_dim': 32, 'feature_dim': 16, 'encoder_hidden_dim': 64, 'hidden_dim': 64,
+    'model_hidden_dim': 64, 'batch_size': 32, 'num_updates': 40, 'eval_interval': 1000,
+    'eval_episodes': 1, 'checkpoint_interval': 1000, 'log_interval': 10, 'device': 'cpu',
+}
+PROTOCOL = LoopProtocol(rounds=1, random_steps=100, updates=30, eval_episodes=1)
+FLAGS = ['--rounds', '1', '--random-steps', '100', '--updates', '30', '--eval-episodes', '1',
+         '--eval-splits', 'extrapolation']
+
+
+@pytest.fixture(scope='module')
+def ray_session() -> Iterator[None]:
+    """One local Ray instance for the module (starting one takes 5-15 s)."""
+    ray = pytest.importorskip('ray')
+    from zeus_ros.offline.ray_runtime import start_ray
+
+    assert start_ray(num_cpus=2)
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+@pytest.fixture(scope='module')
+def tiny_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp('config') / 'tiny.yaml'
+    path.write_text(yaml.safe_dump(TINY))
+    return path
+
+
+def _trials(out: Path, methods: list[str], seeds: list[int],
+            sets: list[dict[str, Any]] | None = None, protocol: LoopProtocol = PROTOCOL
+            ) -> list[Any]:
+    return plan([TASK], methods, seeds, sets or [{}], config_from_dict(TINY), out, protocol,
+                ['extrapolation'])
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    state = torch.load(path, map_location='cpu', weights_only=False)['state']
+    flat: dict[str, torch.Tensor] = {}
+
+    def walk(prefix: str, value: Any) -> None:
+        if isinstance(value, dict):
+            for key, inner in value.items():
+                walk(f'{prefix}.{key}', inner)
+        elif isinstance(value, torch.Tensor):
+            flat[prefix] = value
+
+    walk('', state)
+    return flat
+
+
+def _descendants() -> set[int]:
+    """The pids of this process and every process below it (Ray's servers and workers)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path('/proc').iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    found, todo = set(), [os.getpid()]
+    while todo:
+        pid = todo.pop()
+        found.add(pid)
+        todo += children.get(pid, [])
+    return found
+
+
+def _non_loopback_sockets() -> list[str]:
+    """`ss -tnpa` lines of our processes with an address off loopback (Ray must have some)."""
+    ours = _descendants()
+    lines = subprocess.run(['ss', '-tnpa'], capture_output=True, text=True,
+                           check=True).stdout.splitlines()[1:]
+    mine = [line for line in lines
+            if any(int(pid) in ours for pid in re.findall(r'pid=(\d+)', line))]
+    assert any('raylet' in line or 'gcs_server' in line for line in mine), lines
+    loopback = re.compile(r'^(\[?(::ffff:)?127\.\d+\.\d+\.\d+\]?|\[::1\]|\*|0\.0\.0\.0)$')
+    bad = []
+    for line in mine:
+        local, peer = (address.rsplit(':', 1)[0] for address in line.split()[3:5])
+        if not loopback.match(local) or local in ('*', '0.0.0.0') or not loopback.match(peer):
+            bad.append(line)  # off loopback, or listening on every interface
+    return bad
+
+
+def test_grid_parsing() -> None:
+    assert parse_seeds('0-2,7') == [0, 1, 2, 7]
+    assert parse_sets(['alpha_psi=0.5,1.0', 'k=3']) == [{'alpha_psi': 0.5, 'k': 3},
+                                                         {'alpha_psi': 1.0, 'k': 3}]
+    assert parse_sets([]) == [{}]
+
+
+def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(
+        ray_session: None, tiny_config: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture) -> None:
+    argv = ['--tasks', TASK, '--methods', 'zeus', 'no_context', '--seeds', '0-1', '--config',
+            str(tiny_config), '--out', str(tmp_path / 'sweep'), *FLAGS]
+    assert sweep_main(argv) == 0
+    out = capsys.readouterr().out
+    assert '4/4 done, 0 running, 0 failed' in out
+    assert '| zeus | extrapolation | 2 |' in out and '| no_context | extrapolation | 2 |' in out
+    group = tmp_path / 'sweep' / 'cheetah_run_v1'
+    assert '| no_context | extrapolation | 2 |' in (tmp_path / 'sweep' / 'tables.md').read_text()
+    assert (group / 'table.md').is_file()
+
+    for trial in _trials(tmp_path / 'sequential', ['zeus', 'no_context'], [0, 1]):
+        run_trial(trial, threads=1)
+        swept = group / trial.folder.name
+        summary = 'eval_extrapolation/summary.csv'
+        assert (trial.folder / summary).read_text() == (swept / summary).read_text(), trial.name
+        mine, theirs = (_weights(f / 'run' / 'final.pt') for f in (trial.folder, swept))
+        assert mine.keys() == theirs.keys() and mine
+        assert all(torch.equal(mine[k], theirs[k]) for k in mine), trial.name
+
+    stamps = {p: p.stat().st_mtime_ns for p in group.rglob('*') if p.is_file()}
+    assert sweep_main(argv) == 0
+    out = capsys.readouterr().out
+    assert '4 finished before (skipped), 0 to run' in out and '0 ran, 4 skipped' in out
+    assert all(p.stat().st_mtime_ns == t for p, t in stamps.items() if p.name != 'table.md'
+               and p.suffix not in ('.csv', '.png', '.md'))
+
+
+def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(
+        ray_session: None, tmp_path: Path) -> None:
+    """The device=cpu trial is killed once and retried; device=cuda:99 fails twice (no device).
+
+    Ray's sockets stay on loopback meanwhile.
+    """
+    protocol = LoopProtocol(rounds=1, random_steps=100, updates=80, eval_episodes=1)
+    trials = _trials(tmp_path, ['no_context'], [0], parse_sets(['device=cpu,cuda:99']), protocol)
+    killed, cuda = trials
+    lines: list[str] = []
+    result: dict[str, Any] = {}
+    sweep = threading.Thread(target=lambda: result.update(
+        r=run_sweep(trials, cpus_per_trial=1, log=lines.append)))
+    sweep.start()
+    pid_file = killed.folder.with_name(killed.folder.name + '.pid')
+    deadline = time.monotonic() + 120
+    while not ((killed.folder / 'run').is_dir() and pid_file.is_file()):
+        assert time.monotonic() < deadline and sweep.is_alive(), lines
+        time.sleep(0.02)
+    assert _non_loopback_sockets() == []
+    os.kill(int(pid_file.read_text()), signal.SIGKILL)  # the pid of a step the sweep started
+    sweep.join(timeout=240)
+    assert not sweep.is_alive()
+    outcome = result['r']
+    assert outcome.done == [killed.name] and outcome.attempts[killed.name] == 2
+    assert any('was killed by SIGKILL' in line and 'retrying (attempt 2)' in line
+               for line in lines), lines
+    assert (killed.folder / 'eval_extrapolation' / '.done').is_file()
+    assert killed.log.read_text().count('== ') == 2  # one header per attempt
+    assert list(outcome.failed) == [cuda.name] and outcome.attempts[cuda.name] == 2
+    assert f'training exited with code 2 (log: {cuda.log})' in outcome.failed[cuda.name]
+    assert 'device cuda:99' in cuda.log.read_text()
+    assert lines[-1].startswith('sweep: 1/2 done, 0 running, 1 failed')

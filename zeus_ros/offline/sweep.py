@@ -1,0 +1,377 @@
+r"""`zeus sweep`: tasks x methods x seeds x --set overrides, each trial a Ray task.
+
+    zeus sweep --tasks Cheetah-Run-v0 Walker-Walk-v0 --methods zeus no_context --seeds 0-4 \\
+        --set alpha_psi=0.5,1.0 --out runs/sweep
+
+Each trial is the record -> retrain loop of experiments/run_one.sh (`zeus loop`, then `zeus eval`
+on every split the task defines; trial.py) run as one Ray task holding --cpus-per-trial CPUs
+(and a GPU for pixel configs when the cluster has one); torch uses that many threads, so all
+cores are used and none oversubscribed. Finished trials are skipped, so a rerun resumes; a failed
+trial is retried once (resuming), then reported with its log. At the end the `zeus report`
+tables of every group are written (<group>/table.md, ..., and <out>/tables.md).
+Local Ray is loopback-only (ray_runtime.py); `--address` or RAY_ADDRESS joins a cluster, whose
+workers must see --out at the same path (docs/sweep.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable, Sequence
+import csv
+from dataclasses import dataclass, field
+import itertools
+from pathlib import Path
+import sys
+import time
+from typing import Any
+
+import yaml
+
+from zeus_ros.offline.trial import LoopProtocol, Trial, TrialError, run_trial, trial_done
+
+__all__ = ['SweepResult', 'group_name', 'main', 'parse_seeds', 'parse_sets', 'plan',
+           'run_sweep', 'write_tables']
+
+SPLITS = ('train', 'interpolation', 'extrapolation')
+
+
+class SweepError(ValueError):
+    """A bad grid or flag, found before any trial starts."""
+
+
+def parse_seeds(text: str) -> list[int]:
+    """'0-4' -> 0..4; '0,3,7' and '0-2,9' too."""
+    seeds: list[int] = []
+    for part in (p.strip() for p in text.split(',')):
+        first, dash, last = part.partition('-')
+        try:
+            if not dash:
+                seeds.append(int(part))
+                continue
+            low, high = int(first), int(last)
+            if high < low:
+                raise ValueError
+            seeds += range(low, high + 1)
+        except ValueError:
+            raise SweepError(f'--seeds {text}: {part!r} is not a seed or a range FIRST-LAST; '
+                             'write e.g. 0-4 or 0,2,5') from None
+    return list(dict.fromkeys(seeds))
+
+
+def parse_sets(items: Sequence[str]) -> list[dict[str, Any]]:
+    """['k=a,b', 'j=c'] -> [{k: a, j: c}, {k: b, j: c}]: the product of every key's values."""
+    axes: dict[str, list[Any]] = {}
+    for item in items:
+        key, sep, values = item.partition('=')
+        if not sep or not key.strip() or not values.strip():
+            raise SweepError(f'--set {item}: expected KEY=VALUE[,VALUE...], e.g. '
+                             'alpha_psi=0.5,1.0')
+        if key.strip() in axes:
+            raise SweepError(f'--set {item}: {key.strip()} is set twice; give its values as one '
+                             'comma-separated list')
+        axes[key.strip()] = [yaml.safe_load(v) for v in values.split(',')]
+    keys = list(axes)
+    combos = itertools.product(*axes.values())
+    return [dict(zip(keys, combo, strict=True)) for combo in combos] or [{}]
+
+
+def group_name(task: str, overrides: dict[str, Any]) -> str:
+    """cheetah_run_v0, or cheetah_run_v0__alpha_psi=0.5 with overrides: one report per group."""
+    slug = task.lower().replace('-', '_')
+    return slug + ''.join(f'__{key}={value}' for key, value in overrides.items())
+
+
+def _task_splits(task: str, wanted: Sequence[str] | None) -> tuple[str, ...]:
+    from sim_bridge.presets import load_preset
+    from sim_bridge.registry import task_class
+
+    try:
+        task_class(task)
+    except ValueError as error:
+        raise SweepError(f'--tasks: {error}') from None
+
+    def defined(split: str) -> bool:
+        try:
+            return bool(load_preset(task, split))
+        except (KeyError, ValueError):
+            return False
+
+    if wanted is None:
+        return tuple(s for s in SPLITS if defined(s))
+    missing = [s for s in wanted if not defined(s)]
+    if missing:
+        raise SweepError(f'--eval-splits: {task} defines no {", ".join(missing)} split '
+                         f'(params/contexts/{task}.yaml); leave it out or pick others')
+    return tuple(wanted)
+
+
+def plan(tasks: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
+         sets: Sequence[dict[str, Any]], base: Any, out: Path, protocol: LoopProtocol,
+         splits: Sequence[str] | None = None, evaluate: bool = True) -> list[Trial]:
+    """Every trial of the grid, each config validated now (not hours later on a worker)."""
+    from zeus_ros.learning.config import config_from_dict
+    from zeus_ros.learning.errors import ConfigError
+
+    trials = []
+    for task in tasks:
+        task_splits = _task_splits(task, splits) if evaluate else ()
+        for overrides, method, seed in itertools.product(sets, methods, seeds):
+            group = group_name(task, overrides)
+            values = {**base.to_dict(), **overrides, 'method': method, 'seed': seed}
+            try:
+                config = config_from_dict(values, source=f'--set {overrides}' if overrides
+                                          else f'--methods {method}')
+            except ConfigError as error:
+                raise SweepError(str(error)) from None
+            trials.append(Trial(task=task, method=method, seed=seed, group=group,
+                                folder=out / group / f'{method}_s{seed}',
+                                config=config.to_dict(), splits=task_splits,
+                                protocol=protocol))
+    return trials
+
+
+@dataclass
+class SweepResult:
+    """What a sweep did: trial names per outcome, and why each failed one failed."""
+
+    done: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    attempts: dict[str, int] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _reason(error: BaseException) -> str:
+    """One line: a TrialError's own message, else the Ray error's type and first line."""
+    cause = getattr(error, 'cause', None) or error
+    if isinstance(cause, TrialError):
+        return str(cause)
+    text = str(cause).strip().splitlines()
+    return f'{type(cause).__name__}: {text[-1] if text else ""}'
+
+
+def _gpus(trial: Trial, wanted: float | None, cluster_gpus: float) -> float:
+    """--gpus-per-trial, else one GPU for a pixel config when the cluster has any."""
+    if wanted is not None:
+        return wanted
+    return 1.0 if trial.config.get('obs_kind') == 'pixels' and cluster_gpus >= 1 else 0.0
+
+
+def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
+              num_cpus: int | None = None, cpus_per_trial: int = 1,
+              gpus_per_trial: float | None = None, retries: int = 1,
+              log: Any = print) -> SweepResult:
+    """Run the unfinished trials as Ray tasks; retry each failure `retries` times."""
+    import ray
+
+    from zeus_ros.offline.ray_runtime import start_ray
+
+    result = SweepResult()
+    todo = [t for t in trials if not trial_done(t)]
+    result.skipped = [t.name for t in trials if trial_done(t)]
+    log(f'sweep: {len(trials)} trial(s): {len(result.skipped)} finished before (skipped), '
+        f'{len(todo)} to run')
+    if not todo:
+        return result
+    started_here = start_ray(address, num_cpus)
+    try:
+        resources = ray.cluster_resources()
+        if resources.get('CPU', 0) < cpus_per_trial:
+            raise SweepError(f'--cpus-per-trial {cpus_per_trial}: the Ray cluster has only '
+                             f'{resources.get("CPU", 0):g} CPU(s)')
+        tracker = ray.remote(num_cpus=0)(_StartedNames).remote()
+        remote = ray.remote(_ray_trial)
+        pending: dict[Any, tuple[Trial, int]] = {}
+
+        def submit(trial: Trial, attempt: int) -> None:
+            gpus = _gpus(trial, gpus_per_trial, resources.get('GPU', 0))
+            ref = remote.options(num_cpus=cpus_per_trial, num_gpus=gpus, max_retries=0,
+                                 name=f'trial {trial.name}').remote(trial, cpus_per_trial,
+                                                                    tracker)
+            pending[ref] = (trial, attempt)
+            result.attempts[trial.name] = attempt
+
+        for trial in todo:
+            submit(trial, 1)
+        shown = None
+        begin = time.monotonic()
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=2.0)
+            for ref in ready:
+                trial, attempt = pending.pop(ref)
+                try:
+                    result.seconds[trial.name] = ray.get(ref)
+                    result.done.append(trial.name)
+                except Exception as error:  # TrialError from the task, or a Ray failure
+                    why = _reason(error)
+                    if attempt <= retries:
+                        log(f'sweep: {trial.name} failed ({why}); retrying (attempt '
+                            f'{attempt + 1})')
+                        submit(trial, attempt + 1)
+                    else:
+                        log(f'sweep: {trial.name} FAILED after {attempt} attempt(s): {why}')
+                        result.failed[trial.name] = why
+            names = {t.name for t, _ in pending.values()}
+            running = len(names & set(ray.get(tracker.names.remote())))
+            line = (f'{len(result.done) + len(result.skipped)}/{len(trials)} done, {running} '
+                    f'running, {len(result.failed)} failed')
+            if line != shown:
+                log(f'sweep: {line} ({time.monotonic() - begin:.0f} s)')
+                shown = line
+    finally:
+        if started_here:
+            ray.shutdown()
+    return result
+
+
+def _ray_trial(trial: Trial, threads: int, tracker: Any) -> float:
+    """The Ray task: say it started, then run the trial with `threads` torch threads."""
+    tracker.add.remote(trial.name)
+    return run_trial(trial, threads)
+
+
+class _StartedNames:
+    """Names of the trials that started: Ray tells which tasks run only via its dashboard."""
+
+    def __init__(self) -> None:
+        self._names: set[str] = set()
+
+    def add(self, name: str) -> None:
+        self._names.add(name)
+
+    def names(self) -> set[str]:
+        return self._names
+
+
+def write_tables(trials: Iterable[Trial], out: Path) -> str:
+    """`zeus report` of every group with a finished evaluation; <out>/tables.md; its text."""
+    from zeus_ros.offline.report import markdown_table, write_report
+
+    sections = []
+    for group in dict.fromkeys(t.group for t in trials):
+        try:
+            rows = write_report(out / group, out / group, title=group)
+        except FileNotFoundError:
+            continue
+        sections.append(f'## {group}\n\n{markdown_table(rows)}\n')
+    text = '\n'.join(sections)
+    if text:
+        (out / 'tables.md').write_text(text)
+    return text
+
+
+def _write_status(trials: Sequence[Trial], result: SweepResult, out: Path) -> Path:
+    """<out>/sweep.csv: every trial's status, attempts, seconds and log."""
+    path = out / 'sweep.csv'
+    with path.open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(['trial', 'status', 'attempts', 'seconds', 'log', 'error'])
+        for trial in trials:
+            status = ('skipped' if trial.name in result.skipped else 'failed'
+                      if trial.name in result.failed else 'done')
+            seconds = result.seconds.get(trial.name)
+            writer.writerow([trial.name, status, result.attempts.get(trial.name, 0),
+                             '' if seconds is None else f'{seconds:.1f}', trial.log,
+                             result.failed.get(trial.name, '')])
+    return path
+
+
+def _default_config() -> Path:
+    from sim_bridge.presets import find_params_dir
+
+    return find_params_dir() / 'train' / 'state_cpu.yaml'
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='zeus sweep', formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=__doc__.split('\n\n')[0].split(': ', 1)[1], epilog=__doc__.split('\n\n', 2)[2])
+    parser.add_argument('--tasks', nargs='+', required=True, help='task names')
+    parser.add_argument('--methods', nargs='+', required=True, help='method names')
+    parser.add_argument('--seeds', default='0', help='e.g. 0-4 or 0,2,5 (default: 0)')
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=V1[,V2...]',
+                        help='training config override; several values make a grid axis')
+    parser.add_argument('--config', type=Path,
+                        help='base training config (default: params/train/state_cpu.yaml)')
+    parser.add_argument('--out', type=Path, required=True, help='sweep folder (shared)')
+    parser.add_argument('--rounds', type=int, default=5, help='loop rounds (default: 5)')
+    parser.add_argument('--random-steps', type=int, default=1500)
+    parser.add_argument('--steps', type=int, default=2000, help='policy steps per later round')
+    parser.add_argument('--updates', type=int, default=2000, help='updates per round')
+    parser.add_argument('--noise', type=float, default=0.2)
+    parser.add_argument('--schedule', help='collection schedule (default: switch:train, '
+                        'every min(100, episode/2) steps)')
+    parser.add_argument('--eval-splits', help='comma-separated (default: every split the '
+                        'task defines)')
+    parser.add_argument('--eval-episodes', type=int, help="episodes per context value "
+                        "(default: zeus eval's)")
+    parser.add_argument('--no-eval', action='store_true', help='train only')
+    parser.add_argument('--cpus-per-trial', type=int, default=1,
+                        help='CPUs (= torch threads) per trial (default: 1)')
+    parser.add_argument('--gpus-per-trial', type=float,
+                        help='GPUs per trial (default: 1 for pixel configs when the cluster '
+                        'has GPUs, else 0)')
+    parser.add_argument('--num-cpus', type=int,
+                        help='CPUs of a local Ray instance (default: all cores)')
+    parser.add_argument('--address', help='Ray cluster to join (default: RAY_ADDRESS; '
+                        'none: a local loopback-only instance)')
+    parser.add_argument('--retries', type=int, default=1, help='retries of a failed trial')
+    parser.add_argument('--dry-run', action='store_true', help='list the trials and stop')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus sweep`; returns 0, 1 (a trial failed) or 2 (bad input)."""
+    from zeus_ros.learning.errors import ConfigError
+    from zeus_ros.learning.methods import METHODS
+    from zeus_ros.offline.train import read_config
+
+    args = _build_parser().parse_args(argv)
+    try:
+        for flag in ('rounds', 'random_steps', 'steps', 'updates', 'cpus_per_trial'):
+            if getattr(args, flag) < 1:
+                raise SweepError(f'--{flag.replace("_", "-")} must be >= 1')
+        unknown = [m for m in args.methods if m not in METHODS]
+        if unknown:
+            raise SweepError(f'--methods: unknown {", ".join(unknown)}; known: '
+                             f'{", ".join(METHODS)}')
+        protocol = LoopProtocol(rounds=args.rounds, random_steps=args.random_steps,
+                                steps=args.steps, updates=args.updates, noise=args.noise,
+                                schedule=args.schedule, eval_episodes=args.eval_episodes)
+        splits = [s.strip() for s in args.eval_splits.split(',')] if args.eval_splits else None
+        trials = plan(args.tasks, args.methods, parse_seeds(args.seeds), parse_sets(args.set),
+                      read_config(args.config or _default_config()), args.out.resolve(),
+                      protocol, splits,
+                      evaluate=not args.no_eval)
+    except (SweepError, ConfigError) as error:
+        print(f'zeus sweep: {error}', file=sys.stderr)
+        return 2
+    if args.dry_run:
+        for trial in trials:
+            print(f'{trial.name}{"  (finished)" if trial_done(trial) else ""}')
+        return 0
+    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        result = run_sweep(trials, address=args.address, num_cpus=args.num_cpus,
+                           cpus_per_trial=args.cpus_per_trial,
+                           gpus_per_trial=args.gpus_per_trial, retries=args.retries)
+    except SweepError as error:
+        print(f'zeus sweep: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f'zeus sweep: interrupted; finished trials are kept in {args.out}, a rerun '
+              'resumes the others', file=sys.stderr)
+        return 130
+    status = _write_status(trials, result, args.out.resolve())
+    tables = write_tables(trials, args.out.resolve())
+    if tables:
+        print(f'\n{tables}')
+    print(f'sweep: {len(result.done)} ran, {len(result.skipped)} skipped, '
+          f'{len(result.failed)} failed; trials in {status}, tables in {args.out / "tables.md"}')
+    for why in result.failed.values():
+        print(f'sweep: failed: {why}', file=sys.stderr)
+    return 1 if result.failed else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
