@@ -1,10 +1,14 @@
 """`zeus launch`: start the zeus_ros nodes without the ROS launch system, supervise, stop.
 
 Every child gets loopback-only discovery and one shared domain id, its output is streamed with
-a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node exits: a non-zero
-exit names the node that died. Nodes, parameters and defaults come from
-`zeus_ros.launch_defaults`, exactly as for `ros2 launch zeus_ros zeus.launch.py`: without
---params the installed share/zeus_ros/params/zeus.yaml applies, from any folder.
+a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node of the control
+loop exits: a non-zero exit names the node that died. Logging never stops control: a recorder
+that dies is restarted into a new bag (up to 3 times) while the loop keeps running, and the
+gap is reported. Exit status: 0 clean, 1 a node died or failed to stop, 3 the loop ran but the
+recording has gaps (the unfinished bag is named; `zeus recover` closes it). Nodes, parameters
+and defaults come from `zeus_ros.launch_defaults`, exactly as for `ros2 launch zeus_ros
+zeus.launch.py`: without --params the installed share/zeus_ros/params/zeus.yaml applies, from
+any folder.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -26,6 +31,12 @@ from typing import IO
 from zeus_ros import launch_defaults
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
+
+RECORDER_RESPAWNS = 3
+"""How often a recorder that dies is restarted before the loop runs on unrecorded."""
+RECORDING_GAPS = 3
+"""Exit status of a run whose control loop was fine but whose recording has gaps."""
+_RECORDING_TO = re.compile(r'recording \d+ topics to (.+) \((?:mcap|sqlite3)\)')
 
 RECORDER_DRAIN_S = 0.5
 """Pause between the producers' exit and the recorder's signal: DDS may still be delivering
@@ -87,31 +98,69 @@ class Supervisor:
         self.nodes = nodes
         self.env = env
         self.out = out
+        self.started = time.monotonic()
+        self.gaps: list[str] = []  # one line per recorder death: when, why, which bag
 
     def start(self) -> None:
         """Start every node in order (sim_bridge first: it waits for its peers)."""
         for node in self.nodes:
-            node.process = subprocess.Popen(
-                node.argv, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
-            assert node.process.stdout is not None
-            node.reader = threading.Thread(
-                target=_pump, args=(node, node.process.stdout, self.out), daemon=True)
-            node.reader.start()
+            self._start(node)
+
+    def _start(self, node: NodeProcess) -> None:
+        node.process = subprocess.Popen(
+            node.argv, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        assert node.process.stdout is not None
+        node.reader = threading.Thread(
+            target=_pump, args=(node, node.process.stdout, self.out), daemon=True)
+        node.reader.start()
 
     def wait(self, timeout: float | None = None) -> tuple[str | None, int]:
-        """Block until one node exits (or timeout); return its name and exit code."""
+        """Block until a node of the control loop exits (or timeout); return name and code.
+
+        A recorder that exits meanwhile is restarted (see `_respawn`), not returned.
+        """
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
             for node in self.nodes:
                 assert node.process is not None
                 code = node.process.poll()
-                if code is not None:
-                    return node.name, code
+                if code is None:
+                    continue
+                others = [n for n in self.nodes if n is not node and n.name not in
+                          RECORDS_OTHERS and n.process is not None and n.process.poll() is None]
+                if node.name in RECORDS_OTHERS and others:
+                    self._respawn(node, code)
+                    continue
+                return node.name, code
             if deadline is not None and time.monotonic() > deadline:
                 return None, 0
             time.sleep(0.1)
+
+    def _respawn(self, node: NodeProcess, code: int) -> None:
+        """Logging must not stop control: report the dead recorder, restart it into a new bag."""
+        if node.reader is not None:
+            node.reader.join(timeout=2)
+        bags = [m.group(1) for m in map(_RECORDING_TO.search, node.lines) if m]
+        when = time.monotonic() - self.started
+        bag = f'its bag {bags[-1]} is unfinished: `zeus recover {bags[-1]}`' if bags else \
+            'it had not started a bag'
+        respawn = len(self.gaps) < RECORDER_RESPAWNS
+        self.gaps.append(f'{node.name} died at {when:.1f} s (exit code {code}); {bag}')
+        new_output = f'{bags[-1]}_respawn{len(self.gaps)}' if bags else ''
+        print(f'[zeus launch] {node.name} died with exit code {code}; the control loop keeps '
+              f'running; {bag}; ' + (
+                  f'restarting it into {new_output or "a new bag"} (steps until it records '
+                  'again are not in any bag)' if respawn else
+                  f'not restarting it again ({RECORDER_RESPAWNS} restarts): the rest of the '
+                  'run is not recorded'), file=sys.stderr, flush=True)
+        if not respawn:
+            self.nodes.remove(node)
+            return
+        node.argv = [*node.argv, '-p', f'output:={new_output}'] if new_output else node.argv
+        node.lines = []
+        self._start(node)
 
     def stop(self, grace: float = 10.0) -> dict[str, int]:
         """SIGINT every running node, wait up to `grace` seconds, then SIGKILL what is left.
@@ -175,17 +224,26 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
     except KeyboardInterrupt:
         print('[zeus launch] Ctrl-C: stopping all nodes', file=out, flush=True)
         codes = supervisor.stop()
-        return 0 if not any(codes.values()) else 1
+        return _with_gaps(supervisor, 0 if not any(codes.values()) else 1)
     supervisor.stop()
     if name is None:
         print(f'[zeus launch] time limit of {timeout} s reached: stopped all nodes', file=out)
-        return 0
+        return _with_gaps(supervisor, 0)
     if code != 0:
         print(f'[zeus launch] node {name!r} died with exit code {code}: stopped the others',
               file=sys.stderr, flush=True)
-        return 1
+        return _with_gaps(supervisor, 1)
     print(f'[zeus launch] node {name!r} finished: stopped the others', file=out, flush=True)
-    return 0
+    return _with_gaps(supervisor, 0)
+
+
+def _with_gaps(supervisor: Supervisor, status: int) -> int:
+    """Name every recording gap at the end; a clean run with gaps exits RECORDING_GAPS."""
+    if not supervisor.gaps:
+        return status
+    print(f'[zeus launch] the recording has {len(supervisor.gaps)} gap(s): '
+          + '; '.join(supervisor.gaps), file=sys.stderr, flush=True)
+    return status or RECORDING_GAPS
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -212,6 +270,9 @@ def main(argv: list[str] | None = None) -> int:
                         '/clock and /diagnostics stay global)')
     parser.add_argument('--sim-time', action='store_true',
                         help='every node sets use_sim_time (sim_bridge publishes /clock)')
+    parser.add_argument('--no-progress', action='store_true',
+                        help='no status line (steps, rate, episode, segment return; rewritten '
+                        'in place on a terminal, a line every 10 s otherwise)')
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.nodes.split(',') if name.strip()]
     try:
@@ -225,7 +286,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f'[zeus launch] params {launch.params_file}; ' + '; '.join(
         f'{node.name} {node.parameters}' for node in launch.nodes if node.parameters),
         flush=True)
-    return run_group(plan_processes(launch), ros_env(args.domain_id), args.timeout)
+    env = ros_env(args.domain_id)
+    if args.no_progress:
+        return run_group(plan_processes(launch), env, args.timeout)
+    from zeus_ros.launch_progress import Progress
+
+    progress = Progress(env, launch.namespace)
+    try:
+        return run_group(plan_processes(launch), env, args.timeout, out=progress.out)
+    finally:
+        progress.close()
 
 
 if __name__ == '__main__':
