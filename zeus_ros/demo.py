@@ -150,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
         except CheckpointError as error:
             print(f'zeus demo: --checkpoint: {error}', file=sys.stderr)
             return 2
+    if checkpoint is not None:
+        checkpoint = with_readout(checkpoint, args.out)
     domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
     env = ros_env(domain)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
@@ -178,6 +180,32 @@ def main(argv: list[str] | None = None) -> int:
         print(f'[demo] node {failed[0]!r} died with exit code {failed[1]}', file=sys.stderr)
         return 1
     return 0
+
+
+def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
+    """The checkpoint to deploy, with a context read-out.
+
+    Itself when it holds one, else a copy in `out` with one calibrated now on its train
+    contexts (never on the demo's own run).
+    """
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.offline.readout import (
+        calibrate_readout,
+        readout_from_checkpoint_bytes,
+        store_readout,
+    )
+
+    if readout_from_checkpoint_bytes(checkpoint.read_bytes()) is not None:
+        return checkpoint
+    agent = InferenceAgent.from_checkpoint(checkpoint)
+    if agent.obs_kind != 'state' or method_spec(agent.method).context_source != 'psi':
+        return checkpoint
+    print(f'[demo] calibrating a context read-out for {checkpoint.name} on {steps} steps of its '
+          'train contexts (psi -> context units) ...', flush=True)
+    readout = calibrate_readout(agent, steps=steps)
+    print(f'[demo] {readout.describe()}', flush=True)
+    return store_readout(checkpoint, readout, out / 'checkpoint_with_readout.pt')
 
 
 def format_comparison(live: list[Any], frozen: list[Any], names: Sequence[str]) -> str:
@@ -223,7 +251,7 @@ def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str],
                 while time.monotonic() < drain_until:
                     inspector.executor.spin_once(timeout_sec=0.02)
                 break
-            if time.monotonic() >= next_draw:
+            if time.monotonic() >= next_draw and inspector.current() is not None:
                 print(inspector.view(), flush=True)
                 next_draw = time.monotonic() + 5.0
     except KeyboardInterrupt:

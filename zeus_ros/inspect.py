@@ -1,15 +1,19 @@
 """`zeus inspect`: watch the context topics live; it only subscribes, never changes anything.
 
-The terminal view refreshes once a second: the true context against the learned estimate, the
-current segment's return, observation-to-action latency and the health counters that the nodes
-publish on /diagnostics. `--png` saves the inspection figure and `--csv` the per-step log when
-the inspector stops (Ctrl-C, `--duration` or `--steps`).
+The terminal view refreshes once a second: the true context against the estimate in the
+context's own units (the read-out the estimator publishes on zeus/context_readout when its
+checkpoint holds one; psi otherwise), the current segment's return, the step rate,
+observation-to-action latency and the health counters that the nodes publish on /diagnostics.
+`--png` saves the inspection figure and `--csv` the per-step log when the inspector stops
+(Ctrl-C, `--duration` or `--steps`). With nothing publishing it waits quietly after one hint
+(domain, namespace) and exits 1 when it stops without having seen a step.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 from pathlib import Path
 import sys
 import time
@@ -17,7 +21,13 @@ import time
 import numpy as np
 
 from zeus_ros.cli_args import ZeusArgumentParser
-from zeus_ros.inspection import StepLog, format_segments, percentile, plot_inspection
+from zeus_ros.inspection import (
+    StepLog,
+    StepRecord,
+    format_segments,
+    percentile,
+    plot_inspection,
+)
 
 
 def write_csv(log: StepLog, path: Path) -> Path:
@@ -25,15 +35,22 @@ def write_csv(log: StepLog, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open('w', newline='') as handle:
         writer = csv.writer(handle)
+        names = log.context_names
         writer.writerow(['step', 'episode', 'segment', 'first', 'reward',
-                         *[f'true_{n}' for n in log.context_names], 'history_length',
-                         'latency_ms', 'psi'])
+                         *[f'true_{n}' for n in names], *[f'estimated_{n}' for n in names],
+                         'history_length', 'latency_ms', 'psi'])
         for r in log.ordered():
             psi = '' if r.estimate is None else ' '.join(f'{v:.5g}' for v in r.estimate)
             latency = '' if r.latency_ms is None else f'{r.latency_ms:.3f}'
+            truth = r.truth or ('',) * len(names)
+            readout = tuple(f'{v:.5g}' for v in r.readout) if r.readout else ('',) * len(names)
             writer.writerow([r.step, r.episode, r.segment, int(r.first), f'{r.reward:.6g}',
-                             *(r.truth or ()), r.history_length, latency, psi])
+                             *truth, *readout, r.history_length, latency, psi])
     return path
+
+
+NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the same '
+                'ROS_DOMAIN_ID (and --namespace, if it runs in one)')
 
 
 class Inspector:
@@ -48,6 +65,8 @@ class Inspector:
         from zeus_ros.nodes.common import TOPICS, step_qos
 
         rclpy.init()
+        self.namespace = namespace
+        self.started = time.monotonic()
         # In the system's namespace, the relative zeus topics resolve to that system's.
         self.node = rclpy.create_node('zeus_inspect', namespace=namespace)
         # One executor for the whole run: rclpy.spin_once() would build a new one per call.
@@ -60,6 +79,7 @@ class Inspector:
         node.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, qos)
         node.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth, qos)
         node.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context, qos)
+        node.create_subscription(ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout, qos)
         node.create_subscription(Action, TOPICS.ACTION, self._on_action, qos)
         node.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, self._on_diag, 10)
 
@@ -80,6 +100,9 @@ class Inspector:
         record.estimate = np.asarray(msg.data, dtype=np.float32)
         record.history_length = msg.history_length
 
+    def _on_readout(self, msg: object) -> None:
+        self.log.record(msg.step).readout = tuple(float(v) for v in msg.values)
+
     def _on_action(self, msg: object) -> None:
         self.log.record(msg.step).t_action = time.monotonic()
 
@@ -94,6 +117,7 @@ class Inspector:
 
         start = time.monotonic()
         next_draw = start + refresh
+        hinted = False
         try:
             while rclpy.ok():
                 self.executor.spin_once(timeout_sec=0.05)
@@ -102,37 +126,93 @@ class Inspector:
                     break
                 if steps is not None and len(self.log.records) >= steps:
                     break
-                if not quiet and now >= next_draw:
+                if quiet or now < next_draw:
+                    continue
+                next_draw = now + refresh
+                if self.current() is not None:
                     print(self.view(), flush=True)
-                    next_draw = now + refresh
+                elif not hinted:  # one hint, then wait quietly
+                    print(self.waiting_hint(), flush=True)
+                    hinted = True
         except KeyboardInterrupt:
             pass
 
-    def view(self) -> str:
-        """The terminal view of the newest state."""
+    def listening(self) -> str:
+        """Which topics in which domain: '/zeus/* in ROS_DOMAIN_ID=42 (discovery LOCALHOST)'."""
+        where = f'{self.namespace.rstrip("/")}/zeus/*' if self.namespace.strip('/') \
+            else '/zeus/*'
+        return (f'{where} in ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")} (discovery '
+                f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")})')
+
+    def waiting_hint(self) -> str:
+        """Where the inspector listens, and what to check when nothing arrives."""
+        return f'[inspect] waiting for {self.listening()}; {NOTHING_HINT}'
+
+
+    def current(self) -> StepRecord | None:
+        """The newest step seen whole, or None before the first one.
+
+        Whole: feedback and true context, and the estimate (and its read-out) when an estimator
+        publishes them. Parts of later steps still in flight are not shown, so no half-filled
+        line appears.
+        """
         records = self.log.ordered()
-        if not records:
-            return '[inspect] waiting for /zeus topics ...'
-        last = records[-1]
+        estimating = any(r.estimate is not None for r in records[-50:])
+        reading = any(r.readout is not None for r in records[-50:])
+        for record in reversed(records):
+            if record.episode >= 0 and record.truth is not None \
+                    and (record.estimate is not None or not estimating) \
+                    and (record.readout is not None or not reading):
+                return record
+        return None
+
+    def step_rate(self, window: int = 200) -> float | None:
+        """Steps per second over the newest `window` steps (None before two steps)."""
+        times = [r.t_observation for r in self.log.ordered()[-window:]
+                 if r.t_observation is not None]
+        if len(times) < 2 or times[-1] <= times[0]:
+            return None
+        return (len(times) - 1) / (times[-1] - times[0])
+
+    def estimate_text(self, record: StepRecord) -> str:
+        """'torso_length: estimated 1.21, true 1.25' with a read-out, else psi's first values."""
+        names = self.log.context_names
+        truth = record.truth or ()
+        if record.readout:
+            return '; '.join(f'{n}: estimated {e:.3g}, true {t:.3g}' for n, e, t in
+                             zip(names, record.readout, truth, strict=False))
+        true = ', '.join(f'{n}={v:.3g}' for n, v in zip(names, truth, strict=False))
+        if record.estimate is None:
+            return f'true {true} | no estimator'
+        psi = np.array2string(record.estimate[:4], precision=2, suppress_small=True)
+        return f'true {true} | psi[:4] {psi} (no read-out in the checkpoint)'
+
+    def view(self) -> str:
+        """The terminal view of the newest whole step."""
+        last = self.current()
+        if last is None:
+            return self.waiting_hint()
         segments = self.log.segments()
         current = segments[-1] if segments else None
         latency = self.log.latencies_ms()[-200:]
-        names = self.log.context_names
-        truth = ', '.join(f'{n}={v:.3g}' for n, v in zip(names, last.truth or (), strict=False))
-        psi = '-' if last.estimate is None else np.array2string(
-            last.estimate[:4], precision=2, suppress_small=True)
+        rate = self.step_rate()
         lines = [
-            f'[inspect] step {last.step} episode {last.episode} segment {last.segment}: '
-            f'true {truth or "?"} | psi[:4] {psi} (H={last.history_length})',
+            f'[inspect] step {last.step} episode {last.episode} segment {last.segment} '
+            f'(H={last.history_length}): {self.estimate_text(last)}',
             f'          segment return {current.total_return if current else 0:.2f} over '
-            f'{current.steps if current else 0} steps | latency p50 '
-            f'{percentile(latency, 50):.1f} ms p99 {percentile(latency, 99):.1f} ms',
+            f'{current.steps if current else 0} steps | '
+            + (f'{rate:.0f} steps/s | ' if rate is not None else '')
+            + f'latency p50 {percentile(latency, 50):.1f} ms p99 '
+            f'{percentile(latency, 99):.1f} ms',
         ]
         for name, values in sorted(self.health.items()):
+            # A node's rate is 0.0 until its window holds two events: not shown until then.
             shown = ', '.join(f'{k}={v}' for k, v in values.items()
                               if k in ('rate_hz', 'timeouts', 'rejected', 'stale', 'safe',
-                                       'gaps', 'drops', 'dropped'))
-            lines.append(f'          {name}: {shown}')
+                                       'gaps', 'drops', 'dropped')
+                              and not (k == 'rate_hz' and _is_zero(v)))
+            if shown:
+                lines.append(f'          {name}: {shown}')
         return '\n'.join(lines)
 
     def close(self) -> None:
@@ -144,8 +224,15 @@ class Inspector:
         rclpy.try_shutdown()
 
 
+def _is_zero(text: str) -> bool:
+    try:
+        return float(text) == 0.0
+    except ValueError:
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus inspect`."""
+    """Entry point of `zeus inspect`; 1 when it saw no step."""
     parser = ZeusArgumentParser(prog='zeus inspect', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--duration', type=float, default=None, help='stop after N seconds')
@@ -163,12 +250,16 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         inspector.close()
     log = inspector.log
+    if inspector.current() is None:
+        print(f'zeus inspect: saw no step on {inspector.listening()} in '
+              f'{time.monotonic() - inspector.started:.0f} s; {NOTHING_HINT}', file=sys.stderr)
+        return 1
     print(format_segments(log.segments(), log.context_names))
     if args.csv:
         print(f'[inspect] per-step log: {write_csv(log, args.csv)}')
     if args.png:
         print(f'[inspect] figure: {plot_inspection(log, args.png, "zeus inspect")}')
-    return 0 if log.records else 1
+    return 0
 
 
 if __name__ == '__main__':

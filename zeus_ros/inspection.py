@@ -14,7 +14,6 @@ __all__ = [
     'StepLog',
     'StepRecord',
     'format_segments',
-    'linear_readout',
     'percentile',
     'plot_inspection',
 ]
@@ -32,6 +31,8 @@ class StepRecord:
     segment: int = -1
     estimate: np.ndarray | None = None
     history_length: int = 0
+    readout: tuple[float, ...] | None = None
+    """The estimator's psi in the context's units (its calibrated read-out), when it has one."""
     t_observation: float | None = None
     """Wall-clock receipt time of the step's feedback (seconds, monotonic)."""
     t_action: float | None = None
@@ -58,6 +59,8 @@ class SegmentSummary:
     reward_per_step: float
     context_error: float | None = None
     """Mean distance of the estimate from its segment mean (spread of psi inside the segment)."""
+    estimated: tuple[float, ...] | None = None
+    """Mean read-out (estimate in the context's units) over the segment's steps with history."""
 
 
 @dataclass
@@ -97,11 +100,13 @@ class StepLog:
                 stack = np.stack(estimates)
                 error = float(np.linalg.norm(stack - stack.mean(0), axis=1).mean())
             total = float(np.sum(rewards)) if rewards else 0.0
+            read = [r.readout for r in current if r.readout and r.history_length > 0]
+            estimated = tuple(np.mean(read, axis=0).tolist()) if read else None
             summaries.append(SegmentSummary(
                 segment=current[0].segment, context=current[0].truth or (),
                 first_step=current[0].step, last_step=current[-1].step, steps=len(current),
                 total_return=total, reward_per_step=total / max(len(rewards), 1),
-                context_error=error))
+                context_error=error, estimated=estimated))
 
         for record in self.ordered():
             if record.truth is None:
@@ -121,74 +126,83 @@ class StepLog:
 
 def format_segments(segments: Sequence[SegmentSummary], names: Sequence[str]) -> str:
     """A fixed-width table of the segment summaries."""
+    read = any(s.estimated for s in segments)
     header = f'{"seg":>4} {"steps":>6} {"from":>6} {"to":>6}  {"context":<28} ' \
-             f'{"return":>9} {"per step":>9} {"psi spread":>10}'
+             + (f'{"estimated":<14} ' if read else '') \
+             + f'{"return":>9} {"per step":>9} {"psi spread":>10}'
     lines = [header, '-' * len(header)]
     for s in segments:
         context = ', '.join(f'{n}={v:g}' for n, v in zip(names, s.context, strict=False))
         spread = '' if s.context_error is None else f'{s.context_error:10.3f}'
+        estimated = ', '.join(f'{v:.3g}' for v in s.estimated or ())
         lines.append(f'{s.segment:>4} {s.steps:>6} {s.first_step:>6} {s.last_step:>6}  '
-                     f'{context:<28} {s.total_return:>9.2f} {s.reward_per_step:>9.3f} {spread}')
+                     f'{context:<28} ' + (f'{estimated:<14} ' if read else '')
+                     + f'{s.total_return:>9.2f} {s.reward_per_step:>9.3f} {spread}')
     return '\n'.join(lines)
 
 
-def linear_readout(estimates: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Least-squares affine map from psi to the true value, applied to psi.
-
-    psi lives in its own learned space; this read-out shows how much of the true context it
-    carries, in the context's own unit, without training anything.
-    """
-    design = np.hstack([estimates.astype(np.float64), np.ones((len(estimates), 1))])
-    weights, *_ = np.linalg.lstsq(design, truth.astype(np.float64), rcond=None)
-    return design @ weights
-
-
-def _projection(points: np.ndarray) -> np.ndarray:
-    """First two principal components (zeros for a degenerate cloud)."""
+def _projection(points: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+    """First two principal components and the share of variance each explains."""
     centered = points - points.mean(0)
     if points.shape[1] < 2 or not np.any(centered):
-        return np.zeros((points.shape[0], 2))
-    _u, _s, vt = np.linalg.svd(centered, full_matrices=False)
-    return centered @ vt[:2].T
+        return np.zeros((points.shape[0], 2)), (0.0, 0.0)
+    _u, s, vt = np.linalg.svd(centered, full_matrices=False)
+    share = s ** 2 / max(float((s ** 2).sum()), 1e-12)
+    return centered @ vt[:2].T, (float(share[0]), float(share[1]))
 
 
 def plot_inspection(log: StepLog, path: Path, title: str = '') -> Path:
-    """Save the inspection figure: context over time, psi projection, return per segment."""
+    """Save the inspection figure: context over time, psi projection, return per segment.
+
+    The estimate drawn in the first panel is the estimator's own read-out (calibrated offline
+    and stored in its checkpoint), never a map fitted on the run it is drawn over.
+    """
     import matplotlib
 
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
+    from zeus_ros.labels import context_label
+
     records = [r for r in log.ordered() if r.truth is not None]
     segments = log.segments()
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.5))
+    name = log.context_names[0] if log.context_names else 'context'
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
     ax = axes[0]
     steps = np.array([r.step for r in records])
     truth = np.array([r.truth[0] for r in records]) if records else np.zeros(0)
-    ax.plot(steps, truth, color='black', lw=2, label=f'true {log.context_names[0]}'
-            if log.context_names else 'true context')
+    ax.plot(steps, truth, color='black', lw=2, label=f'true {name}')
     # An empty history (episode start) gives psi of nothing: one constant point that would
     # dominate the projection, so only estimates from at least one transition are drawn.
     with_est = [r for r in records if r.estimate is not None and r.estimate.size
                 and r.history_length > 0]
-    if len(with_est) > 2:
-        readout = linear_readout(np.stack([r.estimate for r in with_est]),
-                                 np.array([r.truth[0] for r in with_est]))
-        ax.plot([r.step for r in with_est], readout, color='tab:blue', lw=1, alpha=0.8,
-                label='psi, linear read-out (least squares on this run)')
+    read = [r for r in with_est if r.readout]
+    if read:
+        ax.plot([r.step for r in read], [r.readout[0] for r in read], color='tab:blue', lw=1,
+                alpha=0.8, label='estimated (read-out stored in the checkpoint)')
+    elif with_est:
+        ax.text(0.01, 0.02, 'no read-out in this checkpoint (zeus export calibrates one):\n'
+                'psi is shown in the middle panel only', transform=ax.transAxes, fontsize=7,
+                va='bottom')
     for s in segments[1:]:
         ax.axvline(s.first_step, color='tab:red', ls='--', lw=0.8)
-    ax.set_xlabel('step')
-    ax.set_title('context over time (dashed: switches)')
-    ax.legend(loc='best', fontsize=8)
+    ax.set_xlabel('control step')
+    ax.set_ylabel(context_label(name))
+    ax.set_title('context over time (dashed: switches)', fontsize=10)
+    ax.legend(loc='upper left', fontsize=8, framealpha=0.6)
 
     ax = axes[1]
     if with_est:
-        xy = _projection(np.stack([r.estimate for r in with_est]))
+        xy, share = _projection(np.stack([r.estimate for r in with_est]))
         colour = [r.truth[0] for r in with_est]
         scatter = ax.scatter(xy[:, 0], xy[:, 1], c=colour, cmap='viridis', s=6)
-        fig.colorbar(scatter, ax=ax, label=log.context_names[0] if log.context_names else '')
-    ax.set_title('psi(H), 2-D PCA, coloured by true context')
+        fig.colorbar(scatter, ax=ax, label=f'true {context_label(name)}')
+        ax.set_xlabel(f'psi PC1 ({share[0]:.0%} of variance)')
+        ax.set_ylabel(f'psi PC2 ({share[1]:.0%} of variance)')
+    else:
+        ax.set_xlabel('psi PC1')
+        ax.set_ylabel('psi PC2')
+    ax.set_title('psi(H), 2-D PCA, coloured by true context', fontsize=10)
 
     ax = axes[2]
     if segments:
@@ -196,9 +210,12 @@ def plot_inspection(log: StepLog, path: Path, title: str = '') -> Path:
                   for s in segments]
         ax.bar(range(len(segments)), [s.reward_per_step for s in segments], color='tab:green')
         ax.set_xticks(range(len(segments)), labels, rotation=60, fontsize=7)
-    ax.set_title('reward per step, per context segment')
-    fig.suptitle(title)
-    fig.tight_layout()
+    ax.set_xlabel(f'segment: {context_label(name)}')
+    ax.set_ylabel('reward per step')
+    ax.set_title('reward per step, per context segment', fontsize=10)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.94 if title else 1.0))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -18,6 +18,7 @@ import torch
 from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.offline.readout import ContextReadout, readout_from_checkpoint_bytes
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 
@@ -31,6 +32,8 @@ class LoadedAgent:
     """Absolute path of the checkpoint file."""
     sha256: str
     """Hex digest of the file's bytes, as they were read for loading."""
+    readout: ContextReadout | None = None
+    """The checkpoint's calibrated context read-out (psi -> context units), if it holds one."""
 
     def describe(self) -> str:
         """What a log line says about it."""
@@ -64,7 +67,14 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
             path, expect_task=params['task'] or None, device=params['device'])
     except CheckpointError as error:
         raise ValueError(f'{node_name}: {error}') from error
-    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest())
+    try:
+        readout = readout_from_checkpoint_bytes(data)
+    except ValueError as error:
+        raise ValueError(f'{node_name}: checkpoint {path}: {error}') from error
+    if readout is not None and len(readout.weights) != agent.context_dim:
+        raise ValueError(f'{node_name}: checkpoint {path}: its context read-out expects psi of '
+                         f'{len(readout.weights)} values, the agent has {agent.context_dim}')
+    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest(), readout)
 
 
 def check_swappable(node_name: str, old: InferenceAgent, new: InferenceAgent) -> None:

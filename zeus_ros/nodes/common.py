@@ -62,6 +62,8 @@ class TOPICS:
     STEP = 'zeus/step'
     CONTEXT_TRUTH = 'zeus/context_truth'
     CONTEXT = 'zeus/context'
+    CONTEXT_READOUT = 'zeus/context_readout'
+    """ContextTruth-typed: the estimate in the context's units (the checkpoint's read-out)."""
     ACTION = 'zeus/action'
     CLOCK = '/clock'
     DIAGNOSTICS = '/diagnostics'

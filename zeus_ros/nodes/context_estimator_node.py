@@ -3,7 +3,9 @@
 For step k it needs o_k and StepFeedback k (reward r_k, applied a_{k-1}, episode start); it
 appends (o_{k-1}, a_{k-1}, r_k, o_k) to the history, or clears it at an episode start, and
 publishes ContextEstimate k with the stamp of observation k. A step that never arrives is a
-counted gap (the transition across it is not formed), never a silent misalignment.
+counted gap (the transition across it is not formed), never a silent misalignment. When the
+checkpoint holds a context read-out (offline/readout.py), the same step's estimate in the
+context's units goes out on zeus/context_readout (ContextTruth type: names and values).
 """
 
 from __future__ import annotations
@@ -69,6 +71,10 @@ class ContextEstimatorNode(Node):
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
         # Publisher last: a peer that sees it knows the subscriptions above already exist.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
+        # The estimate in the context's units, for people and plotting tools (the policy never
+        # reads it): published whenever the checkpoint holds a read-out.
+        self._pub_readout = self.create_publisher(ContextTruth, TOPICS.CONTEXT_READOUT,
+                                                  step_qos())
         steady_timer(self, 1.0, self._publish_diagnostics)
         serve_live_changes(self, SPECS, self.params, self._apply_live,
                            prepare=self._prepare_live)
@@ -76,6 +82,15 @@ class ContextEstimatorNode(Node):
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
             f'k={self.agent.k}, context dim {self.agent.context_dim}): loaded '
             f'{self.loaded.describe()}')
+        self._log_readout()
+
+    def _log_readout(self) -> None:
+        if self.loaded.readout is None:
+            self.get_logger().info(f'no context read-out in the checkpoint: nothing on '
+                                   f'{self._pub_readout.topic_name} (zeus export calibrates one)')
+        else:
+            self.get_logger().info(f'{self._pub_readout.topic_name}: '
+                                   f'{self.loaded.readout.describe()}')
 
     def _prepare_live(self, changed: dict[str, Any]) -> None:
         """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
@@ -99,6 +114,7 @@ class ContextEstimatorNode(Node):
                                   float(old.hist_reward[slot, 0]), old.hist_next_obs[slot])
         self.get_logger().info(f'redeployed live: {self.agent.method} checkpoint '
                                f'{self.loaded.describe()}')
+        self._log_readout()
 
     def _reject(self, step: int, topic: str, error: ValueError) -> None:
         self.counts['rejected'] += 1
@@ -136,6 +152,13 @@ class ContextEstimatorNode(Node):
         msg.missing_steps = self._missing_in_episode
         msg.checkpoint_sha256 = self.loaded.sha256
         self._pub.publish(msg)
+        if self.loaded.readout is not None:
+            readout = ContextTruth()
+            readout.header.stamp = feedback.header.stamp
+            readout.step = step
+            readout.names = list(self.loaded.readout.names)
+            readout.values = self.loaded.readout.apply(context).tolist()
+            self._pub_readout.publish(readout)
         self.counts['estimates'] += 1
         self._rate.tick()
         self._latency_ms.append((time.monotonic() - received) * 1e3)

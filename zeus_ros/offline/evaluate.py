@@ -352,7 +352,9 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         rho, d_true, d_learned = context_rank_correlation(true, learned)
         plot_heatmaps({'true context distance': d_true, 'learned context distance': d_learned},
                       labels, out / 'context_distances.png',
-                      title=f'{agent.task} {split}: Spearman rho = {rho:.3f}')
+                      title=f'{agent.task} {split}: Spearman rho = {rho:.3f}',
+                      axis_label=', '.join(context_label(n) for n in agent.context_names),
+                      units=('distance (context units)', 'distance in psi space'))
     probe: ProbeResult | None = None
     if probe_steps > 0:
         rollout = random_rollout(agent.task, values, probe_steps, every=50, seed=seed + 1,
@@ -395,7 +397,9 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     per_value = {policy: [float(np.mean([r['return'] for r in rows if r['policy'] == policy
                                          and r[f'context/{name}'] == v[name]]))
                           for v in values] for policy in policies}
-    plot_bars(labels, per_value, out / 'returns.png', xlabel=name, ylabel='episode return',
+    plot_bars(labels, per_value, out / 'returns.png',
+              xlabel=', '.join(context_label(n) for n in agent.context_names),
+              ylabel='episode return',
               title=f'{agent.task} {split}: return per context value ({agent.method})')
     plot_trace(switching.reward, {context_label(name, 'true '): switching.context[:, 0]},
                marks=[s['step'] for s in switches], path=out / 'switching.png',
@@ -412,7 +416,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='checkpoint file(s) or folder(s) of them; several (or a folder, or '
                         '--split all) evaluate each into OUT/<task>/<method>_s<seed>/ and '
                         'write the tables over seeds (OUT/tables.md)')
-    parser.add_argument('--task', type=task_name,
+    parser.add_argument('--task', '--task-file', type=task_name,
                         help=f'expected task (error if the checkpoint has another); {TASK_HELP}')
     parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
                         help="context split; 'all': every split the task's preset defines")

@@ -70,6 +70,7 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'`{config.aggregation}` aggregation, context dim {loaded.agent.context_dim} |',
         f'| context options | context_norm `{config.context_norm}`, context_loss '
         f'`{config.context_loss}`, critic_context_grad `{config.critic_context_grad}`, '
+        f'context_target_tau {config.context_target_tau}, '
         f'context_consistency {config.context_consistency}, exploration '
         f'`{config.exploration}` |',
         f'| observations | {obs} |',
@@ -82,6 +83,12 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'| code commit | `{commit}` |',
         f'| file | {pt.stat().st_size / 1e6:.2f} MB, sha256 `{digest}` |',
     ]
+    if 'context_readout' in extra:
+        from zeus_ros.offline.readout import ContextReadout
+
+        readout = ContextReadout.from_dict(extra['context_readout']).describe()
+        readout = readout.removeprefix('context read-out (').removesuffix(')')
+        lines.insert(-1, f'| context read-out | {readout} |')
     rows = _eval_rows(evals)
     if rows:
         episodes = rows[0][1].get('episodes') or 1
@@ -107,12 +114,26 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
 
 
 def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
-           command: str | None = None, commit: str | None = None) -> tuple[Path, Path]:
-    """Write the deployment checkpoint and its card; returns (pt, md)."""
+           command: str | None = None, commit: str | None = None,
+           readout_steps: int = 0) -> tuple[Path, Path]:
+    """Write the deployment checkpoint and its card; returns (pt, md).
+
+    `readout_steps` > 0 calibrates the context read-out (readout.py) on that many steps of
+    the policy on the train contexts and stores it in the export (state agents with a learned
+    psi; pixel agents would render every step).
+    """
     from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
+    from zeus_ros.learning.methods import method_spec
 
     export_for_deployment(checkpoint, out)
     loaded = load_checkpoint(out)
+    if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
+            method_spec(loaded.config.method).context_source == 'psi':
+        from zeus_ros.learning.inference import InferenceAgent
+        from zeus_ros.offline.readout import calibrate_readout, store_readout
+
+        store_readout(out, calibrate_readout(InferenceAgent(loaded.agent), steps=readout_steps))
+        loaded = load_checkpoint(out)
     card = out.with_suffix('.md')
     card.write_text(card_text(out, loaded, evals=evals, command=command, commit=commit))
     return out, card
@@ -132,6 +153,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='command that trained it, for checkpoints that did not record one')
     parser.add_argument('--commit',
                         help='source commit it was trained on, for checkpoints without one')
+    parser.add_argument('--readout-steps', type=int, default=2000,
+                        help='steps of the policy on the train contexts that calibrate the '
+                        'context read-out stored in the export (psi -> context units, published '
+                        'on zeus/context_readout; default %(default)s, 0: none)')
     args = parser.parse_args(argv)
     if args.out.suffix != '.pt':
         print(f'zeus export: --out {args.out} must end in .pt', file=sys.stderr)
@@ -144,8 +169,8 @@ def main(argv: list[str] | None = None) -> int:
         evals = args.checkpoint.parent.parent
     try:
         pt, card = export(args.checkpoint, args.out, evals=evals, command=args.command,
-                          commit=args.commit)
-    except CheckpointError as error:
+                          commit=args.commit, readout_steps=max(args.readout_steps, 0))
+    except (CheckpointError, ValueError) as error:
         print(f'zeus export: {error}', file=sys.stderr)
         return 2
     before, after = args.checkpoint.stat().st_size, pt.stat().st_size

@@ -129,6 +129,11 @@ class MetricsLog:
         return write_csv(self.path, self.rows)
 
 
+OVERLAP_MARKERS = ('o', 's', '^', 'v', 'D', 'x', '+', '*')
+OVERLAP_STYLES = ('-', '--', '-.', ':')
+"""Marker and dash per line of one plot, so coinciding lines stay distinguishable."""
+
+
 def _pyplot() -> Any:
     """Matplotlib with the file-only backend (no display on robots and CI)."""
     import matplotlib
@@ -157,14 +162,16 @@ def plot_metric_grid(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], pat
     for ax, (key, xs, ys) in zip(axes.flat, series, strict=False):
         ax.plot(xs, ys, lw=1.2)
         ax.set_title(key, fontsize=9)
-        ax.set_xlabel(x, fontsize=8)
+        ax.set_xlabel('update' if x == 'step' else x, fontsize=8)
+        ax.set_ylabel(key.rsplit('/', 1)[-1], fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(series):]:
         ax.set_visible(False)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    # Leave the top strip to the figure title, so it never overlaps a panel title.
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.94 if title else 1.0))
     return _save(fig, path)
 
 
@@ -184,9 +191,13 @@ def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, gro
     for index, key in enumerate(keys):
         points = sorted(groups[key])
         color = cmap(index / max(len(keys) - 1, 1))
-        ax.plot(*zip(*points, strict=True), marker='o', ms=3, color=color,
+        # Lines that coincide (e.g. several at return 0) stay visible: each its own dash and
+        # marker, drawn thinner on top of the ones before.
+        ax.plot(*zip(*points, strict=True), marker=OVERLAP_MARKERS[index % len(OVERLAP_MARKERS)],
+                ms=7 - 4 * index / max(len(keys), 1), ls=OVERLAP_STYLES[index % 4],
+                lw=2.2 - 1.4 * index / max(len(keys), 1), color=color, alpha=0.85,
                 label=f'{group}={key:g}' if isinstance(key, float) else f'{group}={key}')
-    ax.set_xlabel(x)
+    ax.set_xlabel('update' if x == 'step' else x)
     ax.set_ylabel(ylabel or y)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
@@ -197,20 +208,27 @@ def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, gro
 
 
 def plot_heatmaps(matrices: Mapping[str, np.ndarray], labels: Sequence[str], path: str | Path,
-                  *, title: str = '') -> Path:
-    """Side-by-side heat maps of square matrices sharing axis labels (pairwise distances)."""
+                  *, title: str = '', axis_label: str = '', units: Sequence[str] = ()) -> Path:
+    """Side-by-side heat maps of square matrices sharing axis labels (pairwise distances).
+
+    `axis_label` names what the rows and columns are (e.g. 'torso_length [m]'), `units[i]`
+    what the colour of matrix i measures (e.g. 'distance [m]').
+    """
     plt = _pyplot()
-    fig, axes = plt.subplots(1, len(matrices), figsize=(4.6 * len(matrices), 4.0),
+    fig, axes = plt.subplots(1, len(matrices), figsize=(4.6 * len(matrices), 4.3),
                              squeeze=False)
-    for ax, (name, matrix) in zip(axes.flat, matrices.items(), strict=True):
+    for index, (ax, (name, matrix)) in enumerate(zip(axes.flat, matrices.items(), strict=True)):
         image = ax.imshow(matrix, cmap='magma')
         ax.set_title(name, fontsize=9)
         ax.set_xticks(range(len(labels)), labels, rotation=90, fontsize=7)
         ax.set_yticks(range(len(labels)), labels, fontsize=7)
-        fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04)
+        ax.set_xlabel(axis_label, fontsize=8)
+        ax.set_ylabel(axis_label, fontsize=8)
+        fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04,
+                     label=units[index] if index < len(units) else '')
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.93 if title else 1.0))
     return _save(fig, path)
 
 

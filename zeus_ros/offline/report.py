@@ -290,7 +290,7 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
             writer.writeheader()
             writer.writerows(headroom)
         (out / 'headroom.md').write_text(headroom_table(headroom) + '\n')
-    _plot(rows, title or task_label(folder.name), out / 'returns.png')
+    _plot(rows, task_label(title or folder.name), out / 'returns.png')
     return rows
 
 

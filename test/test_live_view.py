@@ -1,0 +1,125 @@
+"""The live view, from folders outside the repository.
+
+The context read-out (calibrated offline, stored in the checkpoint, published by the
+estimator), `zeus inspect` with and without a system, `zeus launch`'s status line.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from live_fixtures import tiny_checkpoint
+from ros_harness import ros_environment
+
+# This file's own domain ids (the issue-12 range), so parallel runs do not meet.
+DOMAIN_EMPTY, DOMAIN_LIVE = 131, 132
+
+
+def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
+        tmp_path: Path) -> None:
+    """fit_readout scores on segments it did not fit; the checkpoint keeps it and its weights."""
+    from zeus_ros.learning.checkpoint import load_checkpoint
+    from zeus_ros.offline.readout import (
+        ContextReadout,
+        fit_readout,
+        readout_from_checkpoint_bytes,
+        store_readout,
+    )
+
+    rng = np.random.default_rng(0)
+    segments = np.repeat(np.arange(8), 50)
+    truth = np.repeat(rng.uniform(0.6, 1.2, 8), 50)[:, None]
+    psi = np.hstack([2.0 * truth - 1.0, rng.normal(size=(400, 3))])  # one informative dim
+    readout = fit_readout(psi, truth, ('torso_length',), segments, fitted_on='synthetic')
+    assert readout.heldout_rmse[0] < 0.02 and readout.heldout_r2[0] > 0.95
+    np.testing.assert_allclose(readout.apply(psi[:5])[:, 0], truth[:5, 0], atol=0.02)
+    # psi that carries nothing: the held-back score says so (no better than the mean)
+    blind = fit_readout(rng.normal(size=(400, 4)), truth, ('torso_length',), segments,
+                        fitted_on='noise')
+    assert blind.heldout_r2[0] < 0.3
+    with pytest.raises(ValueError, match='2 context segments'):
+        fit_readout(psi, truth, ('torso_length',), np.zeros(400), fitted_on='one segment')
+
+    ckpt = tiny_checkpoint(tmp_path / 'tiny.pt')
+    assert readout_from_checkpoint_bytes(ckpt.read_bytes()) is None
+    context_dim = load_checkpoint(ckpt).agent.context_dim
+    sized = ContextReadout(('torso_length',), np.ones((context_dim, 1)), np.zeros(1),
+                           (0.1,), (0.5,), 'test')
+    stored = store_readout(ckpt, sized, tmp_path / 'with.pt')
+    again = readout_from_checkpoint_bytes(stored.read_bytes())
+    assert again is not None and again.to_dict() == sized.to_dict()
+    loaded = load_checkpoint(stored)
+    assert loaded.extra['purpose'] == 'test' and loaded.agent.context_dim == context_dim
+
+
+def test_inspect_with_nothing_running_hints_once_and_exits_1(tmp_path: Path) -> None:
+    """No system: one waiting hint naming the domain, no empty table, one error line, exit 1."""
+    result = subprocess.run(
+        [sys.executable, '-m', 'zeus_ros.cli', 'inspect', '--duration', '3', '--refresh', '0.5',
+         '--png', str(tmp_path / 'x.png')],
+        cwd=tmp_path, env=ros_environment(DOMAIN_EMPTY), capture_output=True, text=True,
+        timeout=60, check=False)
+    assert result.returncode == 1, result.stdout + result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 1 and f'ROS_DOMAIN_ID={DOMAIN_EMPTY}' in lines[0], result.stdout
+    assert 'waiting for /zeus/*' in lines[0] and 'seg' not in result.stdout
+    err = result.stderr.splitlines()
+    assert len(err) == 1, result.stderr
+    assert err[0].startswith('zeus inspect: saw no step on /zeus/* in ')
+    assert f'ROS_DOMAIN_ID={DOMAIN_EMPTY}' in err[0]
+    assert not (tmp_path / 'x.png').exists()
+
+
+@pytest.mark.ros
+def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) -> None:
+    """The estimator publishes its checkpoint's read-out; inspect shows it in context units.
+
+    From a folder outside the repository: `zeus launch` (installed params, our checkpoint)
+    prints its status line; `zeus inspect` never shows a half-received step and writes the
+    estimate next to the truth, equal to the stored read-out applied to the published psi.
+    """
+    from zeus_ros.learning.checkpoint import load_checkpoint
+    from zeus_ros.offline.readout import ContextReadout, store_readout
+
+    ckpt = tiny_checkpoint(tmp_path / 'tiny.pt')
+    dim = load_checkpoint(ckpt).agent.context_dim
+    weights = np.linspace(-1.0, 1.0, dim)[:, None]
+    readout = ContextReadout(('torso_length',), weights, np.array([0.9]), (0.1,), (0.5,),
+                             'test')
+    store_readout(ckpt, readout)
+    env = ros_environment(DOMAIN_LIVE)
+    launch = subprocess.Popen(
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--checkpoint', str(ckpt),
+         '--timeout', '60'], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    try:
+        inspect = subprocess.run(
+            [sys.executable, '-m', 'zeus_ros.cli', 'inspect', '--steps', '400', '--refresh',
+             '0.3', '--csv', str(tmp_path / 'steps.csv'), '--duration', '50'],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=90, check=False)
+    finally:
+        launch.send_signal(2)
+        launch_out, _ = launch.communicate(timeout=60)
+    assert inspect.returncode == 0, inspect.stdout + inspect.stderr
+    views = [line for line in inspect.stdout.splitlines() if line.startswith('[inspect] step')]
+    assert views, inspect.stdout
+    assert all('torso_length: estimated' in line and ', true ' in line for line in views), views
+    assert not any('episode -1' in line or 'segment -1' in line for line in views)
+    rows = list(csv.DictReader((tmp_path / 'steps.csv').open()))
+    checked = 0
+    for row in rows:
+        if row['psi'] and row['estimated_torso_length']:
+            psi = np.array([float(v) for v in row['psi'].split()])
+            assert float(row['estimated_torso_length']) == pytest.approx(
+                float(readout.apply(psi)[0]), abs=1e-3)
+            checked += 1
+    assert checked > 100
+    assert 'context_readout: context read-out (torso_length RMSE 0.1' in launch_out
+    status = [line for line in launch_out.splitlines() if line.startswith('[zeus launch] step')]
+    assert status and 'steps/s' in status[-1] and 'return' in status[-1], launch_out[-3000:]
