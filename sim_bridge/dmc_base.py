@@ -97,7 +97,7 @@ class DmcTask(ContextualTask):
             if episode_length < 1:
                 raise ValueError(f'{self.name}: episode_length must be >= 1, got {episode_length}')
             self.episode_length = int(episode_length)
-        self._spec = load_suite_spec(self.xml_name, light_textures=True)
+        self._spec = self._load_spec(light_textures=True)
         self._prepare_spec(self._spec)
         self._cache = ModelCache(self._build, capacity=cache_size)
         self._context = {spec.name: float(spec.default) for spec in self.specs}
@@ -114,6 +114,10 @@ class DmcTask(ContextualTask):
         self._state_dim = int(self._observation(self._current.model, self._current.data).size)
 
     # --- what a concrete task provides -------------------------------------------------------
+
+    def _load_spec(self, *, light_textures: bool) -> mujoco.MjSpec:
+        """The task's model as an editable spec (the suite XML named by `xml_name`)."""
+        return load_suite_spec(self.xml_name, light_textures=light_textures)
 
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
         """Context-independent edits made once (e.g. explicit densities, contact priority)."""
@@ -246,7 +250,7 @@ class DmcTask(ContextualTask):
     def render(self, height: int = 84, width: int = 84) -> np.ndarray:
         """RGB frame of the current state from the tracking camera."""
         if self._renderer is None:
-            spec = load_suite_spec(self.xml_name, light_textures=False)
+            spec = self._load_spec(light_textures=False)
             self._prepare_spec(spec)
             self._edit_spec(spec, self._context)
             self._renderer = SyncedRenderer(spec.compile(), camera=self.camera)

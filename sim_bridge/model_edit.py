@@ -24,6 +24,7 @@ __all__ = [
     'ModelCache',
     'SyncedRenderer',
     'copy_physical_state',
+    'load_model_spec',
     'load_suite_spec',
     'suite_dir',
 ]
@@ -52,10 +53,23 @@ def load_suite_spec(xml_name: str, *, light_textures: bool) -> mujoco.MjSpec:
         raise FileNotFoundError(f'dm_control suite model {path} not found')
     assets = {f'./common/{name}': (root / 'common' / name).read_bytes() for name in _COMMON_ASSETS}
     spec = mujoco.MjSpec.from_string(path.read_text(), assets)
-    if light_textures:
-        for texture in spec.textures:
-            texture.width = _TINY_TEXTURE
-            texture.height = _TINY_TEXTURE
+    return _lighten(spec) if light_textures else spec
+
+
+def load_model_spec(path: Path, *, light_textures: bool) -> mujoco.MjSpec:
+    """Parse a user's MJCF file (includes and assets relative to it) into an editable spec."""
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+    except (ValueError, RuntimeError) as error:  # mujoco's parse errors name line and element
+        raise ValueError(f'model {path}: {error}') from None
+    return _lighten(spec) if light_textures else spec
+
+
+def _lighten(spec: mujoco.MjSpec) -> mujoco.MjSpec:
+    """Shrink every texture to 2x2: same physics, ~100x faster compile, never rendered."""
+    for texture in spec.textures:
+        texture.width = _TINY_TEXTURE
+        texture.height = _TINY_TEXTURE
     return spec
 
 

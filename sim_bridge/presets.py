@@ -1,4 +1,7 @@
-"""The paper's context value tables as named presets (params/contexts/<task>.yaml)."""
+"""The paper's context value tables as named presets (params/contexts/<task>.yaml).
+
+A task declared in a task file carries its presets in the file (`presets:`), same format.
+"""
 
 from __future__ import annotations
 
@@ -29,6 +32,15 @@ def find_params_dir() -> Path:
 
 @cache
 def _preset_file(task: str) -> dict[str, Any]:
+    from sim_bridge.registry import declared_task
+
+    declared = declared_task(task)
+    if declared is not None:  # a task file carries its own presets
+        if not declared.presets:
+            raise ValueError(f'{task}: its task file {declared.source} declares no presets; add '
+                             'presets: {train: [...], interpolation: [...], extrapolation: [...]}')
+        single = declared.parameters[0] if len(declared.parameters) == 1 else None
+        return {'parameter': single, **declared.presets}
     path = find_params_dir() / 'contexts' / f'{task}.yaml'
     if not path.is_file():
         known = sorted(p.stem for p in path.parent.glob('*.yaml'))

@@ -10,11 +10,15 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 import importlib
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sim_bridge.core import ContextualTask
 
-__all__ = ['TASK_NAMES', 'is_simulated', 'is_task_file', 'make_task', 'register_task_file',
-           'task_class']
+if TYPE_CHECKING:
+    from sim_bridge.task_files import DeclaredTask
+
+__all__ = ['TASK_NAMES', 'declared_task', 'is_simulated', 'is_task_file', 'make_task',
+           'register_task_file', 'task_class']
 
 _TASKS: dict[str, tuple[str, str]] = {
     'Cheetah-Run-v0': ('sim_bridge.cheetah', 'CheetahRunTask'),
@@ -43,21 +47,28 @@ def register_task_file(path: str | Path) -> str:
     return declared.name
 
 
+def declared_task(name: str) -> DeclaredTask | None:
+    """The task file behind a registered task name or a path (registered then), else None."""
+    if not (is_task_file(name) or name in _FILE_TASKS):
+        return None
+    from sim_bridge.task_files import load_task_file
+
+    declared = load_task_file(_FILE_TASKS.get(name, Path(name)))
+    _FILE_TASKS.setdefault(declared.name, declared.source)  # its presets, evaluation by name
+    return declared
+
+
 def is_simulated(name: str) -> bool:
     """False for a task that only a robot can step (declared by robot_bridge params)."""
-    if is_task_file(name) or name in _FILE_TASKS:
-        from sim_bridge.task_files import load_task_file
-
-        return load_task_file(_FILE_TASKS.get(name, Path(name))).simulated
-    return name in _TASKS
+    declared = declared_task(name)
+    return declared.simulated if declared is not None else name in _TASKS
 
 
 def task_class(name: str) -> Callable[..., ContextualTask]:
     """The class of a task, imported on demand (MuJoCo models load only when used)."""
-    if is_task_file(name) or name in _FILE_TASKS:
-        from sim_bridge.task_files import load_task_file
-
-        return load_task_file(_FILE_TASKS.get(name, Path(name))).factory
+    declared = declared_task(name)
+    if declared is not None:
+        return declared.factory
     if name not in _TASKS:
         raise ValueError(f'unknown task {name!r}; valid tasks: {", ".join(TASK_NAMES)}, '
                          'or a task file (.yaml)')

@@ -15,6 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 import importlib
 import math
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +35,10 @@ class JointObservation:
     effort: Mapping[str, float] = field(default_factory=dict)
     extra: Mapping[str, np.ndarray] = field(default_factory=dict)
     """Extra inputs (e.g. Float64MultiArray topics or sensors) by name."""
+    model: Any = None
+    """Simulated tasks: the mujoco.MjModel in force (None on a robot)."""
+    data: Any = None
+    """Simulated tasks: the mujoco.MjData after the control step (None on a robot)."""
 
 
 RewardFn = Callable[[JointObservation, 'np.ndarray | None', 'JointObservation | None'], float]

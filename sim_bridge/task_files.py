@@ -1,13 +1,15 @@
 """Tasks declared in YAML files: a robot (its robot_bridge params) or a MuJoCo model.
 
 One reader for every tool: `make_task('my_task.yaml')` and `--task-file` end up here. A file
-holding a `robot_bridge: ros__parameters:` section declares a robot (sim_bridge/robot.py).
+holding a `robot_bridge: ros__parameters:` section declares a robot (sim_bridge/robot.py); a
+file with a `model:` declares a simulated task (sim_bridge/mjcf_task.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +17,23 @@ import yaml
 
 from sim_bridge.core import ContextualTask
 
-__all__ = ['DeclaredTask', 'load_task_file', 'read_yaml']
+__all__ = ['DeclaredTask', 'TaskFactory', 'load_task_file', 'read_yaml']
+
+
+@dataclass(frozen=True)
+class TaskFactory:
+    """Builds the declared task, like a task class; carries what the tools read of a class."""
+
+    build: Callable[..., ContextualTask]
+    name: str
+    episode_length: int
+    specs: tuple[Any, ...] = ()
+    """The context parameters (ContextSpec), as a task class's `specs`."""
+
+    def __call__(self, seed: int | None = None, context: Mapping[str, float] | None = None,
+                 **kwargs: Any) -> ContextualTask:
+        """A new task instance."""
+        return self.build(seed=seed, context=context, **kwargs)
 
 
 @dataclass(frozen=True)
@@ -23,10 +41,13 @@ class DeclaredTask:
     """A task file read and validated: its task name and how to build the task."""
 
     name: str
-    factory: Callable[..., ContextualTask]
+    factory: TaskFactory
     source: Path
     simulated: bool = True
     """False for a robot: only robot_bridge steps it."""
+    presets: Mapping[str, list[Any]] = field(default_factory=dict)
+    """Context values per split (train / interpolation / extrapolation), as in params/contexts."""
+    parameters: tuple[str, ...] = ()
 
 
 def read_yaml(path: Path, what: str = 'task file') -> Any:
@@ -54,23 +75,56 @@ def _robot(path: Path, params: Mapping[str, Any]) -> DeclaredTask:
     except ValueError as error:
         raise ValueError(f'task file {path}: {error}') from None
 
-    def factory(seed: int | None = None, context: Mapping[str, float] | None = None
-                ) -> ContextualTask:
+    def build(seed: int | None = None, context: Mapping[str, float] | None = None
+              ) -> ContextualTask:
         task = RobotTask(spec, path)
         if context:
             task.set_context(context)
         return task
 
+    task = RobotTask(spec, path)
+    factory = TaskFactory(build, spec.task, spec.episode_length, task.context_specs)
     return DeclaredTask(spec.task, factory, path, simulated=False)
 
 
+def _mjcf(path: Path, data: Mapping[str, Any]) -> DeclaredTask:
+    from sim_bridge.mjcf_task import MjcfTask, parse_mjcf_task
+
+    spec = parse_mjcf_task(path, data)
+    MjcfTask(spec).close()  # builds once: every path, the reward and the model are checked now
+    factory = TaskFactory(partial(MjcfTask, spec), spec.name, spec.episode_length,
+                          tuple(p.spec for p in spec.context))
+    return DeclaredTask(spec.name, factory, path, presets=spec.presets,
+                        parameters=tuple(p.spec.name for p in spec.context))
+
+
+_READ: dict[Path, tuple[float, DeclaredTask]] = {}
+"""Task files read so far, with their modification time (a file is validated once)."""
+
+
 def load_task_file(path: Path) -> DeclaredTask:
-    """Read and validate a task file; ValueError naming the file and what is wrong."""
+    """Read and validate a task file (once per version); ValueError naming what is wrong."""
+    path = Path(path).absolute()
+    try:
+        mtime = path.stat().st_mtime
+    except OSError:
+        mtime = -1.0
+    cached = _READ.get(path)
+    if cached is not None and cached[0] == mtime:
+        return cached[1]
+    declared = _load(path)
+    _READ[path] = (mtime, declared)
+    return declared
+
+
+def _load(path: Path) -> DeclaredTask:
     from sim_bridge.robot import robot_section
 
     data = read_yaml(path)
     robot = robot_section(data)
     if robot is not None:
         return _robot(path, robot)
+    if isinstance(data, Mapping) and 'model' in data:
+        return _mjcf(path, data)
     raise ValueError(f'task file {path}: expected a robot_bridge: ros__parameters: section '
                      '(a robot) or a MuJoCo task (model:, observation:, context:)')

@@ -21,13 +21,38 @@ import numpy as np
 
 from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
+from sim_bridge.rewards import JointObservation
 
-__all__ = ['WalkerFootTask', 'WalkerFrictionTask']
+__all__ = ['WalkerFootTask', 'WalkerFrictionTask', 'walk_reward']
 
 _STAND_HEIGHT = 1.2  # dm_control walker
 _WALK_SPEED = 1.0  # dm_control walker walk
 _XX, _XZ, _ZZ = 0, 2, 8  # indices into a row-major 3x3 xmat
 _FEET = ('left_foot', 'right_foot')
+
+
+def _walk(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """The suite's walk reward: standing (height, upright) x (5 moving + 1) / 6."""
+    torso = model.body('torso').id
+    standing = rewards.tolerance(
+        data.xpos[torso, 2], bounds=(_STAND_HEIGHT, float('inf')), margin=_STAND_HEIGHT / 2
+    )
+    upright = (1 + data.xmat[torso, _ZZ]) / 2
+    stand_reward = (3 * standing + upright) / 4
+    move_reward = rewards.tolerance(
+        data.sensor('torso_subtreelinvel').data[0],
+        bounds=(_WALK_SPEED, float('inf')),
+        margin=_WALK_SPEED / 2,
+        value_at_margin=0.5,
+        sigmoid='linear',
+    )
+    return float(stand_reward * (5 * move_reward + 1) / 6)
+
+
+def walk_reward(obs: JointObservation, action: np.ndarray | None,
+                prev_obs: JointObservation | None) -> float:
+    """The walk reward as a task-file reward (`reward: sim_bridge.walker:walk_reward`)."""
+    return _walk(obs.model, obs.data)
 
 
 class _Walker(DmcTask):
@@ -45,20 +70,7 @@ class _Walker(DmcTask):
         return np.concatenate([orientations, [height], data.qvel]).astype(np.float64)
 
     def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
-        torso = model.body('torso').id
-        standing = rewards.tolerance(
-            data.xpos[torso, 2], bounds=(_STAND_HEIGHT, float('inf')), margin=_STAND_HEIGHT / 2
-        )
-        upright = (1 + data.xmat[torso, _ZZ]) / 2
-        stand_reward = (3 * standing + upright) / 4
-        move_reward = rewards.tolerance(
-            data.sensor('torso_subtreelinvel').data[0],
-            bounds=(_WALK_SPEED, float('inf')),
-            margin=_WALK_SPEED / 2,
-            value_at_margin=0.5,
-            sigmoid='linear',
-        )
-        return float(stand_reward * (5 * move_reward + 1) / 6)
+        return _walk(model, data)
 
     def _initialize_episode(
         self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator

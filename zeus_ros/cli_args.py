@@ -25,7 +25,7 @@ def _task_names() -> tuple[str, ...]:
     return TASK_NAMES
 
 
-TASK_HELP = 'task family: ' + ', '.join(_task_names())
+TASK_HELP = 'task family: ' + ', '.join(_task_names()) + ', or a task file (.yaml)'
 
 
 def nearest(value: str, choices: Iterable[str]) -> str:
@@ -37,7 +37,14 @@ def nearest(value: str, choices: Iterable[str]) -> str:
 
 
 def task_name(value: str) -> str:
-    """The argparse type of --task: a registered task name, else the choices and the nearest."""
+    """The argparse type of --task: a registered task name or a task file (registered here)."""
+    from sim_bridge.registry import is_task_file, register_task_file
+
+    if is_task_file(value):
+        try:
+            return register_task_file(input_path(value, 'task file'))
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error)) from None
     names = _task_names()
     if value in names:
         return value

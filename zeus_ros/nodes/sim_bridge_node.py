@@ -43,7 +43,8 @@ MODES = ('lockstep', 'realtime')
 ACTION_BACKLOG = 1000  # reader history of zeus/action: room for a flood between two takes
 SCHEDULE_PREFIX = 'schedule.'
 SPECS: dict[str, Spec] = {
-    'task': Spec('Cheetah-Run-v0', 'contextual MuJoCo task', choices=TASK_NAMES),
+    'task': Spec('Cheetah-Run-v0', 'contextual MuJoCo task: ' + ', '.join(TASK_NAMES) +
+                 ', or a task file (.yaml, sim_bridge/mjcf_task.py)'),
     'mode': Spec('lockstep', 'lockstep: step k+1 after Action k; realtime: wall-clock timer',
                  choices=MODES),
     'seed': Spec(0, "seeds the task's initial states and sampled schedules", low=0),
@@ -73,7 +74,11 @@ class SimBridgeNode(Node):
     def __init__(self) -> None:
         super().__init__('sim_bridge')
         self.params = declare_specs(self, SPECS, open_prefixes=[SCHEDULE_PREFIX])
-        task = make_task(self.params['task'], seed=self.params['seed'])
+        try:
+            task = make_task(self.params['task'], seed=self.params['seed'])
+        except ValueError as error:
+            raise ValueError(f'sim_bridge: parameter task: {error}') from None
+        self.params['task'] = task.name  # a task file's declared name, as steps carry it
         schedule = schedule_from_config(self._schedule_config(), task, self.params['seed'])
         self.env = ScheduledEnv(task, schedule)
         self.mode: str = self.params['mode']

@@ -272,7 +272,7 @@ def _build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=SCHEDULE_HELP,
     )
-    parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
+    parser.add_argument('--task', '--task-file', required=True, type=task_name, help=TASK_HELP)
     parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
     parser.add_argument('--steps', type=int, required=True, help='control steps to record')
     parser.add_argument('--seed', type=int, default=0, help='seeds task, schedule and policy')
