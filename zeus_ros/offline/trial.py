@@ -31,7 +31,7 @@ from typing import Any
 import yaml
 
 __all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'run_trial',
-           'trial_done']
+           'trial_done', 'trial_steps']
 
 
 class TrialError(RuntimeError):
@@ -143,30 +143,27 @@ def _run_step(trial: Trial, what: str, args: list[str], threads: int) -> float:
     return time.perf_counter() - start
 
 
-def run_trial(trial: Trial, threads: int = 1) -> float:
-    """Train (if not done) and evaluate (the splits not done); returns the wall seconds.
+def trial_steps(trial: Trial) -> list[tuple[str, list[str], Path]]:
+    """The `zeus` commands the trial still has to run, each with the marker it completes.
 
-    Raises TrialError naming the step that failed and the log. Safe to call again after a
-    failure or a kill: it resumes.
+    Writes the trial's config.yaml (the training command reads it). A trial with bags or a run
+    folder but no .done_train was cut off: its loop resumes.
     """
-    start = time.perf_counter()
     folder, protocol = trial.folder, trial.protocol
     folder.mkdir(parents=True, exist_ok=True)
-    with trial.log.open('a') as log:
-        stamp = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M:%S UTC')
-        log.write(f'== {stamp} {trial.name} on {socket.gethostname()}, {threads} thread(s)\n')
+    steps = []
     if not (folder / '.done_train').is_file():
         config = folder / 'config.yaml'
         config.write_text(yaml.safe_dump(trial.config, sort_keys=False))
         resume = (folder / 'bags').is_dir() or (folder / 'run').is_dir()
-        args = ['loop', '--task', trial.task, '--config', str(config), '--out', str(folder),
-                '--rounds', str(protocol.rounds), '--random-steps', str(protocol.random_steps),
-                '--steps', str(protocol.steps), '--updates', str(protocol.updates),
-                '--noise', str(protocol.noise),
-                '--schedule', protocol.schedule or default_schedule(trial.task),
-                '--no-eval', '--no-progress', *(['--resume'] if resume else [])]
-        seconds = _run_step(trial, 'training', args, threads)
-        (folder / '.done_train').write_text(f'{seconds:.0f}\n')
+        steps.append(('training', [
+            'loop', '--task', trial.task, '--config', str(config), '--out', str(folder),
+            '--rounds', str(protocol.rounds), '--random-steps', str(protocol.random_steps),
+            '--steps', str(protocol.steps), '--updates', str(protocol.updates),
+            '--noise', str(protocol.noise),
+            '--schedule', protocol.schedule or default_schedule(trial.task),
+            '--no-eval', '--no-progress', *(['--resume'] if resume else [])],
+            folder / '.done_train'))
     for split in trial.splits:
         target = folder / f'eval_{split}'
         if (target / '.done').is_file():
@@ -176,6 +173,23 @@ def run_trial(trial: Trial, threads: int = 1) -> float:
                 '--seed', str(protocol.eval_seed), '--out', str(target), '--no-progress']
         if protocol.eval_episodes is not None:
             args += ['--episodes', str(protocol.eval_episodes)]
-        seconds = _run_step(trial, f'evaluation ({split})', args, threads)
-        (target / '.done').write_text(f'{seconds:.0f}\n')
+        steps.append((f'evaluation ({split})', args, target / '.done'))
+    return steps
+
+
+def run_trial(trial: Trial, threads: int = 1) -> float:
+    """Run the steps not done yet, each in a subprocess; returns the wall seconds.
+
+    Raises TrialError naming the step that failed and the log. Safe to call again after a
+    failure or a kill: it resumes.
+    """
+    start = time.perf_counter()
+    steps = trial_steps(trial)
+    with trial.log.open('a') as log:
+        stamp = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M:%S UTC')
+        log.write(f'== {stamp} {trial.name} on {socket.gethostname()}, {threads} thread(s)\n')
+    for what, args, marker in steps:
+        seconds = _run_step(trial, what, args, threads)
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text(f'{seconds:.0f}\n')
     return time.perf_counter() - start
