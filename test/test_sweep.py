@@ -189,3 +189,15 @@ def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(
     assert f'training exited with code 2 (log: {cuda.log})' in outcome.failed[cuda.name]
     assert 'device cuda:99' in cuda.log.read_text()
     assert lines[-1].startswith('sweep: 1/2 done, 0 running, 1 failed')
+
+
+def test_collect_workers_as_ray_tasks_equal_sequential_collections(ray_session: None,
+                                                                   tmp_path: Path) -> None:
+    from test_collect_workers import COMMON, SEED, STEPS, assert_same_data, sequential_bags
+
+    from zeus_ros.offline import collect
+
+    out = tmp_path / 'ray'
+    assert collect.main([*COMMON, '--steps', str(STEPS), '--seed', str(SEED), '--out', str(out),
+                         '--workers', '2', '--ray']) == 0
+    assert_same_data(out, sequential_bags(tmp_path / 'sequential'))

@@ -286,6 +286,12 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--append', action='store_true',
                         help='add a new bag next to the bags already in --out')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
+    parser.add_argument('--workers', type=int, default=1,
+                        help='simulators at once, each writing its own bag of --steps/N steps '
+                        'with a seed derived from --seed (default: 1)')
+    parser.add_argument('--ray', action='store_true',
+                        help='run the workers as Ray tasks (RAY_ADDRESS: on that cluster, '
+                        '--out shared), not as local processes')
     return parser
 
 
@@ -294,6 +300,10 @@ def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     if args.steps < 1:
         print(f'zeus collect: --steps must be >= 1, got {args.steps}', file=sys.stderr)
+        return 2
+    if not 1 <= args.workers <= args.steps:
+        print(f'zeus collect: --workers must be between 1 and --steps ({args.steps}), got '
+              f'{args.workers}', file=sys.stderr)
         return 2
     try:
         schedule_config = parse_schedule(args.schedule)
@@ -339,6 +349,11 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         policy = AgentPolicy(agent, noise=args.noise, seed=args.seed)
+    if args.workers > 1 or args.ray:  # checked above, collected by the workers
+        task.close()
+        from zeus_ros.offline.collect_workers import main_workers
+
+        return main_workers(args, schedule_config, bag)
     # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     args.out.mkdir(parents=True, exist_ok=True)

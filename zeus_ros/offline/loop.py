@@ -25,14 +25,8 @@ from typing import Any
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.collect import (
-    SCHEDULE_HELP,
-    AgentPolicy,
-    collect,
-    next_bag_path,
-    parse_schedule,
-    random_policy,
-)
+from zeus_ros.offline.collect import SCHEDULE_HELP, next_bag_path, parse_schedule
+from zeus_ros.offline.collect_workers import CollectJob, collect_bag
 from zeus_ros.offline.train import (
     CHECKPOINT,
     FINAL,
@@ -105,27 +99,10 @@ def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: 
                    seed: int, checkpoint: Path | None, noise: float, pixels: bool,
                    progress: bool, stochastic: bool = False, bag: Path | None = None) -> Path:
     """One collection: random without a checkpoint, else the agent (sampled, or mode + noise)."""
-    from sim_bridge.env import ScheduledEnv
-    from sim_bridge.registry import make_task
-    from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.bag_writer import StepBagWriter
-
-    task = make_task(task_name, seed=seed)
-    try:
-        env = ScheduledEnv(task, schedule_from_config(schedule, task, seed))
-        policy = random_policy(task, seed)
-        if checkpoint is not None:
-            from zeus_ros.learning.inference import InferenceAgent
-
-            agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task.name)
-            policy = AgentPolicy(agent, noise=0.0 if stochastic else noise, seed=seed,
-                                 stochastic=stochastic)
-        bag = bag or next_bag_path(bags, append=True)
-        bags.mkdir(parents=True, exist_ok=True)
-        with StepBagWriter(bag, pixels=pixels) as writer:
-            stats = collect(env, task, policy, writer, steps, progress=progress)
-    finally:
-        task.close()
+    bag = bag or next_bag_path(bags, append=True)
+    stats = collect_bag(CollectJob(task_name, schedule, bag, steps, seed, checkpoint=checkpoint,
+                                   noise=noise, stochastic=stochastic, pixels=pixels,
+                                   progress=progress))
     print(f'loop: wrote {stats.steps} steps ({stats.episodes} episode starts) to {bag} '
           f'in {stats.seconds:.1f} s')
     return bag
