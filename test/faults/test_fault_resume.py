@@ -70,6 +70,7 @@ def test_loop_resume_after_kill_during_collection_recovers_and_completes_the_rou
     data = ingest_bags(out / 'bags')
     assert data.report.steps == STEPS
     assert 'train: ' in text and 'from 2 bag(s)' in text and (out / 'run' / 'final.pt').is_file()
+    assert 'cut short' not in text, 'the completed round is not short'
 
 
 def test_loop_resume_after_kill_during_training_continues_from_the_last_checkpoint(
@@ -102,3 +103,43 @@ def test_loop_resume_after_kill_during_training_continues_from_the_last_checkpoi
     assert f'checkpoint at update {saved}' in text and f'updates {saved} -> 40' in text
     assert 'is unfinished' not in text and 'collect' not in text.split('resuming')[1]
     assert load_checkpoint(out / 'run' / 'final.pt').step == 40
+
+
+def test_train_on_a_collection_cut_by_kill_names_recover_then_says_the_round_is_short(
+        tmp_path: Path) -> None:
+    """Kill -9 mid `zeus collect`: train refuses, naming `zeus recover`; then warns.
+
+    After the recover, train and train --resume run but say the bag was cut short (never a
+    silent exit 0 on a cut round).
+    """
+    config = tmp_path / 'tiny.yaml'
+    config.write_text(yaml.safe_dump(TINY))
+    out = tmp_path / 'collect'
+    bag = out / 'bag_000'
+    collect = [sys.executable, '-m', 'zeus_ros.cli', 'collect', '--task', TASK, '--steps',
+               str(STEPS), '--out', str(out), '--no-progress']
+    with subprocess.Popen(collect, cwd=REPO, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.DEVNULL) as proc:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (bag / 'bag_000.mcap').is_file() and (bag / 'bag_000.mcap').stat().st_size > 1e6:
+                os.kill(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.05)
+        assert proc.wait(30) == -signal.SIGKILL, 'the collection ended before the kill'
+
+    def train(*extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, '-m', 'zeus_ros.cli', 'train', '--bags', str(bag), '--config',
+             str(config), '--out', str(tmp_path / 'run'), '--no-progress', *extra],
+            cwd=REPO, capture_output=True, text=True, timeout=300, check=False)
+
+    refused = train()
+    assert refused.returncode == 2 and f'zeus recover {bag}' in refused.stderr, refused.stderr
+    assert refused.stderr.count('\n') == 1
+    assert subprocess.run([sys.executable, '-m', 'zeus_ros.cli', 'recover', str(bag)],
+                          cwd=REPO, capture_output=True, timeout=60).returncode == 0
+    for extra in ((), ('--resume', '--updates', '6')):
+        result = train(*extra)
+        assert result.returncode == 0, result.stderr
+        assert f'cut short by a crash: {bag} (recovered)' in result.stdout, result.stdout

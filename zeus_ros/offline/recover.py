@@ -260,6 +260,23 @@ def _tally(report: RecoveryReport, messages: Iterable[tuple[str, bytes]],
                 report.last_step[topic] = step
 
 
+def bag_state(bag: Path) -> str | None:
+    """How a bag was left, from its metadata.yaml: 'closed', 'recovered', 'provisional'.
+
+    'recovered': cut by a crash and rebuilt by `zeus recover`; 'unfinished': no metadata (not
+    closed); None when the metadata says nothing (not written by zeus).
+    """
+    bag = bag.parent if bag.is_file() else bag
+    meta = bag / 'metadata.yaml'
+    if not meta.exists():
+        return 'unfinished'
+    try:
+        info = YAML(typ='safe').load(meta.read_text('utf8'))['rosbag2_bagfile_information']
+    except Exception:  # an unreadable metadata.yaml: ingest names what is wrong with it
+        return None
+    return (info.get('custom_data') or {}).get(STATE_KEY)
+
+
 def needs_recovery(bag: Path) -> bool:
     """True when a bag directory was not closed (no or provisional metadata, unreadable)."""
     meta = bag / 'metadata.yaml'

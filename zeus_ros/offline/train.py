@@ -182,6 +182,19 @@ def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
         task.close()
 
 
+def _report_cut_bags(bags: Sequence[str], log: Callable[[str], None]) -> None:
+    """Say which bags a crash cut short: their round may hold fewer steps than it asked for."""
+    from zeus_ros.offline.recover import bag_state
+
+    cut = [f'{bag} ({state})' for bag in bags
+           if (state := bag_state(Path(bag))) in ('recovered', 'unfinished', 'provisional')
+           and not any(Path(bag).parent.glob(f'{Path(bag).name}_rest*'))]  # loop completed it
+    if cut:
+        log(f'train: WARNING: {len(cut)} bag(s) were cut short by a crash: {", ".join(cut)}; '
+            'their collection stopped early, so their round may hold fewer steps than it '
+            'asked for (`zeus loop --resume` collects what a round lacks)')
+
+
 def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
     old, new = stored.to_dict(), wanted.to_dict()
     return [f'{key}: checkpoint {old[key]!r}, now {new[key]!r}' for key in old
@@ -285,6 +298,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     log(f'train: {dataset.task}, method {cfg.method}, {len(replay)} transitions in '
         f'{replay.num_episodes} episodes from {len(dataset.report.bags)} bag(s); '
         f'updates {start} -> {cfg.num_updates} on {device}')
+    _report_cut_bags(dataset.report.bags, log)
     metrics = MetricsLog.resume(out / 'metrics.csv', up_to_step=start) if resume \
         else MetricsLog(out / 'metrics.csv')
     evals = MetricsLog.resume(out / 'eval.csv', up_to_step=start) if resume \
