@@ -27,6 +27,7 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.offline.collect_workers import portable_task
 from zeus_ros.offline.trial import LoopProtocol, Trial, TrialError, run_trial, trial_done
 
 __all__ = ['SweepResult', 'group_name', 'main', 'parse_seeds', 'parse_sets', 'plan',
@@ -123,7 +124,7 @@ def plan(tasks: Sequence[str], methods: Sequence[str], seeds: Sequence[int],
                                           else f'--methods {method}')
             except ConfigError as error:
                 raise SweepError(str(error)) from None
-            trials.append(Trial(task=task, method=method, seed=seed, group=group,
+            trials.append(Trial(task=portable_task(task), method=method, seed=seed, group=group,
                                 folder=out / group / f'{method}_s{seed}',
                                 config=config.to_dict(), splits=task_splits,
                                 protocol=protocol))
@@ -283,11 +284,16 @@ def _default_config() -> Path:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+    from zeus_ros.learning.methods import METHODS
+
+    parser = ZeusArgumentParser(
         prog='zeus sweep', formatter_class=argparse.RawDescriptionHelpFormatter,
         description=__doc__.split('\n\n')[0].split(': ', 1)[1], epilog=__doc__.split('\n\n', 2)[2])
-    parser.add_argument('--tasks', nargs='+', required=True, help='task names')
-    parser.add_argument('--methods', nargs='+', required=True, help='method names')
+    parser.add_argument('--tasks', nargs='+', required=True, type=task_name,
+                        help=f'{TASK_HELP}; several')
+    parser.add_argument('--methods', nargs='+', required=True, choices=METHODS,
+                        help='%(choices)s; several')
     parser.add_argument('--seeds', default='0', help='e.g. 0-4 or 0,2,5 (default: 0)')
     parser.add_argument('--set', action='append', default=[], metavar='KEY=V1[,V2...]',
                         help='training config override; several values make a grid axis')
@@ -323,7 +329,6 @@ def _build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus sweep`; returns 0, 1 (a trial failed) or 2 (bad input)."""
     from zeus_ros.learning.errors import ConfigError
-    from zeus_ros.learning.methods import METHODS
     from zeus_ros.offline.train import read_config
 
     args = _build_parser().parse_args(argv)
@@ -331,10 +336,6 @@ def main(argv: list[str] | None = None) -> int:
         for flag in ('rounds', 'random_steps', 'steps', 'updates', 'cpus_per_trial'):
             if getattr(args, flag) < 1:
                 raise SweepError(f'--{flag.replace("_", "-")} must be >= 1')
-        unknown = [m for m in args.methods if m not in METHODS]
-        if unknown:
-            raise SweepError(f'--methods: unknown {", ".join(unknown)}; known: '
-                             f'{", ".join(METHODS)}')
         protocol = LoopProtocol(rounds=args.rounds, random_steps=args.random_steps,
                                 steps=args.steps, updates=args.updates, noise=args.noise,
                                 schedule=args.schedule, eval_episodes=args.eval_episodes)
