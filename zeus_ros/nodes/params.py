@@ -67,6 +67,8 @@ def validate(node_name: str, specs: Mapping[str, Spec], values: Mapping[str, Any
         if not _type_ok(spec.default, value):
             raise ValueError(f'{node_name}: parameter {key} must be {_type_name(spec.default)}, '
                              f'got {value!r}')
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f'{node_name}: parameter {key} must be a finite number, got {value}')
         if spec.low is not None and value < spec.low:
             raise ValueError(f'{node_name}: parameter {key} must be >= {spec.low}, got {value}')
         if spec.high is not None and value > spec.high:
