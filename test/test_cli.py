@@ -117,3 +117,46 @@ def test_old_positional_spellings_still_work(tmp_path: Path,
     positional = capsys.readouterr().err
     assert _run('report', ['--folder', str(missing), '--out', str(tmp_path / 'r')]) == 2
     assert capsys.readouterr().err == positional
+
+
+def _documented_commands(text: str) -> list[tuple[str, list[str]]]:
+    """Every `zeus <command> --flag ...` line of the bash blocks of a markdown text."""
+    import re
+
+    found = []
+    for block in re.findall(r'```bash\n(.*?)```', text, flags=re.DOTALL):
+        joined = block.replace('\\\n', ' ')
+        for line in joined.splitlines():
+            line = line.split('#', 1)[0].strip()
+            if line.startswith('zeus ') and len(line.split()) > 1:
+                words = line.split()
+                found.append((words[1], [w.split('=')[0] for w in words if w.startswith('--')]))
+    return found
+
+
+@pytest.mark.parametrize('doc', ['README.md', 'docs/training.md', 'docs/recording.md'])
+def test_the_docs_use_only_commands_and_flags_the_help_lists(
+        doc: str, capsys: pytest.CaptureFixture) -> None:
+    """Docs and --help say the same: every documented command and flag exists."""
+    text = (Path(__file__).resolve().parents[1] / doc).read_text()
+    helps: dict[str, str] = {}
+    for command, flags in _documented_commands(text):
+        if command in ('--help', '-h'):
+            continue
+        assert command in SUBCOMMANDS, (doc, command)
+        if command not in helps:
+            assert _run(command, ['--help']) == 0
+            helps[command] = capsys.readouterr().out
+        for flag in flags:
+            if flag != '--help':
+                assert flag in helps[command], (doc, command, flag)
+
+
+def test_readme_names_every_command() -> None:
+    """The README's `zeus --help` comment and executables table list every subcommand."""
+    text = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
+    comment = next(line for line in text.splitlines() if line.startswith('zeus --help'))
+    row = next(line for line in text.splitlines() if line.startswith('| `zeus` |'))
+    for name in SUBCOMMANDS:
+        assert f' {name} ' in comment.replace('/', ' ') + ' ', name
+        assert f'`{name}`' in row, name

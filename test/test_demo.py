@@ -32,3 +32,7 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     table = done.stdout.split('value of adaptation:')[1]
     assert 'live - frozen' in table and '\n all ' in table
     assert (out / 'inspection.png').is_file() and (out / 'frozen' / 'inspection.png').is_file()
+    # The shipped checkpoint has no read-out: the demo calibrates one on the train contexts
+    # (not on its own run) and the estimator publishes the estimate in m/s.
+    assert 'context read-out (target_velocity RMSE' in done.stdout
+    assert sum('estimated_target_velocity' in r for r in live) >= 50

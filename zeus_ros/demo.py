@@ -42,7 +42,8 @@ DEFAULT_TASK = 'Cheetah-Run-v1'
 its checkpoint is the config with the largest value of adaptation there (no_critic_grad)."""
 """Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
 
-# Cheetah-Run-v0: training values (0.7-1.15) alternating with extrapolation values (1.2-1.5).
+# Cheetah-Run-v0: values of the training range (0.6-1.15 in the preset; the demo uses 0.7-1.1)
+# alternating with extrapolation values (1.2-1.5).
 # The shipped checkpoint fails on the shortest torsos (0.3-0.6, see its card), so the demo shows
 # the range it handles. Other tasks alternate their train and extrapolation presets.
 CHEETAH_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
