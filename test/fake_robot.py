@@ -1,8 +1,9 @@
 """A fake robot for the robot_bridge tests: what a ros2_control robot shows to the outside.
 
 JointState (gripper, elbow, shoulder: another order than the bridge observes) at 50 Hz, a
-payload sensor (Float64MultiArray), and a forward command controller taking velocity commands
-in its own joint order (elbow, shoulder) on `forward_command_controller/commands`. The plant is
+payload sensor (Float64MultiArray), a 64x48 bgr8 camera, and a forward command controller
+taking velocity commands in its own joint order (elbow, shoulder) on
+`forward_command_controller/commands`. The plant is
 first order: each joint's velocity follows its command with time constant `tau`. On SIGINT it
 writes every command it received (arrival order) as JSON to the path in argv[1].
 
@@ -16,11 +17,12 @@ import signal
 import sys
 import time
 
+import numpy as np
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 NAMES = ['gripper', 'elbow', 'shoulder']
@@ -40,6 +42,7 @@ class FakeRobot(Node):
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.pub_joints = self.create_publisher(JointState, 'joint_states', reliable)
         self.pub_payload = self.create_publisher(Float64MultiArray, 'payload_sensor', reliable)
+        self.pub_camera = self.create_publisher(Image, 'camera/image_raw', reliable)
         self.create_subscription(Float64MultiArray, 'forward_command_controller/commands',
                                  self.on_command, reliable)
         self.create_timer(self.dt, self.tick)
@@ -64,6 +67,11 @@ class FakeRobot(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_joints.publish(msg)
         self.pub_payload.publish(Float64MultiArray(data=[self.payload]))
+        # A 64x48 bgr8 camera: blue = 200, green = 100, red = 50 (the bridge turns it to rgb8).
+        frame = np.zeros((48, 64, 3), np.uint8)
+        frame[:] = (200, 100, 50)
+        self.pub_camera.publish(Image(header=msg.header, height=48, width=64, encoding='bgr8',
+                                      step=64 * 3, data=frame.tobytes()))
 
 
 def main() -> None:

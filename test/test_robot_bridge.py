@@ -156,22 +156,29 @@ def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
 
 def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
         robot_processes: ProcessGroup, tmp_path: Path) -> None:
-    """NaN and wrong-length actions -> safe command; too large -> clipped; silence -> stale."""
+    """NaN and wrong-length actions -> safe command; too large -> clipped; silence -> stale.
+
+    The camera goes along: republished for every step as our 84x84 rgb8 frame.
+    """
     from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import Image
     from std_msgs.msg import Float64MultiArray
     from zeus_msgs.msg import Action, StateVector, StepFeedback
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.common import array_from_image, image_qos, stamp_ns, step_qos
 
     robot_processes.start('fake_robot_safety', [sys.executable, str(REPO / 'test' /
                                                                     'fake_robot.py'),
                                                 str(tmp_path / 'commands.json')])
     robot_processes.start('robot_bridge_safety', [
         *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
-        '--params-file', str(PARAMS), '-p', 'safe_command:=0.1,-0.1'])
+        '--params-file', str(PARAMS), '-p', 'safe_command:=0.1,-0.1',
+        '-p', 'image_topic:=camera/image_raw'])
     plan = {3: [0.3, -0.2], 4: [float('nan'), 0.0], 5: [5.0, -5.0], 6: [0.1, 0.2, 0.3]}
     commands: list[tuple[float, ...]] = []
     feedback: dict[int, int] = {}
+    stamps: set[int] = set()
+    frames: list[tuple[int, np.ndarray]] = []
     diagnostics: list[dict[str, str]] = []
     with driver_node(robot_processes.domain_id, 'fake_policy') as driver:
         publisher = driver.create_publisher(Action, 'zeus/action', step_qos(depth=1))
@@ -181,8 +188,13 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
                 publisher.publish(Action(step=msg.step, data=plan.get(msg.step, [0.0, 0.0])))
 
         driver.create_subscription(StateVector, 'zeus/observation/state', act, step_qos())
-        driver.create_subscription(StepFeedback, 'zeus/step', lambda m: feedback.__setitem__(
-            m.step, m.action_status), step_qos())
+        def on_feedback(msg: StepFeedback) -> None:
+            feedback[msg.step] = msg.action_status
+            stamps.add(stamp_ns(msg.header.stamp))
+
+        driver.create_subscription(StepFeedback, 'zeus/step', on_feedback, step_qos())
+        driver.create_subscription(Image, 'zeus/observation/image', lambda m: frames.append(
+            (stamp_ns(m.header.stamp), array_from_image(m, (84, 84)))), image_qos('realtime'))
         driver.create_subscription(Float64MultiArray, 'forward_command_controller/commands',
                                    lambda m: commands.append(tuple(np.round(m.data, 5))),
                                    step_qos())
@@ -200,5 +212,8 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     assert commands[-1] == (safe[1], safe[0])  # silence: the configured safe command
     statuses = set(feedback.values())
     assert {1, 2, 3, 5} <= statuses  # ok, clipped, rejected, stale reached StepFeedback
+    # The camera, republished per step: 84x84 rgb8 (bgr8 converted), with the step's stamp.
+    assert len(frames) > 20 and all(stamp in stamps for stamp, _ in frames)
+    assert all((frame == (50, 100, 200)).all() for _, frame in frames)
     last = diagnostics[-1]
     assert int(last['rejected']) == 2 and int(last['clipped']) == 1 and int(last['stale']) > 0

@@ -130,3 +130,36 @@ def test_the_node_refuses_a_bad_params_file_in_one_line() -> None:
     assert result.returncode == 2, result.stderr
     assert "error: reward velocity:knee: no joint 'knee'" in result.stderr
     assert 'Traceback' not in result.stderr
+
+
+def test_a_camera_frame_becomes_our_square_rgb8_frame() -> None:
+    """bgr8 channels swapped, the centre square resized; other encodings refused."""
+    from sensor_msgs.msg import Image
+
+    from zeus_ros.nodes.robot_io import frame_from_camera
+
+    pixels = np.zeros((4, 8, 3), np.uint8)
+    pixels[:, 2:6] = (10, 20, 30)  # the centre 4x4 square, in b, g, r
+    msg = Image(height=4, width=8, encoding='bgr8', step=8 * 3 + 2,
+                data=np.pad(pixels.reshape(4, 24), ((0, 0), (0, 2))).tobytes())
+    frame = frame_from_camera(msg, 2)
+    assert frame.shape == (2, 2, 3) and (frame == (30, 20, 10)).all()
+    mono = Image(height=2, width=2, encoding='mono8', step=2, data=bytes([7, 7, 7, 7]))
+    assert (frame_from_camera(mono, 4) == 7).all()
+    with pytest.raises(ValueError, match="image encoding '16UC1'"):
+        frame_from_camera(Image(height=1, width=1, encoding='16UC1', step=2, data=b'00'), 2)
+    with pytest.raises(ValueError, match='image data has 3 bytes'):
+        frame_from_camera(Image(height=2, width=2, encoding='rgb8', step=6, data=b'000'), 2)
+
+
+def test_both_launchers_put_robot_bridge_in_sim_bridges_place() -> None:
+    """robot:=true / --robot: the same plan, robot_bridge waiting for every other node."""
+    from zeus_ros.launch_defaults import plan, plan_from_arguments
+
+    launch = plan(robot=True, params_file=PARAMS, record=True)
+    assert [n.name for n in launch.nodes] == ['robot_bridge', 'context_estimator', 'policy',
+                                               'recorder']
+    assert launch.nodes[0].parameters['min_observers'] == 3
+    assert launch.nodes[0].executable == 'robot_bridge_node'
+    same = plan_from_arguments({'robot': 'true', 'params_file': str(PARAMS), 'record': 'true'})
+    assert same == launch

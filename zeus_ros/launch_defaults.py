@@ -66,6 +66,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    'the one in the params file)'),
     LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
     LaunchArgument('log_level', 'info', 'log level of every node: ' + ', '.join(LOG_LEVELS)),
+    LaunchArgument('robot', 'false', "robot_bridge in sim_bridge's place (params_file: the "
+                   "robot's, e.g. params/robot_bridge.yaml)"),
 )
 
 
@@ -230,6 +232,7 @@ def plan(
     record: bool = False,
     log_level: str = 'info',
     nodes: Sequence[str] = DEFAULT_NODES,
+    robot: bool = False,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -237,6 +240,8 @@ def plan(
     so none of them misses step 0; a relative checkpoint becomes an absolute path.
     """
     names = list(dict.fromkeys(nodes))
+    if robot:  # a robot steps the loop: robot_bridge takes sim_bridge's place
+        names = [('robot_bridge' if name == 'sim_bridge' else name) for name in names]
     if record and 'recorder' not in names:
         names.append('recorder')
     unknown = [name for name in names if name not in NODES]
@@ -278,4 +283,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
     return plan(namespace=get['namespace'], use_sim_time=parse_bool('use_sim_time',
                                                                     get['use_sim_time']),
                 params_file=get['params_file'], checkpoint=get['checkpoint'],
-                record=parse_bool('record', get['record']), log_level=get['log_level'])
+                record=parse_bool('record', get['record']), log_level=get['log_level'],
+                robot=parse_bool('robot', get['robot']))

@@ -256,6 +256,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--nodes', default=','.join(launch_defaults.DEFAULT_NODES),
                         help=f'comma-separated subset of {",".join(NODES)}')
     parser.add_argument('--record', action='store_true', help='also start the recorder')
+    parser.add_argument('--robot', action='store_true',
+                        help="robot_bridge in sim_bridge's place (--params: the robot's, e.g. "
+                        'params/robot_bridge.yaml)')
     parser.add_argument('--checkpoint', default='',
                         help='checkpoint for context_estimator and policy (default: the params '
                         "file's)")
@@ -279,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         launch = launch_defaults.plan(
             namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
             checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
-            nodes=names)
+            nodes=names, robot=args.robot)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2

@@ -2,7 +2,8 @@
 
 It takes sim_bridge's place in realtime mode. On a fixed control-rate timer it assembles step k
 from the newest JointState (the `joints` of the params, in that order; positions, velocities,
-efforts as `observe` says) and the extra Float64MultiArray inputs, computes the reward of the
+efforts as `observe` says) and the extra Float64MultiArray inputs (and republishes the newest
+camera frame, square and resized, for pixel agents), computes the reward of the
 params (a built-in or `package.module:function`), and publishes StateVector, StepFeedback and
 ContextTruth (the operator-declared `context`) with one stamp. The policy's Action goes to the
 robot at once, converted to Float64MultiArray / JointTrajectory / Twist in the controller's
@@ -22,7 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Float64MultiArray
 from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
 
@@ -36,6 +37,8 @@ from zeus_ros.nodes.common import (
     WaitReport,
     action_qos,
     diagnostics_message,
+    image_from_array,
+    image_qos,
     missing_peers,
     run_node,
     steady_timer,
@@ -45,6 +48,7 @@ from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.robot_io import (
     COMMAND_TYPES,
     CommandPublisher,
+    frame_from_camera,
     hold_positions,
     parse_safe_command,
     read_joint_state,
@@ -59,6 +63,11 @@ SPECS: dict[str, Spec] = {
     'joint_state_topic': Spec('joint_states', 'sensor_msgs/JointState input'),
     'extra_inputs': Spec([''], "extra Float64MultiArray inputs as 'TOPIC:SIZE', appended to "
                          'the observation in this order'),
+    'image_topic': Spec('', 'a camera (sensor_msgs/Image, rgb8/bgr8/rgba8/bgra8/mono8) '
+                        'republished per step on zeus/observation/image for pixel agents '
+                        "('': none)"),
+    'image_size': Spec(84, 'side of the square frame republished (centre crop, nearest pixel)',
+                       low=1, high=1024),
     'control_rate': Spec(50.0, 'control steps per second (wall clock)', low=0.1, high=1000.0),
     'input_timeout': Spec(0.0, 'an input older than this skips the step and sends the safe '
                           'command (0: 5 control periods)', live=True, low=0.0),
@@ -107,6 +116,7 @@ class RobotBridgeNode(Node):
         self._joints: tuple[float, dict[str, dict[str, float]]] | None = None
         self._positions: dict[str, float] = {}
         self._extras: dict[str, tuple[float, np.ndarray]] = {}
+        self._image: tuple[float, Image] | None = None
         self._applied: tuple[float, np.ndarray, ActionStatus] | None = None
         self._action_time = -math.inf
         self._hold: np.ndarray | None = None
@@ -130,6 +140,11 @@ class RobotBridgeNode(Node):
             self.create_subscription(Float64MultiArray, topic,
                                      partial(self._on_extra, topic, size),
                                      qos_profile_sensor_data)
+        self._pub_image = None
+        if self.params['image_topic']:
+            self.create_subscription(Image, self.params['image_topic'], self._on_image,
+                                     qos_profile_sensor_data)
+            self._pub_image = self.create_publisher(Image, TOPICS.IMAGE, image_qos('realtime'))
         qos = step_qos()
         self._pub_step = self.create_publisher(StepFeedback, TOPICS.STEP, qos)
         self._pub_truth = self.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, qos)
@@ -185,6 +200,9 @@ class RobotBridgeNode(Node):
             return
         self._extras[topic] = (time.monotonic(), data)
 
+    def _on_image(self, msg: Image) -> None:
+        self._image = (time.monotonic(), msg)
+
     def _on_action(self, msg: Action) -> None:
         self._action_time = time.monotonic()
         checked = check_action(msg.data, self.low, self.high)
@@ -217,13 +235,18 @@ class RobotBridgeNode(Node):
         ages = {self.params['joint_state_topic']: self._joints[0] if self._joints else None}
         ages.update({topic: self._extras[topic][0] if topic in self._extras else None
                      for topic, _ in self.spec.extra_inputs})
+        if self._pub_image is not None:
+            ages[self.params['image_topic']] = self._image[0] if self._image else None
         return [topic for topic, seen in ages.items() if seen is None or now - seen > timeout]
 
     def _ready(self, now: float) -> bool:
         missing = self._inputs_missing(now)
         if self.params['wait_for_peers']:
-            missing += missing_peers(self, [self._pub_step, self._pub_state],
-                                     self._sub_action, self.params['min_observers'])
+            outputs = [self._pub_step, self._pub_state]
+            if self._pub_image is not None:
+                outputs.append(self._pub_image)
+            missing += missing_peers(self, outputs, self._sub_action,
+                                     self.params['min_observers'])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
@@ -270,6 +293,8 @@ class RobotBridgeNode(Node):
         """The observation from the newest inputs (held); one older than 1.5 periods is late."""
         assert self._joints is not None
         received = [self._joints[0], *(self._extras[t][0] for t, _ in self.spec.extra_inputs)]
+        if self._image is not None:
+            received.append(self._image[0])
         self.counts['late_inputs'] += sum(now - seen > 1.5 * self.period for seen in received)
         extras = {topic: self._extras[topic][1] for topic, _ in self.spec.extra_inputs}
         return self.spec.observation(self._joints[1], extras)
@@ -314,6 +339,8 @@ class RobotBridgeNode(Node):
             action_status=int(ActionStatus.NONE if first else status))
         feedback.header.stamp = stamp
         self._pub_step.publish(feedback)
+        if self._pub_image is not None and self._image is not None:
+            self._publish_frame(self._image[1], stamp)
         state = StateVector(step=self._step, data=obs.state.tolist())
         state.header.stamp = stamp
         self._pub_state.publish(state)  # last: whoever acts on o_k has r_k and c_k already
@@ -323,6 +350,15 @@ class RobotBridgeNode(Node):
         every = self.params['log_every']
         if every and self._step % every == 0:
             self.get_logger().info(f'step {self._step} episode {self._episode}')
+
+    def _publish_frame(self, msg: Image, stamp: Any) -> None:
+        """The camera frame of this step, converted, with the step's stamp (a bad one: counted)."""
+        try:
+            frame = frame_from_camera(msg, self.params['image_size'])
+        except ValueError as error:
+            self._reject_input(self.params['image_topic'], error)
+            return
+        self._pub_image.publish(image_from_array(frame, stamp))
 
     def _publish_diagnostics(self) -> None:
         problems = [f'{self.counts[key]} {key}' for key in COUNTS[3:] if self.counts[key]]

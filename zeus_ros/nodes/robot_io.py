@@ -12,7 +12,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Image, JointState
 
 from sim_bridge.robot import joint_indices
 from zeus_ros.nodes.common import action_qos
@@ -20,8 +20,8 @@ from zeus_ros.nodes.common import action_qos
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['COMMAND_TYPES', 'CommandPublisher', 'hold_positions', 'parse_safe_command',
-           'read_joint_state']
+__all__ = ['COMMAND_TYPES', 'CommandPublisher', 'frame_from_camera', 'hold_positions',
+           'parse_safe_command', 'read_joint_state']
 
 COMMAND_TYPES = ('float64_multi_array', 'joint_trajectory', 'twist')
 TWIST_FIELDS = tuple(f'{part}.{axis}' for part in ('linear', 'angular') for axis in 'xyz')
@@ -111,6 +111,31 @@ class CommandPublisher:
     def publish(self, action: np.ndarray) -> None:
         """Send `action` to the robot."""
         self.publisher.publish(self.message(action))
+
+
+_CHANNELS = {'rgb8': (3, [0, 1, 2]), 'bgr8': (3, [2, 1, 0]), 'rgba8': (4, [0, 1, 2]),
+             'bgra8': (4, [2, 1, 0]), 'mono8': (1, [0, 0, 0])}
+
+
+def frame_from_camera(msg: Image, size: int) -> np.ndarray:
+    """A camera Image as the size x size rgb8 frame our agents see: centre square, nearest pixel.
+
+    ValueError for an encoding other than rgb8/bgr8/rgba8/bgra8/mono8 or inconsistent data.
+    """
+    if msg.encoding not in _CHANNELS:
+        raise ValueError(f'image encoding {msg.encoding!r}: use one of {", ".join(_CHANNELS)}')
+    channels, order = _CHANNELS[msg.encoding]
+    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    if height < 1 or width < 1 or step < width * channels or len(msg.data) < step * height:
+        raise ValueError(f'image data has {len(msg.data)} bytes for {height}x{width} '
+                         f'{msg.encoding} with row step {step}')
+    rows = np.frombuffer(bytes(msg.data), np.uint8)[:step * height].reshape(height, step)
+    pixels = rows[:, :width * channels].reshape(height, width, channels)
+    side = min(height, width)
+    top, left = (height - side) // 2, (width - side) // 2
+    pick = (np.arange(size) * side // size)
+    square = pixels[top + pick[:, None], left + pick[None, :]]
+    return np.ascontiguousarray(square[:, :, order])
 
 
 def parse_safe_command(text: str, low: np.ndarray, high: np.ndarray) -> np.ndarray | str:
