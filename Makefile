@@ -3,13 +3,15 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := source scripts/env.sh
 
-.PHONY: help setup demo test lint bench
+.PHONY: help setup demo test lint bench faults soak
 
 help:
 	@echo 'make demo   set up, then run the live demo'
 	@echo 'make test   set up, then run the test suite'
 	@echo 'make lint   ruff over the project'
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
+	@echo 'make faults set up, then run only the fault matrix (test/faults, also part of make test)'
+	@echo 'make soak   set up, then run the three-node loop for an hour (RSS growth, step gaps)'
 
 setup:
 	@bash scripts/setup.sh
@@ -25,3 +27,9 @@ lint: setup
 
 bench: setup
 	@$(ENV) && for b in benchmarks/bench_*.py; do echo "== $$b"; python "$$b" || exit 1; done
+
+faults: setup
+	@$(ENV) && python -m pytest -q test/faults $(PYTEST_ARGS)
+
+soak: setup
+	@$(ENV) && python benchmarks/soak.py $(SOAK_ARGS)

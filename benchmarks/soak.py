@@ -1,0 +1,156 @@
+"""Soak: the three-node loop (`zeus launch`, the shipped checkpoint) for a long time.
+
+Fails (exit 1) when a node's resident memory grows by more than --max-rss-growth MiB between
+the end of the warm-up and the end of the run, or when two consecutive /zeus/step messages
+arrive more than --max-gap seconds apart, or when a node exits. sim_bridge runs in realtime
+mode at the task's own rate: a deployment's pace, and the machine stays usable meanwhile.
+
+    source scripts/env.sh && python benchmarks/soak.py --minutes 60      # `make soak`
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+NODES = {'sim_bridge': 'sim_bridge_node', 'context_estimator': 'context_estimator_node',
+         'policy': 'policy_node'}
+
+
+def rss_mib(pid: int) -> float:
+    """Resident memory of one process in MiB, from /proc."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024
+    return float('nan')
+
+
+def node_pids(parent: int) -> dict[str, int]:
+    """Pid of each node `zeus launch` (pid `parent`) started."""
+    found = {}
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
+            argv = (entry / 'cmdline').read_bytes().decode(errors='replace')
+        except OSError:
+            continue
+        for name, module in NODES.items():
+            if ppid == parent and f'zeus_ros.nodes.{module}' in argv:
+                found[name] = int(entry.name)
+    return found
+
+
+def params_file(folder: Path) -> Path:
+    """params/zeus.yaml with sim_bridge (and the QoS of its peers) in realtime mode."""
+    params = yaml.safe_load((REPO / 'params' / 'zeus.yaml').read_text())
+    for name in NODES:
+        params[f'/**/{name}']['ros__parameters']['mode'] = 'realtime'
+    for name in ('context_estimator', 'policy'):
+        section = params[f'/**/{name}']['ros__parameters']
+        section['checkpoint'] = str(REPO / section['checkpoint'])
+    path = folder / 'soak.yaml'
+    path.write_text(yaml.safe_dump(params))
+    return path
+
+
+def main() -> int:
+    """Run the soak; print the figures; exit 1 on a failed criterion."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--minutes', type=float, default=60.0)
+    parser.add_argument('--warmup', type=float, default=60.0, help='seconds before the RSS '
+                        'baseline (imports, first inferences, DDS buffers)')
+    parser.add_argument('--max-rss-growth', type=float, default=5.0, help='MiB per node')
+    parser.add_argument('--max-gap', type=float, default=1.0, help='seconds between steps')
+    args = parser.parse_args()
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from zeus_msgs.msg import StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')
+        launch = subprocess.Popen(
+            [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params',
+             str(params_file(Path(tmp)))], cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.STDOUT, start_new_session=True)
+        rclpy.init(domain_id=domain)
+        probe = rclpy.create_node('soak_probe')
+        arrivals: list[float] = [0, 0.0, 0.0]  # count, last arrival, longest gap
+        started_at: list[float] = []
+
+        def on_step(_msg: StepFeedback) -> None:
+            now = time.monotonic()
+            if arrivals[0]:
+                arrivals[2] = max(arrivals[2], now - arrivals[1])
+            else:
+                started_at.append(now)
+            arrivals[0] += 1
+            arrivals[1] = now
+
+        probe.create_subscription(StepFeedback, TOPICS.STEP, on_step, step_qos())
+        executor = SingleThreadedExecutor()
+        executor.add_node(probe)
+        baseline: dict[str, float] = {}
+        failed = ''
+        end = None
+        try:
+            while True:
+                executor.spin_once(timeout_sec=0.1)
+                if launch.poll() is not None:
+                    failed = f'zeus launch exited with {launch.returncode}'
+                    break
+                if not started_at:
+                    continue
+                now = time.monotonic()
+                if not baseline and now - started_at[0] >= args.warmup:
+                    pids = node_pids(launch.pid)
+                    baseline = {name: rss_mib(pid) for name, pid in pids.items()}
+                    arrivals[2] = 0.0  # gaps count from the baseline on
+                    end = now + args.minutes * 60
+                    print(f'soak: baseline RSS (MiB) {baseline}; running {args.minutes} min',
+                          flush=True)
+                if end is not None and now >= end:
+                    break
+            final = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
+        finally:
+            if launch.poll() is None:
+                os.killpg(launch.pid, signal.SIGINT)
+                launch.wait(timeout=30)
+            probe.destroy_node()
+            rclpy.try_shutdown()
+    growth = {name: final.get(name, float('nan')) - rss for name, rss in baseline.items()}
+    steps, gap = int(arrivals[0]), arrivals[2]
+    print(f'soak: {steps} steps; longest step gap {gap * 1000:.0f} ms; RSS growth (MiB) '
+          + ', '.join(f'{name} {value:+.2f}' for name, value in growth.items()))
+    if not failed and not baseline:
+        failed = 'the loop never ran past the warm-up'
+    bad = [name for name, value in growth.items() if not value <= args.max_rss_growth]
+    if bad:
+        failed = f'RSS grew more than {args.max_rss_growth} MiB: {bad}'
+    elif gap > args.max_gap:
+        failed = f'a step gap of {gap:.2f} s (limit {args.max_gap} s)'
+    if failed:
+        print(f'soak: FAILED: {failed}', file=sys.stderr)
+        return 1
+    print('soak: passed')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
