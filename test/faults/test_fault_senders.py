@@ -1,10 +1,10 @@
-"""Fault matrix, sender rows: only the paired policy drives the robot.
+"""Fault matrix, sender rows: only the paired policy drives, only its estimator informs it.
 
 Real processes: sim_bridge (lockstep), a random policy, and a second process publishing on
 zeus/action as fast as it can (flood_actions.py: well-formed actions for the awaited step,
 NaN, Inf, 1e30, wrong lengths, wrong steps). None of its actions may be applied or even
 validated, the loop keeps stepping, /diagnostics says ERROR while the intruder exists and
-names it, and the log names it once.
+names it, and the log names it once. The same holds for contexts flooded at the policy.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from live_fixtures import TASK, node
+from live_fixtures import TASK, node, tiny_checkpoint
 from ros_harness import ProcessGroup, driver_node, spin_until
 
 pytestmark = pytest.mark.ros
@@ -119,3 +119,49 @@ def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
             ros_processes.log_text('sim_bridge')[-2000:]
     log = ros_processes.log_text('sim_bridge')
     assert '/policy restarted' in log and 'a second publisher' not in log, log[-2000:]
+
+
+def _status(diagnostics: list[Any], node_name: str) -> Any:
+    """The newest /diagnostics status of `node_name` (None before the first)."""
+    found = [s for array in diagnostics for s in array.status
+             if s.name.lstrip('/').startswith(node_name)]
+    return found[-1] if found else None
+
+
+def test_a_second_context_publisher_never_reaches_the_policy(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """Contexts flooded on zeus/context by another process: refused by GID, ERROR, loop runs.
+
+    The intruder's estimates carry no checkpoint sha256: had one reached the policy's checks it
+    would count as `mismatched`; it must count as `foreign` instead.
+    """
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}', 'min_observers:=2'))
+    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
+    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
+    steps: list[tuple[float, Any]] = []
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        _watch(probe, steps, diagnostics)
+        assert spin_until(probe, lambda: len(steps) > 100, timeout=90), \
+            ros_processes.log_text('policy')[-2000:]
+        flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER), '3', '4',
+                                                   'context'])
+        assert spin_until(probe, lambda: flooder.poll() is not None, 90)
+        after = len(steps)
+        assert spin_until(probe, lambda: len(steps) > after + 50, timeout=60), 'loop stopped'
+
+        def policy_error() -> bool:
+            status = _status(diagnostics, 'policy')
+            return status is not None and status.level == DiagnosticStatus.ERROR
+
+        if not policy_error():  # the intruder may already have left: look at the history
+            assert any(s.level == DiagnosticStatus.ERROR and '/intruder' in s.message
+                       for array in diagnostics for s in array.status
+                       if s.name.lstrip('/').startswith('policy')), 'no ERROR on /diagnostics'
+    values = {kv.key: kv.value for kv in _status(diagnostics, 'policy').values}
+    assert int(values['foreign']) > 0 and int(values['mismatched']) == 0, values
+    assert ros_processes.log_text('policy').count(
+        'a second publisher on /zeus/context: /intruder') == 1

@@ -36,6 +36,7 @@ from zeus_ros.nodes.common import (
 )
 from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '
@@ -93,7 +94,7 @@ class PolicyNode(Node):
         self.high = np.asarray(high, dtype=np.float32)
         self.decoder = ObservationDecoder(obs_kind, obs_shape, self.params['image_size'])
         self.counts = dict.fromkeys(
-            ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched'), 0)
+            ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched', 'foreign'), 0)
         self._contexts: dict[int, np.ndarray] = {}
         self._newest_context: tuple[float, np.ndarray] | None = None
         self._waiting: tuple[int, Any, np.ndarray, float] | None = None
@@ -106,9 +107,13 @@ class PolicyNode(Node):
         self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
                                  mode=mode)
         self.assembler = self.inputs.assembler
-        if self.needs_context:
-            self.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context,
-                                     step_qos())
+        # Contexts come from one estimator only (the only publisher, by GID; followed when it
+        # restarts): another publisher on zeus/context is refused, counted and an ERROR.
+        self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.CONTEXT),
+                                      what='contexts')
+        self._sub_context = SenderSubscription(
+            self, ContextEstimate, TOPICS.CONTEXT, step_qos(depth=100), self._on_context,
+            admit=self._senders.accepts) if self.needs_context else None
         # The action publisher appears only once a context source exists: sim_bridge starts
         # stepping when it sees an action publisher, so step 0 already gets its context.
         # Steady clocks: with use_sim_time, ROS time only moves once sim_bridge steps.
@@ -275,11 +280,19 @@ class PolicyNode(Node):
         self._rate.tick()
 
     def _publish_diagnostics(self) -> None:
+        self.counts['foreign'] = self._senders.refused
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
                   **self.counts}
-        problems = [f'{self.counts[key]} {key}'
-                    for key in ('stale', 'safe', 'rejected', 'mismatched') if self.counts[key]]
-        self._pub_diag.publish(diagnostics_message(self, 'actions', values, problems))
+        problems = [f'{self.counts[key]} {key}' for key in
+                    ('stale', 'safe', 'rejected', 'mismatched', 'foreign') if self.counts[key]]
+        errors = self._senders.errors() if self.needs_context else []
+        self._pub_diag.publish(diagnostics_message(self, 'actions', values, problems, errors))
+
+    def destroy_node(self) -> None:
+        """The context subscription is ours (not rclpy's): it goes before the node."""
+        if self._sub_context is not None:
+            self._sub_context.destroy()
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

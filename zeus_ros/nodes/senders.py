@@ -290,14 +290,20 @@ class SenderPairing:
 
     def others(self) -> list[Sender]:
         """Publishers on the topic besides the paired one (each is named once in the log)."""
-        if self.paired is None:  # before pairing, extra publishers are what pair() names
-            return []
         graph = self.publishers(max_age=0.5)
+        if self.paired is None:  # one publisher is the one to pair with; more are ambiguous
+            return list(graph.values()) if len(graph) > 1 else []
         found = [s for gid, s in graph.items() if gid not in self._retired
                  and gid != self.paired.gid and not self._successor(s, graph)]
         for sender in found:
             self._name_once(sender)
         return found
+
+    def errors(self) -> list[str]:
+        """The /diagnostics ERROR line while other publishers exist (empty: none)."""
+        others = self.others()
+        return [f'{len(others)} other publisher(s) on {self.topic}: '
+                f'{", ".join(map(str, others))}; their {self.what} are refused'] if others else []
 
     def _name_once(self, sender: Sender) -> None:
         if sender.gid in self._named or not sender.node:  # named once the graph knows it

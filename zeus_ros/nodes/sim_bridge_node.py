@@ -292,9 +292,7 @@ class SimBridgeNode(Node):
         self.counts['foreign'] = self._senders.refused
         problems = [f'{self.counts[key]} {key}' for key in
                     ('timeouts', 'rejected', 'stale', 'foreign') if self.counts[key]]
-        others = self._senders.others()
-        errors = [f'{len(others)} other publisher(s) on {self._senders.topic}: '
-                  f'{", ".join(map(str, others))}; their actions are refused'] if others else []
+        errors = self._senders.errors()
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
                   **self.counts}
