@@ -158,7 +158,8 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
         robot_processes: ProcessGroup, tmp_path: Path) -> None:
     """NaN and wrong-length actions -> safe command; too large -> clipped; silence -> stale.
 
-    The camera goes along: republished for every step as our 84x84 rgb8 frame.
+    The camera goes along: republished for every step as our 84x84 rgb8 frame. A second node
+    publishing actions is refused: only the paired policy drives the robot.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import Image
@@ -180,14 +181,21 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     stamps: set[int] = set()
     frames: list[tuple[int, np.ndarray]] = []
     diagnostics: list[dict[str, str]] = []
-    with driver_node(robot_processes.domain_id, 'fake_policy') as driver:
+    with driver_node(robot_processes.domain_id, 'fake_policy') as driver, \
+            driver_node(robot_processes.domain_id, 'intruder') as intruder:
         publisher = driver.create_publisher(Action, 'zeus/action', step_qos(depth=1))
+        stray: list[object] = []
 
         def act(msg: StateVector) -> None:
             if msg.step <= 6:  # then silence: the bridge must fall back to the safe command
                 publisher.publish(Action(step=msg.step, data=plan.get(msg.step, [0.0, 0.0])))
+            if msg.step == 2:  # another node starts publishing actions once the loop runs
+                stray.append(intruder.create_publisher(Action, 'zeus/action', step_qos()))
+            if stray and msg.step <= 30:
+                stray[0].publish(Action(step=msg.step, data=[0.9, 0.9]))
 
         driver.create_subscription(StateVector, 'zeus/observation/state', act, step_qos())
+
         def on_feedback(msg: StepFeedback) -> None:
             feedback[msg.step] = msg.action_status
             stamps.add(stamp_ns(msg.header.stamp))
@@ -202,11 +210,13 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
             {kv.key: kv.value for kv in s.values} for s in m.status
             if 'robot_bridge' in s.name), 10)
         assert spin_until(driver, lambda: len(feedback) > 40 and any(
-            int(d.get('stale', 0)) > 0 for d in diagnostics), 60), \
+            int(d.get('stale', 0)) > 0 and int(d.get('foreign', 0)) > 0
+            for d in diagnostics), 60), \
             robot_processes.log_text('robot_bridge_safety')[-2000:]
     safe = (0.1, -0.1)
     assert (-0.2, 0.3) in commands  # controller order: elbow, shoulder
     assert (-1.0, 1.0) in commands  # [5, -5] clipped, then reordered
+    assert (0.9, 0.9) not in commands  # the intruder's actions never reach the robot
     assert not any(math.isnan(v) for c in commands for v in c)
     assert all(len(c) == 2 for c in commands)
     assert commands[-1] == (safe[1], safe[0])  # silence: the configured safe command
@@ -217,3 +227,4 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     assert all((frame == (50, 100, 200)).all() for _, frame in frames)
     last = diagnostics[-1]
     assert int(last['rejected']) == 2 and int(last['clipped']) == 1 and int(last['stale']) > 0
+    assert int(last['foreign']) > 0 and last['action_sender'].startswith('/fake_policy')

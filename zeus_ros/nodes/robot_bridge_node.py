@@ -35,7 +35,6 @@ from zeus_ros.nodes.common import (
     NodeFinished,
     RateMeter,
     WaitReport,
-    action_qos,
     diagnostics_message,
     image_from_array,
     image_qos,
@@ -53,6 +52,7 @@ from zeus_ros.nodes.robot_io import (
     parse_safe_command,
     read_joint_state,
 )
+from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
 SPECS: dict[str, Spec] = {
     'task': Spec('', "the robot's task name, written into every step (bags and checkpoints "
@@ -84,6 +84,8 @@ SPECS: dict[str, Spec] = {
                          "'angular.z']"),
     'safe_command': Spec('', "sent when no usable action: '' (zeros clipped into the limits), "
                          "'hold' (measured positions) or comma-separated values"),
+    'action_sender': Spec('', 'node whose actions drive the robot, e.g. /policy (empty: the only '
+                          'action publisher at step 0); others are refused (docs/security.md)'),
     'stale_action_age': Spec(0.0, 'an older action is replaced by the safe command '
                              '(0: 3 control periods)', live=True, low=0.0),
     'context': Spec('', "known context as 'NAME=VALUE,...' (e.g. the payload you mounted), "
@@ -97,7 +99,8 @@ SPECS: dict[str, Spec] = {
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',
-          'rejected_inputs', 'bad_rewards')
+          'rejected_inputs', 'bad_rewards', 'foreign')
+ACTION_BACKLOG = 1000  # reader history of zeus/action, as sim_bridge: room for a flood
 
 
 class RobotBridgeNode(Node):
@@ -150,8 +153,13 @@ class RobotBridgeNode(Node):
         self._pub_truth = self.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, qos)
         self._pub_state = self.create_publisher(StateVector, TOPICS.STATE, qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        self._sub_action = self.create_subscription(Action, TOPICS.ACTION, self._on_action,
-                                                    action_qos('realtime'))
+        # Only the paired policy drives the robot (by publisher GID, as sim_bridge does); a deep
+        # reader history keeps its action while a flood from elsewhere is drained and counted.
+        self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.ACTION),
+                                      self.params['action_sender'], what='actions')
+        self._sub_action = SenderSubscription(self, Action, TOPICS.ACTION,
+                                              step_qos(depth=ACTION_BACKLOG), self._on_action,
+                                              admit=self._senders.accepts)
         self._wait_report = WaitReport(self)
         steady_timer(self, self.period, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
@@ -247,6 +255,9 @@ class RobotBridgeNode(Node):
                 outputs.append(self._pub_image)
             missing += missing_peers(self, outputs, self._sub_action,
                                      self.params['min_observers'])
+            if not missing and self._senders.paired is None:
+                problem = self._senders.pair()
+                missing += [problem] if problem else []
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
@@ -361,9 +372,14 @@ class RobotBridgeNode(Node):
         self._pub_image.publish(image_from_array(frame, stamp))
 
     def _publish_diagnostics(self) -> None:
+        self.counts['foreign'] = self._senders.refused
         problems = [f'{self.counts[key]} {key}' for key in COUNTS[3:] if self.counts[key]]
-        values = {'task': self.spec.task, 'rate_hz': f'{self._rate.rate:.1f}', **self.counts}
-        self._pub_diag.publish(diagnostics_message(self, 'robot loop', values, problems))
+        others = self._senders.others()
+        errors = [f'{len(others)} other publisher(s) on {self._senders.topic}: '
+                  f'{", ".join(map(str, others))}; their actions are refused'] if others else []
+        values = {'task': self.spec.task, 'rate_hz': f'{self._rate.rate:.1f}',
+                  'action_sender': str(self._senders.paired), **self.counts}
+        self._pub_diag.publish(diagnostics_message(self, 'robot loop', values, problems, errors))
 
     def close(self) -> None:
         """Say how far the loop got."""
