@@ -11,6 +11,7 @@ are cached, and a change mid-episode keeps positions, velocities and time. The f
     action_repeat: 2                   # control steps per agent step (rewards summed)
     episode_length: 200                # agent steps
     init: random                       # qpos0 | random (limited joints) | random_all (+ hinges)
+    camera: top                        # the camera of pixel observations (name or index)
     prepare: {'geom:floor.priority': 1}          # one-time edits (optional)
     observation: ['joint:*.qpos', 'joint:*.qvel', 'sensor:payload_acc.data']
     reward: 'tracking:root_x=0.1,root_y=0.1'     # built-in or package.module:function
@@ -74,7 +75,8 @@ class MjcfTaskSpec:
     action_repeat: int
     episode_length: int
     init: str
-    camera: int
+    camera: int | str
+    """The camera frames come from: its index or name in the model."""
     prepare: tuple[tuple[ModelPath, float], ...]
     observation: tuple[ModelPath, ...]
     reward: str
@@ -109,6 +111,12 @@ def _integer(data: Mapping[str, Any], key: str, default: int, where: str) -> int
     value = data.get(key, default)
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
         raise ValueError(f'{where}: {key} must be an integer >= 1, got {value!r}')
+    return value
+
+
+def _camera(value: Any, where: str) -> int | str:
+    if isinstance(value, bool) or not isinstance(value, (int, str)) or value == '':
+        raise ValueError(f'{where}: camera must be an index or a camera name, got {value!r}')
     return value
 
 
@@ -185,7 +193,7 @@ def parse_mjcf_task(path: Path, data: Mapping[str, Any]) -> MjcfTaskSpec:
         n_sub_steps=_integer(data, 'n_sub_steps', 1, where),
         action_repeat=_integer(data, 'action_repeat', 1, where),
         episode_length=_integer(data, 'episode_length', 1000, where), init=init,
-        camera=int(data.get('camera', 0)), prepare=prepare, observation=obs,
+        camera=_camera(data.get('camera', 0), where), prepare=prepare, observation=obs,
         reward=str(data['reward']), context=params, presets=dict(presets))
 
 
@@ -213,6 +221,11 @@ class MjcfTask(DmcTask):
             raise ValueError(message if message.startswith(where) else f'{where}: {message}'
                              ) from None
         model = self.model
+        if isinstance(self.camera, str) and self.camera not in {
+                model.camera(i).name for i in range(model.ncam)}:
+            names = ', '.join(model.camera(i).name for i in range(model.ncam)) or 'none'
+            raise ValueError(f"task file {task_spec.source}: no camera named {self.camera!r}; "
+                             f"the model's cameras: {names}")
         joints = [model.joint(j).name for j in range(model.njnt) if model.jnt_type[j] in _ONE_DOF]
         try:
             self._reward_fn = load_reward(task_spec.reward, joints, ('position', 'velocity'))

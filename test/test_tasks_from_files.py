@@ -154,12 +154,15 @@ def test_a_bad_path_names_itself_and_the_models_elements(tmp_path: Path, context
 
 
 def test_a_bad_observation_or_reward_is_found_when_the_file_is_read(tmp_path: Path) -> None:
-    """Unknown joint in the observation, unknown joint in the reward."""
+    """Unknown joint in the observation or the reward, unknown camera."""
     path = _task_file(tmp_path, {}, observation=['joint:elbow.qpos'])
     with pytest.raises(ValueError, match="no joint named 'elbow'; the model's joints: hinge"):
         make_task(str(path))
     path = _task_file(tmp_path, {}, reward='velocity:elbow')
     with pytest.raises(ValueError, match="no joint 'elbow'"):
+        make_task(str(path))
+    path = _task_file(tmp_path, {}, camera='side')
+    with pytest.raises(ValueError, match="no camera named 'side'; the model's cameras: none"):
         make_task(str(path))
 
 
