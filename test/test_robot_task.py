@@ -92,7 +92,7 @@ def test_rewards_built_in_and_a_users_function(tmp_path: Path, monkeypatch) -> N
 
 
 def test_command_messages_follow_the_controllers_order() -> None:
-    """Float64MultiArray, single-point JointTrajectory (one period ahead) and Twist."""
+    """Float64MultiArray, single-point JointTrajectory (one period ahead), Twist(Stamped)."""
     from zeus_ros.nodes.robot_io import CommandPublisher, hold_positions, parse_safe_command
 
     action = np.asarray([0.25, -0.5])
@@ -109,6 +109,10 @@ def test_command_messages_follow_the_controllers_order() -> None:
         twist = CommandPublisher(node, 'twist', 'c', ['drive', 'steer'], [],
                                  ['linear.x', 'angular.z'], 0.02).message(action)
         assert (twist.linear.x, twist.angular.z, twist.linear.y) == (0.25, -0.5, 0.0)
+        stamped = CommandPublisher(node, 'twist_stamped', 'f', ['drive', 'steer'], [],
+                                   ['linear.x', 'angular.z'], 0.02).message(action)
+        assert (stamped.twist.linear.x, stamped.twist.angular.z) == (0.25, -0.5)
+        assert stamped.header.frame_id == 'base_link' and stamped.header.stamp.sec > 0
         with pytest.raises(ValueError, match='must name the same joints'):
             CommandPublisher(node, 'float64_multi_array', 'd', ['a', 'b'], ['a', 'c'], [], 0.02)
         with pytest.raises(ValueError, match='twist_fields'):

@@ -80,8 +80,8 @@ SPECS: dict[str, Spec] = {
     'command_type': Spec('float64_multi_array', 'command message', choices=COMMAND_TYPES),
     'command_topic': Spec('forward_command_controller/commands', 'command output topic'),
     'command_joints': Spec([''], "the controller's joint order (empty: action_joints)"),
-    'twist_fields': Spec([''], "twist: the field each action value sets, e.g. ['linear.x', "
-                         "'angular.z']"),
+    'twist_fields': Spec([''], 'twist(_stamped): the field each action value sets, e.g. '
+                         "['linear.x', 'angular.z']"),
     'safe_command': Spec('', "sent when no usable action: '' (zeros clipped into the limits), "
                          "'hold' (measured positions) or comma-separated values"),
     'action_sender': Spec('', 'node whose actions drive the robot, e.g. /policy (empty: the only '

@@ -2,7 +2,8 @@
 
 Out: the action (in `action_joints` order) becomes a Float64MultiArray for a forward command
 controller (`~/commands`, values in `command_joints` order), a single-point JointTrajectory
-reaching its positions one control period from now, or a Twist for a mobile base.
+reaching its positions one control period from now, or a Twist / TwistStamped for a mobile
+base (Jazzy's diff_drive_controller takes TwistStamped).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ if TYPE_CHECKING:
 __all__ = ['COMMAND_TYPES', 'CommandPublisher', 'frame_from_camera', 'hold_positions',
            'parse_safe_command', 'read_joint_state']
 
-COMMAND_TYPES = ('float64_multi_array', 'joint_trajectory', 'twist')
+COMMAND_TYPES = ('float64_multi_array', 'joint_trajectory', 'twist', 'twist_stamped')
 TWIST_FIELDS = tuple(f'{part}.{axis}' for part in ('linear', 'angular') for axis in 'xyz')
 
 
@@ -60,13 +61,15 @@ class CommandPublisher:
                              f'{", ".join(COMMAND_TYPES)}')
         self.kind = kind
         self.period = period
+        self.frame_id = 'base_link'  # twist_stamped: the base frame, as diff_drive_controller
+        self._clock = node.get_clock()
         self.command_joints = list(command_joints or action_joints)
         if sorted(self.command_joints) != sorted(action_joints):
             raise ValueError(f'robot_bridge: command_joints {self.command_joints} must name the '
                              f'same joints as action_joints {list(action_joints)} (any order)')
         self.order = joint_indices(list(action_joints), self.command_joints)
         self.twist_fields = list(twist_fields)
-        if kind == 'twist':
+        if kind.startswith('twist'):
             bad = [f for f in self.twist_fields if f not in TWIST_FIELDS]
             if bad or len(self.twist_fields) != len(action_joints):
                 raise ValueError(f'robot_bridge: twist_fields {self.twist_fields} need one of '
@@ -83,9 +86,9 @@ class CommandPublisher:
             from trajectory_msgs.msg import JointTrajectory
 
             return JointTrajectory
-        from geometry_msgs.msg import Twist
+        from geometry_msgs.msg import Twist, TwistStamped
 
-        return Twist
+        return Twist if self.kind == 'twist' else TwistStamped
 
     def message(self, action: np.ndarray) -> Any:
         """The command message for `action` (action order in, controller order out)."""
@@ -103,9 +106,13 @@ class CommandPublisher:
                 positions=values, time_from_start=Duration(
                     sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000))]
         else:
+            twist = msg if self.kind == 'twist' else msg.twist
+            if self.kind == 'twist_stamped':
+                msg.header.stamp = self._clock.now().to_msg()
+                msg.header.frame_id = self.frame_id
             for name, value in zip(self.twist_fields, (float(v) for v in action), strict=True):
                 part, axis = name.split('.')
-                setattr(getattr(msg, part), axis, value)
+                setattr(getattr(twist, part), axis, value)
         return msg
 
     def publish(self, action: np.ndarray) -> None:
