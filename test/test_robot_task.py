@@ -156,14 +156,23 @@ def test_a_camera_frame_becomes_our_square_rgb8_frame() -> None:
         frame_from_camera(Image(height=2, width=2, encoding='rgb8', step=6, data=b'000'), 2)
 
 
-def test_both_launchers_put_robot_bridge_in_sim_bridges_place() -> None:
-    """robot:=true / --robot: the same plan, robot_bridge waiting for every other node."""
+def test_both_launchers_put_robot_bridge_in_sim_bridges_place(tmp_path: Path) -> None:
+    """robot:=true / --robot: robot_bridge in sim_bridge's place, waiting for the others.
+
+    Without a checkpoint the random policy records alone (its task: the robot's params file).
+    """
     from zeus_ros.launch_defaults import plan, plan_from_arguments
 
-    launch = plan(robot=True, params_file=PARAMS, record=True)
+    checkpoint = tmp_path / 'arm.pt'
+    checkpoint.write_bytes(b'')
+    launch = plan(robot=True, params_file=PARAMS, record=True, checkpoint=str(checkpoint))
     assert [n.name for n in launch.nodes] == ['robot_bridge', 'context_estimator', 'policy',
                                                'recorder']
     assert launch.nodes[0].parameters['min_observers'] == 3
     assert launch.nodes[0].executable == 'robot_bridge_node'
-    same = plan_from_arguments({'robot': 'true', 'params_file': str(PARAMS), 'record': 'true'})
-    assert same == launch
+    assert launch == plan_from_arguments({'robot': 'true', 'params_file': str(PARAMS),
+                                          'record': 'true', 'checkpoint': str(checkpoint)})
+    first = plan(robot=True, params_file=PARAMS, record=True)
+    assert [n.name for n in first.nodes] == ['robot_bridge', 'policy', 'recorder']
+    assert first.nodes[0].parameters['min_observers'] == 2
+    assert first.nodes[1].parameters['task'] == str(PARAMS)

@@ -237,7 +237,10 @@ def plan(
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
     sim_bridge waits for every other node of the group (the recorder included) on zeus/step,
-    so none of them misses step 0; a relative checkpoint becomes an absolute path.
+    so none of them misses step 0; a relative checkpoint becomes an absolute path. With
+    `robot`, robot_bridge takes sim_bridge's place; without any checkpoint the robot's first
+    recording is made by the random policy alone (no estimator), which reads the robot's shape
+    from the params file.
     """
     names = list(dict.fromkeys(nodes))
     if robot:  # a robot steps the loop: robot_bridge takes sim_bridge's place
@@ -252,6 +255,11 @@ def plan(
     given = str(params_file) if params_file not in (None, '') else ''
     path = Path(os.path.abspath(os.path.expanduser(given))) if given else default_params_file()
     params = read_params(path)
+    random_robot = robot and not checkpoint and not any(
+        section.get('checkpoint') for node in AGENT_NODES
+        for section in _node_sections(params, node))
+    if random_robot:
+        names = [name for name in names if name != 'context_estimator']
     ns = namespace.strip().strip('/')
     planned = []
     for name in names:
@@ -266,6 +274,8 @@ def plan(
             if values:
                 overrides[key] = str(resolve_path(str(values[-1]), path.parent,
                                                   f'{name} {key} (params file {path})'))
+        if random_robot and name == 'policy':
+            overrides['task'] = str(path)  # the robot's params file declares its task
         if use_sim_time:
             overrides['use_sim_time'] = True
         planned.append(NodePlan(name, overrides))
