@@ -143,3 +143,30 @@ def test_train_on_a_collection_cut_by_kill_names_recover_then_says_the_round_is_
         result = train(*extra)
         assert result.returncode == 0, result.stderr
         assert f'cut short by a crash: {bag} (recovered)' in result.stdout, result.stdout
+
+
+def test_loop_resume_after_kill_between_checkpoint_and_final_writes_the_final(
+        tmp_path: Path) -> None:
+    """Kill between a round's last two writes: --resume writes final.pt, not 'done'.
+
+    The round ends by writing checkpoint.pt, then final.pt; a kill between them leaves
+    checkpoint.pt at the round's total and no final.pt (here removed: the same files on disk).
+    """
+    from zeus_ros.learning.checkpoint import load_checkpoint
+
+    config = tmp_path / 'tiny.yaml'
+    config.write_text(yaml.safe_dump(TINY))
+    out = tmp_path / 'loop'
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'loop', '--task', TASK, '--config',
+            str(config), '--out', str(out), '--rounds', '1', '--random-steps', '400',
+            '--updates', '4', '--no-eval', '--no-progress']
+    subprocess.run(argv, cwd=REPO, capture_output=True, timeout=300, check=True)
+    final = out / 'run' / 'final.pt'
+    final.unlink()
+    result = subprocess.run([*argv, '--resume'], cwd=REPO, capture_output=True, text=True,
+                            timeout=300, check=False)
+    text = result.stdout + result.stderr
+    assert result.returncode == 0, text
+    assert f'trained to update 4, but {final} is missing' in text, text
+    assert 'collect' not in text.split('resuming')[1]
+    assert load_checkpoint(final).step == 4

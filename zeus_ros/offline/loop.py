@@ -122,13 +122,18 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
     done_bags = len([p for p in bags.glob('bag_*') if p.is_dir()
                      and _ROUND_BAG.fullmatch(p.name)]) if resume else 0
     done_updates = checkpoint_step(run / CHECKPOINT) if resume else 0
+    done_final = checkpoint_step(run / FINAL) if resume else 0
     if resume:
         print(f'loop: resuming {out}: {done_bags} bag(s), checkpoint at update {done_updates}')
     results = []
     for index in range(rounds):
         total = updates * (index + 1)
-        if index < done_bags and done_updates >= total:
+        if index < done_bags and (done_updates > total or done_final >= total):
             continue
+        if index < done_bags and done_updates == total:  # killed between its last two writes
+            print(f'loop: round {index + 1}/{rounds} trained to update {total}, but '
+                  f'{run / FINAL} is ' + (f'from update {done_final}' if done_final else
+                                          'missing') + ': writing it from its checkpoint')
         checkpoint = None if index == 0 else run / CHECKPOINT
         stochastic = config.exploration == 'stochastic'
         how = 'sampled (stochastic SAC policy)' if stochastic else f'+ noise {noise}'
