@@ -154,6 +154,8 @@ def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(
     assert '4 finished before (skipped), 0 to run' in out and '0 ran, 4 skipped' in out
     assert all(p.stat().st_mtime_ns == t for p, t in stamps.items() if p.name != 'table.md'
                and p.suffix not in ('.csv', '.png', '.md'))
+    assert sweep_main([*argv, '--updates', '31']) == 2  # another protocol: not mixed in
+    assert 'was run with other settings (updates: 30 -> 31)' in capsys.readouterr().err
 
 
 def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(

@@ -28,7 +28,14 @@ from typing import Any
 import yaml
 
 from zeus_ros.offline.collect_workers import portable_task
-from zeus_ros.offline.trial import LoopProtocol, Trial, TrialError, run_trial, trial_done
+from zeus_ros.offline.trial import (
+    LoopProtocol,
+    Trial,
+    TrialError,
+    recorded_differences,
+    run_trial,
+    trial_done,
+)
 
 __all__ = ['SweepResult', 'group_name', 'main', 'parse_seeds', 'parse_sets', 'plan',
            'run_sweep', 'write_tables']
@@ -168,6 +175,12 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
     from zeus_ros.offline.ray_runtime import start_ray
 
     result = SweepResult()
+    for trial in trials:
+        differences = recorded_differences(trial)
+        if differences:
+            raise SweepError(f'{trial.folder} was run with other settings ('
+                             f'{"; ".join(differences[:3])}); use the same flags to resume it, '
+                             'or another --out')
     todo = [t for t in trials if not trial_done(t)]
     result.skipped = [t.name for t in trials if trial_done(t)]
     log(f'sweep: {len(trials)} trial(s): {len(result.skipped)} finished before (skipped), '

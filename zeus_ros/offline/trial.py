@@ -4,6 +4,7 @@ A trial is the record -> retrain loop of one (task, method, seed, overrides) and
 
 Layout (that of experiments/run_one.sh, which `zeus report` reads):
   <out>/<group>/<method>_s<seed>/config.yaml    the trial's training config, overrides applied
+  <out>/<group>/<method>_s<seed>/protocol.yaml  its loop and evaluation flags (LoopProtocol)
   <out>/<group>/<method>_s<seed>/bags, run/      what `zeus loop --out` writes
   <out>/<group>/<method>_s<seed>/.done_train     training wall seconds (the trial trained)
   <out>/<group>/<method>_s<seed>/eval_<split>/   `zeus eval` output; .done: its wall seconds
@@ -17,7 +18,7 @@ steps are skipped, so running a trial again resumes it (`zeus loop --resume`).
 from __future__ import annotations
 
 import ctypes
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 import datetime
 import os
 from pathlib import Path
@@ -30,8 +31,8 @@ from typing import Any
 
 import yaml
 
-__all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'run_trial',
-           'trial_done', 'trial_steps']
+__all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'recorded_differences',
+           'run_trial', 'trial_done', 'trial_steps']
 
 
 class TrialError(RuntimeError):
@@ -84,6 +85,26 @@ def default_schedule(task: str) -> str:
 
     every = min(100, max(1, task_class(task).episode_length // 2))
     return f'switch:train:every={every}'
+
+
+def recorded_differences(trial: Trial) -> list[str]:
+    """What differs between `trial` and what its folder was run with ('key: was -> now').
+
+    A trial folder holds one run: skipping or resuming it under other settings would mix them.
+    Folders without a record (experiments/run_one.sh's) are taken as they are.
+    """
+    differences = []
+    for name, wanted in (('config.yaml', trial.config), ('protocol.yaml', asdict(trial.protocol))):
+        try:
+            stored = yaml.safe_load((trial.folder / name).read_text())
+        except OSError:
+            continue
+        if not isinstance(stored, dict):
+            continue
+        differences += [f'{key}: {stored.get(key)!r} -> {wanted.get(key)!r}'
+                        for key in sorted(set(stored) | set(wanted))
+                        if stored.get(key) != wanted.get(key)]
+    return differences
 
 
 def trial_done(trial: Trial) -> bool:
@@ -155,6 +176,8 @@ def trial_steps(trial: Trial) -> list[tuple[str, list[str], Path]]:
     if not (folder / '.done_train').is_file():
         config = folder / 'config.yaml'
         config.write_text(yaml.safe_dump(trial.config, sort_keys=False))
+        (folder / 'protocol.yaml').write_text(yaml.safe_dump(asdict(trial.protocol),
+                                                             sort_keys=False))
         resume = (folder / 'bags').is_dir() or (folder / 'run').is_dir()
         steps.append(('training', [
             'loop', '--task', trial.task, '--config', str(config), '--out', str(folder),
