@@ -165,3 +165,36 @@ def test_a_second_context_publisher_never_reaches_the_policy(
     assert int(values['foreign']) > 0 and int(values['mismatched']) == 0, values
     assert ros_processes.log_text('policy').count(
         'a second publisher on /zeus/context: /intruder') == 1
+
+
+def test_two_action_publishers_at_start_wait_until_action_sender_names_one(
+        ros_processes: ProcessGroup) -> None:
+    """Two publishers before step 0: sim_bridge names both and waits; action_sender decides.
+
+    With action_sender:=/policy it pairs with the policy and refuses the other.
+    """
+    from zeus_msgs.msg import Action
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    steps: list[tuple[float, Any]] = []
+    diagnostics: list[Any] = []
+    with driver_node(ros_processes.domain_id, name='stray') as probe:
+        _watch(probe, steps, diagnostics)
+        stray = probe.create_publisher(Action, TOPICS.ACTION, step_qos())
+        ros_processes.start('policy', node('policy', f'task:={TASK}'))
+        first = ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}'))
+        assert spin_until(probe, lambda: 'found 2' in ros_processes.log_text('sim_bridge'), 60)
+        assert not steps, 'sim_bridge started with two action publishers'
+        log = ros_processes.log_text('sim_bridge')
+        assert '/policy' in log and '/stray' in log and 'set action_sender' in log, log
+        ros_processes.stop(first)
+        ros_processes.start('sim_bridge2', node('sim_bridge', f'task:={TASK}',
+                                                'action_sender:=/policy'))
+        assert spin_until(probe, lambda: len(steps) > 5, timeout=60)
+        for _ in range(20):
+            stray.publish(Action(step=steps[-1][1].step, data=[0.4321] * 6))
+        assert spin_until(probe, lambda: len(steps) > 100, timeout=60)
+    log = ros_processes.log_text('sim_bridge2')
+    assert 'paired with /policy' in log and 'a second publisher on /zeus/action: /stray' in log
+    assert all(m.action_status in (m.ACTION_OK, m.ACTION_NONE) for _, m in steps)

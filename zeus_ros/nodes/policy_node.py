@@ -110,7 +110,7 @@ class PolicyNode(Node):
         # Contexts come from one estimator only (the only publisher, by GID; followed when it
         # restarts): another publisher on zeus/context is refused, counted and an ERROR.
         self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.CONTEXT),
-                                      what='contexts')
+                                      what='contexts', setting='')
         self._sub_context = SenderSubscription(
             self, ContextEstimate, TOPICS.CONTEXT, step_qos(depth=100), self._on_context,
             admit=self._senders.accepts) if self.needs_context else None

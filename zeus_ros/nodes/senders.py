@@ -197,7 +197,8 @@ class SenderPairing:
     """Which publisher of a topic may drive this node; counts and names everyone else.
 
     `expected` ('' or a fully qualified node name such as /r1/policy) says whom to pair with;
-    empty means the only publisher on the topic when `pair()` is called (start-up). A paired
+    empty means the only publisher on the topic when `pair()` is called (start-up); `setting`
+    names the parameter that sets it, for messages ('' when the node has none). A paired
     node that restarts publishes under a new GID: its new publisher (same node name) is paired
     once the old one has left the graph or has been silent for `takeover_after` seconds (a
     killed process stays in the graph until its DDS lease ends, ~20 s). Everything else is
@@ -205,11 +206,12 @@ class SenderPairing:
     """
 
     def __init__(self, node: Node, topic: str, expected: str = '', what: str = 'messages',
-                 takeover_after: float = 1.0) -> None:
+                 takeover_after: float = 1.0, setting: str = 'action_sender') -> None:
         self._node = node
         self.topic = topic
         self.expected = expected
         self.what = what
+        self.setting = setting
         self.paired: Sender | None = None
         self.refused = 0
         self.takeover_after = takeover_after
@@ -239,13 +241,14 @@ class SenderPairing:
         wanted = self.expected or 'a publisher'
         if not candidates:
             return f'{wanted} on {self.topic}' + (
-                f' (action_sender; found {", ".join(map(str, graph))})' if graph else '')
+                f' ({self.setting}; found {", ".join(map(str, graph))})' if graph else '')
         if any(not s.node for s in candidates):
             return f'the ROS graph to name the publishers of {self.topic}'
         if len(candidates) > 1:
             return (f'one publisher on {self.topic}, found {len(candidates)}: '
-                    f'{", ".join(map(str, candidates))}; stop the extra ones or set '
-                    'action_sender to the node that drives the robot')
+                    f'{", ".join(map(str, candidates))}; stop the extra ones' + (
+                        f' or set {self.setting} to the node to follow' if self.setting
+                        else ''))
         self.paired = candidates[0]
         self._heard = time.monotonic()
         self._node.get_logger().info(
