@@ -22,7 +22,7 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     out = tmp_path / 'demo'
     done = subprocess.run(python_module('zeus_ros.demo', '--steps', '60', '--out', str(out)),
                           env=ros_environment(fresh_domain_id()), capture_output=True,
-                          text=True, timeout=240, check=False)
+                          text=True, timeout=360, check=False)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     live, frozen = read_csv(out / 'steps.csv'), read_csv(out / 'frozen' / 'steps.csv')
     assert len(live) >= 55 and len(frozen) >= 55

@@ -239,6 +239,10 @@ def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny
                    'transitions from 1 bag(s)', 'Not evaluated yet'):
         assert needle in card, needle
     assert 'pytest' in card or 'command' in card  # the recorded command line of this process
+    # the context read-out, calibrated on the train contexts, is in the export and on the card
+    readout = load_checkpoint(target).extra['context_readout']
+    assert readout['names'] == ['torso_length'] and 'train contexts' in readout['fitted_on']
+    assert '| context read-out | torso_length RMSE' in card
     run = tmp_path / 'resume'
     run.mkdir()
     shutil.copy(target, run / 'checkpoint.pt')

@@ -78,8 +78,10 @@ class Inspector:
         node = self.node
         node.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, qos)
         node.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth, qos)
-        node.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context, qos)
-        node.create_subscription(ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout, qos)
+        context = node.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context, qos)
+        readout = node.create_subscription(ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout,
+                                           qos)
+        self._topics = {'context': context.topic_name, 'readout': readout.topic_name}
         node.create_subscription(Action, TOPICS.ACTION, self._on_action, qos)
         node.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, self._on_diag, 10)
 
@@ -157,8 +159,11 @@ class Inspector:
         line appears.
         """
         records = self.log.ordered()
-        estimating = any(r.estimate is not None for r in records[-50:])
-        reading = any(r.readout is not None for r in records[-50:])
+        # An estimator that is up but whose first estimate is still in flight counts as one.
+        estimating = any(r.estimate is not None for r in records[-50:]) or \
+            self.node.count_publishers(self._topics['context']) > 0
+        reading = any(r.readout is not None for r in records[-50:]) or \
+            self.node.count_publishers(self._topics['readout']) > 0
         for record in reversed(records):
             if record.episode >= 0 and record.truth is not None \
                     and (record.estimate is not None or not estimating) \
@@ -245,12 +250,14 @@ def main(argv: list[str] | None = None) -> int:
                         help='watch the system in this namespace (e.g. r1 for /r1/zeus/...)')
     args = parser.parse_args(argv)
     inspector = Inspector(namespace='/' + args.namespace.strip('/'))
+    seen = False
     try:
         inspector.spin(args.duration, args.steps, args.refresh, args.quiet)
+        seen = inspector.current() is not None
     finally:
         inspector.close()
     log = inspector.log
-    if inspector.current() is None:
+    if not seen:
         print(f'zeus inspect: saw no step on {inspector.listening()} in '
               f'{time.monotonic() - inspector.started:.0f} s; {NOTHING_HINT}', file=sys.stderr)
         return 1

@@ -72,9 +72,9 @@ class ContextEstimatorNode(Node):
         # Publisher last: a peer that sees it knows the subscriptions above already exist.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
         # The estimate in the context's units, for people and plotting tools (the policy never
-        # reads it): published whenever the checkpoint holds a read-out.
-        self._pub_readout = self.create_publisher(ContextTruth, TOPICS.CONTEXT_READOUT,
-                                                  step_qos())
+        # reads it): published whenever the checkpoint holds a read-out; the publisher exists
+        # only then, so a viewer can tell "no read-out" from "not arrived yet".
+        self._pub_readout: Any = None
         steady_timer(self, 1.0, self._publish_diagnostics)
         serve_live_changes(self, SPECS, self.params, self._apply_live,
                            prepare=self._prepare_live)
@@ -87,10 +87,13 @@ class ContextEstimatorNode(Node):
     def _log_readout(self) -> None:
         if self.loaded.readout is None:
             self.get_logger().info(f'no context read-out in the checkpoint: nothing on '
-                                   f'{self._pub_readout.topic_name} (zeus export calibrates one)')
-        else:
-            self.get_logger().info(f'{self._pub_readout.topic_name}: '
-                                   f'{self.loaded.readout.describe()}')
+                                   f'{TOPICS.CONTEXT_READOUT} (zeus export calibrates one)')
+            return
+        if self._pub_readout is None:
+            self._pub_readout = self.create_publisher(ContextTruth, TOPICS.CONTEXT_READOUT,
+                                                      step_qos())
+        self.get_logger().info(f'{self._pub_readout.topic_name}: '
+                               f'{self.loaded.readout.describe()}')
 
     def _prepare_live(self, changed: dict[str, Any]) -> None:
         """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
@@ -152,7 +155,7 @@ class ContextEstimatorNode(Node):
         msg.missing_steps = self._missing_in_episode
         msg.checkpoint_sha256 = self.loaded.sha256
         self._pub.publish(msg)
-        if self.loaded.readout is not None:
+        if self.loaded.readout is not None and self._pub_readout is not None:
             readout = ContextTruth()
             readout.header.stamp = feedback.header.stamp
             readout.step = step

@@ -200,7 +200,7 @@ def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, gro
     ax.set_xlabel('update' if x == 'step' else x)
     ax.set_ylabel(ylabel or y)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.0, 1.0))  # never over a line
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
@@ -269,7 +269,7 @@ def plot_bars(labels: Sequence[str], series: Mapping[str, Sequence[float]], path
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3, axis='y')
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(1.0, 1.0))  # never over a bar
     if title:
         ax.set_title(title, fontsize=10)
     fig.tight_layout()
@@ -289,7 +289,7 @@ def plot_trace(values: Sequence[float], others: Mapping[str, Sequence[float]], *
             ax.axvline(mark, color='tab:red', lw=0.8, alpha=0.6)
         ax.set_ylabel(name, fontsize=8)
         ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel('step')
+    axes[-1, 0].set_xlabel('control step')
     if title:
         axes[0, 0].set_title(title, fontsize=10)
     fig.tight_layout()
