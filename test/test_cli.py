@@ -42,7 +42,7 @@ BAD_VALUES = [
     ('report', ['--out', 'o'], '--folder', 'required'),
     ('recover', ['--dry-run'], '--bags', 'required'),
     ('export', ['--checkpoint', 'c.pt'], '--out', 'required'),
-    ('ingest', ['--strict'], 'bags', 'required'),
+    ('ingest', ['--strict'], '--bags', 'required'),
 ]
 
 

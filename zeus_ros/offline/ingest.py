@@ -32,7 +32,7 @@ import warnings
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.errors import BagError, IngestError
 from zeus_ros.offline.schema import (
     MSGTYPES,
@@ -621,12 +621,13 @@ def _bag_files(bag: Path) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`zeus ingest BAG...`: read bags as training would and say what they hold or lack."""
+    """`zeus ingest --bags BAG...`: read bags as training would and say what they hold or lack."""
     parser = ZeusArgumentParser(
         prog='zeus ingest', description='Read bags exactly as `zeus train` does and report '
         'steps, episodes and every gap, duplicate or count mismatch (exit 1 if unusable).')
-    parser.add_argument('bags', nargs='+', type=Path,
-                        help='bag directories, .mcap/.db3 files, or directories of bags')
+    flag_or_positional(parser, '--bags', many=True, type=Path,
+                       help='bag directories, .mcap/.db3 files, or directories of bags (as '
+                       '`zeus train --bags`; also accepted without --bags)')
     parser.add_argument('--namespace', default='',
                         help='namespace of the recorded system: reads /<ns>/zeus/... topics')
     parser.add_argument('--strict', action='store_true', help='any issue is an error')
