@@ -20,7 +20,7 @@ IMPORT_TO_DEPENDENCY = {
     'rosbags': 'python3-rosbags-pip',
 }
 """Third-party Python imports and their rosdep keys."""
-PIP_ONLY = {'dm_control': 'dm-control', 'gymnasium': 'gymnasium'}
+PIP_ONLY = {'dm_control': 'dm-control', 'gymnasium': 'gymnasium', 'ray': 'ray'}
 """Imports without a rosdep key: README's pip step installs them (import -> pip name)."""
 OWN = {'zeus_ros', 'sim_bridge'}
 
