@@ -101,8 +101,10 @@ def test_collect_random_bytes_and_bad_schedules(files: dict[str, Path], tmp_path
                          ('empty.yaml', 'must hold a mapping')):
         assert collect.main([*base, '--schedule', str(files[name])]) == 2, name
         _one_line(capsys, f'--schedule: {files[name]} ', needle)
-    assert collect.main([*base[:1], 'Nope-v0', *base[2:]]) == 2
-    _one_line(capsys, '--task Nope-v0', 'unknown task')
+    with pytest.raises(SystemExit) as exited:  # argparse checks --task: exit 2, one line
+        collect.main([*base[:1], 'Nope-v0', *base[2:]])
+    assert exited.value.code == 2
+    _one_line(capsys, '--task', "unknown task 'Nope-v0'")
     assert not out.exists()
 
 

@@ -115,12 +115,12 @@ def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
         data = load_yaml_text(path)
     except OSError as error:
         raise ConfigError(f'{flag} {path}: cannot read it ({error.strerror})') from None
-    except ValueError as error:
-        raise ConfigError(str(error)) from None
-    except YamlTextError as error:
+    except YamlTextError as error:  # a ValueError too: caught first, so the file is named
         hint = ('; expected a YAML training config such as params/train/state_cpu.yaml'
                 if error.binary else '')
         raise ConfigError(f'{flag} {path}: {error}{hint}') from None
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
     if data is None:
         raise ConfigError(f'{flag} {path}: the file is empty (no keys); refusing to train with '
                           'every default by accident: start from params/train/state_cpu.yaml')
