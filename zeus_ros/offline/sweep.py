@@ -188,6 +188,7 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
     if not todo:
         return result
     started_here = start_ray(address, num_cpus)
+    pending: dict[Any, tuple[Trial, int]] = {}
     try:
         resources = ray.cluster_resources()
         if resources.get('CPU', 0) < cpus_per_trial:
@@ -195,13 +196,12 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
                              f'{resources.get("CPU", 0):g} CPU(s)')
         tracker = ray.remote(num_cpus=0)(_StartedNames).remote()
         remote = ray.remote(_ray_trial)
-        pending: dict[Any, tuple[Trial, int]] = {}
 
         def submit(trial: Trial, attempt: int) -> None:
             gpus = _gpus(trial, gpus_per_trial, resources.get('GPU', 0))
             ref = remote.options(num_cpus=cpus_per_trial, num_gpus=gpus, max_retries=0,
-                                 name=f'trial {trial.name}').remote(trial, cpus_per_trial,
-                                                                    tracker)
+                                 name=f'trial {trial.name}').remote(
+                trial, cpus_per_trial, tracker, f'{trial.name}#{attempt}')
             pending[ref] = (trial, attempt)
             result.attempts[trial.name] = attempt
 
@@ -225,22 +225,26 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
                     else:
                         log(f'sweep: {trial.name} FAILED after {attempt} attempt(s): {why}')
                         result.failed[trial.name] = why
-            names = {t.name for t, _ in pending.values()}
-            running = len(names & set(ray.get(tracker.names.remote())))
+            attempts = {f'{t.name}#{a}' for t, a in pending.values()}
+            running = len(attempts & ray.get(tracker.names.remote()))
             line = (f'{len(result.done) + len(result.skipped)}/{len(trials)} done, {running} '
                     f'running, {len(result.failed)} failed')
             if line != shown:
                 log(f'sweep: {line} ({time.monotonic() - begin:.0f} s)')
                 shown = line
+    except KeyboardInterrupt:
+        for ref in pending:  # a cluster would run them on without us
+            ray.cancel(ref, force=True)
+        raise
     finally:
         if started_here:
             ray.shutdown()
     return result
 
 
-def _ray_trial(trial: Trial, threads: int, tracker: Any) -> float:
-    """The Ray task: say it started, then run the trial with `threads` torch threads."""
-    tracker.add.remote(trial.name)
+def _ray_trial(trial: Trial, threads: int, tracker: Any, attempt: str) -> float:
+    """The Ray task: say this attempt started, then run the trial with `threads` threads."""
+    tracker.add.remote(attempt)
     return run_trial(trial, threads)
 
 
