@@ -34,7 +34,7 @@ def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
 
     rng = np.random.default_rng(0)
     segments = np.repeat(np.arange(8), 50)
-    truth = np.repeat(rng.uniform(0.6, 1.2, 8), 50)[:, None]
+    truth = np.repeat(np.tile(rng.uniform(0.6, 1.2, 4), 2), 50)[:, None]  # 4 values, twice
     psi = np.hstack([2.0 * truth - 1.0, rng.normal(size=(400, 3))])  # one informative dim
     readout = fit_readout(psi, truth, ('torso_length',), segments, fitted_on='synthetic')
     assert readout.heldout_rmse[0] < 0.02 and readout.heldout_r2[0] > 0.95
@@ -43,7 +43,7 @@ def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
     blind = fit_readout(rng.normal(size=(400, 4)), truth, ('torso_length',), segments,
                         fitted_on='noise')
     assert blind.heldout_r2[0] < 0.3
-    with pytest.raises(ValueError, match='2 context segments'):
+    with pytest.raises(ValueError, match='two segments of one context value'):
         fit_readout(psi, truth, ('torso_length',), np.zeros(400), fitted_on='one segment')
 
     ckpt = tiny_checkpoint(tmp_path / 'tiny.pt')
@@ -85,14 +85,16 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     estimate next to the truth, equal to the stored read-out applied to the published psi.
     """
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.readout import ContextReadout, store_readout
+    from zeus_ros.offline.readout import ContextReadout, NoveltyMonitor, store_readout
 
     ckpt = tiny_checkpoint(tmp_path / 'tiny.pt')
     dim = load_checkpoint(ckpt).agent.context_dim
     weights = np.linspace(-1.0, 1.0, dim)[:, None]
     readout = ContextReadout(('torso_length',), weights, np.array([0.9]), (0.1,), (0.5,),
                              'test')
-    store_readout(ckpt, readout)
+    # a novelty monitor whose only training context is far from any psi: every step is novel
+    novelty = NoveltyMonitor(np.full((1, dim), 50.0), 1.0, 2.0, 5, 'test')
+    store_readout(ckpt, readout, novelty=novelty)
     env = ros_environment(DOMAIN_LIVE)
     launch = subprocess.Popen(
         [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--checkpoint', str(ckpt),
@@ -111,15 +113,61 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     assert views, inspect.stdout
     assert all('torso_length: estimated' in line and ', true ' in line for line in views), views
     assert not any('episode -1' in line or 'segment -1' in line for line in views)
+    assert any('NOT A TRAINING CONTEXT' in line for line in views), views
+    assert 'context novelty: novel_steps=' in inspect.stdout  # the /diagnostics WARN
     rows = list(csv.DictReader((tmp_path / 'steps.csv').open()))
-    checked = 0
+    checked = novelties = 0
     for row in rows:
         if row['psi'] and row['estimated_torso_length']:
             psi = np.array([float(v) for v in row['psi'].split()])
             assert float(row['estimated_torso_length']) == pytest.approx(
                 float(readout.apply(psi)[0]), abs=1e-3)
             checked += 1
-    assert checked > 100
+            if row['novelty']:  # scored once the history holds k transitions
+                assert float(row['novelty_threshold']) == 2.0 and float(row['novelty']) > 2.0
+                novelties += 1
+    assert checked > 100 and novelties > 50
     assert 'context_readout: context read-out (torso_length RMSE 0.1' in launch_out
     status = [line for line in launch_out.splitlines() if line.startswith('[zeus launch] step')]
     assert status and 'steps/s' in status[-1] and 'return' in status[-1], launch_out[-3000:]
+
+
+def test_novelty_warns_on_an_extrapolation_context_and_clears_back_on_a_training_one() -> None:
+    """The demo's shipped Cheetah-Run-v1 checkpoint, its monitor calibrated on train contexts.
+
+    Mid-episode switches every 20 steps between a train target velocity (1.29 m/s) and an
+    extrapolation one (4.0 m/s): the monitor flags the extrapolation segments and is clear
+    again at the end of each train segment that follows a warning.
+    """
+    import torch
+
+    from zeus_ros.demo import default_checkpoint
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.collect import AgentPolicy
+    from zeus_ros.offline.evaluate import _make_env, _switch_schedule, run_steps
+    from zeus_ros.offline.readout import NoveltyTracker, calibrate_readout
+
+    torch.set_num_threads(1)
+    agent = InferenceAgent.from_checkpoint(default_checkpoint('Cheetah-Run-v1'))
+    _readout, monitor = calibrate_readout(agent, steps=1000)
+    env, task = _make_env(agent.task, _switch_schedule(
+        [{'target_velocity': 1.29}, {'target_velocity': 4.0}], 20), 5)
+    try:
+        trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=5), 160,
+                          progress=False)
+    finally:
+        task.close()
+    tracker = NoveltyTracker(monitor, agent.k)
+    novel = [None if s is None else s > monitor.threshold for s in
+             (tracker.update(p, h, f) for p, h, f in
+              zip(trace.psi, trace.history_length, trace.first, strict=True))]
+    segments = [[novel[i] for i in np.flatnonzero(trace.segment == seg) if novel[i] is not None]
+                for seg in range(8)]
+    extrapolation, train = segments[1::2], segments[0::2]
+    warned = [any(flags) for flags in extrapolation]
+    assert sum(warned) >= 3, segments
+    for index, did_warn in enumerate(warned[:-1]):
+        if did_warn:  # the train segment after it ends clear
+            assert train[index + 1][-1] is False, segments
+    share = [np.mean([f for flags in group for f in flags]) for group in (extrapolation, train)]
+    assert share[0] > 3 * share[1], share

@@ -204,9 +204,9 @@ def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
         return checkpoint
     print(f'[demo] calibrating a context read-out for {checkpoint.name} on {steps} steps of its '
           'train contexts (psi -> context units) ...', flush=True)
-    readout = calibrate_readout(agent, steps=steps)
-    print(f'[demo] {readout.describe()}', flush=True)
-    return store_readout(checkpoint, readout, out / 'checkpoint_with_readout.pt')
+    readout, novelty = calibrate_readout(agent, steps=steps)
+    print(f'[demo] {readout.describe()}\n[demo] {novelty.describe()}', flush=True)
+    return store_readout(checkpoint, readout, out / 'checkpoint_with_readout.pt', novelty)
 
 
 def format_comparison(live: list[Any], frozen: list[Any], names: Sequence[str]) -> str:

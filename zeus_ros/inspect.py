@@ -38,14 +38,15 @@ def write_csv(log: StepLog, path: Path) -> Path:
         names = log.context_names
         writer.writerow(['step', 'episode', 'segment', 'first', 'reward',
                          *[f'true_{n}' for n in names], *[f'estimated_{n}' for n in names],
-                         'history_length', 'latency_ms', 'psi'])
+                         'novelty', 'novelty_threshold', 'history_length', 'latency_ms', 'psi'])
         for r in log.ordered():
             psi = '' if r.estimate is None else ' '.join(f'{v:.5g}' for v in r.estimate)
             latency = '' if r.latency_ms is None else f'{r.latency_ms:.3f}'
             truth = r.truth or ('',) * len(names)
             readout = tuple(f'{v:.5g}' for v in r.readout) if r.readout else ('',) * len(names)
+            novelty = tuple(f'{v:.4g}' for v in r.novelty) if r.novelty else ('', '')
             writer.writerow([r.step, r.episode, r.segment, int(r.first), f'{r.reward:.6g}',
-                             *truth, *readout, r.history_length, latency, psi])
+                             *truth, *readout, *novelty, r.history_length, latency, psi])
     return path
 
 
@@ -82,6 +83,7 @@ class Inspector:
         readout = node.create_subscription(ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout,
                                            qos)
         self._topics = {'context': context.topic_name, 'readout': readout.topic_name}
+        node.create_subscription(ContextTruth, TOPICS.CONTEXT_NOVELTY, self._on_novelty, qos)
         node.create_subscription(Action, TOPICS.ACTION, self._on_action, qos)
         node.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, self._on_diag, 10)
 
@@ -104,6 +106,10 @@ class Inspector:
 
     def _on_readout(self, msg: object) -> None:
         self.log.record(msg.step).readout = tuple(float(v) for v in msg.values)
+
+    def _on_novelty(self, msg: object) -> None:
+        values = dict(zip(msg.names, msg.values, strict=False))
+        self.log.record(msg.step).novelty = (values['novelty'], values['threshold'])
 
     def _on_action(self, msg: object) -> None:
         self.log.record(msg.step).t_action = time.monotonic()
@@ -201,9 +207,14 @@ class Inspector:
         current = segments[-1] if segments else None
         latency = self.log.latencies_ms()[-200:]
         rate = self.step_rate()
+        novelty = ''
+        if last.novelty:
+            score, threshold = last.novelty
+            novelty = (f' | novelty {score:.2f} > {threshold:.2f}: NOT A TRAINING CONTEXT'
+                       if score > threshold else f' | novelty {score:.2f} (< {threshold:.2f})')
         lines = [
             f'[inspect] step {last.step} episode {last.episode} segment {last.segment} '
-            f'(H={last.history_length}): {self.estimate_text(last)}',
+            f'(H={last.history_length}): {self.estimate_text(last)}{novelty}',
             f'          segment return {current.total_return if current else 0:.2f} over '
             f'{current.steps if current else 0} steps | '
             + (f'{rate:.0f} steps/s | ' if rate is not None else '')
@@ -214,7 +225,7 @@ class Inspector:
             # A node's rate is 0.0 until its window holds two events: not shown until then.
             shown = ', '.join(f'{k}={v}' for k, v in values.items()
                               if k in ('rate_hz', 'timeouts', 'rejected', 'stale', 'safe',
-                                       'gaps', 'drops', 'dropped')
+                                       'gaps', 'drops', 'dropped', 'novel_steps')
                               and not (k == 'rate_hz' and _is_zero(v)))
             if shown:
                 lines.append(f'          {name}: {shown}')

@@ -33,6 +33,8 @@ class StepRecord:
     history_length: int = 0
     readout: tuple[float, ...] | None = None
     """The estimator's psi in the context's units (its calibrated read-out), when it has one."""
+    novelty: tuple[float, float] | None = None
+    """(score, threshold) of the estimator's novelty monitor; above: not a training context."""
     t_observation: float | None = None
     """Wall-clock receipt time of the step's feedback (seconds, monotonic)."""
     t_action: float | None = None
@@ -61,6 +63,8 @@ class SegmentSummary:
     """Mean distance of the estimate from its segment mean (spread of psi inside the segment)."""
     estimated: tuple[float, ...] | None = None
     """Mean read-out (estimate in the context's units) over the segment's steps with history."""
+    novel: float | None = None
+    """Share of the segment's scored steps above the novelty threshold."""
 
 
 @dataclass
@@ -102,11 +106,13 @@ class StepLog:
             total = float(np.sum(rewards)) if rewards else 0.0
             read = [r.readout for r in current if r.readout and r.history_length > 0]
             estimated = tuple(np.mean(read, axis=0).tolist()) if read else None
+            scored = [r.novelty[0] > r.novelty[1] for r in current if r.novelty]
+            novel = float(np.mean(scored)) if scored else None
             summaries.append(SegmentSummary(
                 segment=current[0].segment, context=current[0].truth or (),
                 first_step=current[0].step, last_step=current[-1].step, steps=len(current),
                 total_return=total, reward_per_step=total / max(len(rewards), 1),
-                context_error=error, estimated=estimated))
+                context_error=error, estimated=estimated, novel=novel))
 
         for record in self.ordered():
             if record.truth is None:
@@ -127,17 +133,21 @@ class StepLog:
 def format_segments(segments: Sequence[SegmentSummary], names: Sequence[str]) -> str:
     """A fixed-width table of the segment summaries."""
     read = any(s.estimated for s in segments)
+    scored = any(s.novel is not None for s in segments)
     header = f'{"seg":>4} {"steps":>6} {"from":>6} {"to":>6}  {"context":<28} ' \
              + (f'{"estimated":<14} ' if read else '') \
-             + f'{"return":>9} {"per step":>9} {"psi spread":>10}'
+             + f'{"return":>9} {"per step":>9} {"psi spread":>10}' \
+             + (f' {"novel":>6}' if scored else '')
     lines = [header, '-' * len(header)]
     for s in segments:
         context = ', '.join(f'{n}={v:g}' for n, v in zip(names, s.context, strict=False))
         spread = '' if s.context_error is None else f'{s.context_error:10.3f}'
         estimated = ', '.join(f'{v:.3g}' for v in s.estimated or ())
+        novel = '' if s.novel is None else f'{s.novel:6.0%}'
         lines.append(f'{s.segment:>4} {s.steps:>6} {s.first_step:>6} {s.last_step:>6}  '
                      f'{context:<28} ' + (f'{estimated:<14} ' if read else '')
-                     + f'{s.total_return:>9.2f} {s.reward_per_step:>9.3f} {spread}')
+                     + f'{s.total_return:>9.2f} {s.reward_per_step:>9.3f} {spread:>10}'
+                     + (f' {novel:>6}' if scored else ''))
     return '\n'.join(lines)
 
 

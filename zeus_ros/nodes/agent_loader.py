@@ -18,7 +18,7 @@ import torch
 from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.readout import ContextReadout, readout_from_checkpoint_bytes
+from zeus_ros.offline.readout import ContextReadout, NoveltyMonitor, stored_monitors
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 
@@ -34,6 +34,8 @@ class LoadedAgent:
     """Hex digest of the file's bytes, as they were read for loading."""
     readout: ContextReadout | None = None
     """The checkpoint's calibrated context read-out (psi -> context units), if it holds one."""
+    novelty: NoveltyMonitor | None = None
+    """The checkpoint's context novelty monitor (distance from the training contexts)."""
 
     def describe(self) -> str:
         """What a log line says about it."""
@@ -68,13 +70,16 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
     except CheckpointError as error:
         raise ValueError(f'{node_name}: {error}') from error
     try:
-        readout = readout_from_checkpoint_bytes(data)
+        readout, novelty = stored_monitors(data)
     except ValueError as error:
         raise ValueError(f'{node_name}: checkpoint {path}: {error}') from error
-    if readout is not None and len(readout.weights) != agent.context_dim:
-        raise ValueError(f'{node_name}: checkpoint {path}: its context read-out expects psi of '
-                         f'{len(readout.weights)} values, the agent has {agent.context_dim}')
-    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest(), readout)
+    for what, size in (('context read-out', None if readout is None else len(readout.weights)),
+                       ('novelty monitor', None if novelty is None
+                        else novelty.centroids.shape[1])):
+        if size is not None and size != agent.context_dim:
+            raise ValueError(f'{node_name}: checkpoint {path}: its {what} expects psi of {size} '
+                             f'values, the agent has {agent.context_dim}')
+    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest(), readout, novelty)
 
 
 def check_swappable(node_name: str, old: InferenceAgent, new: InferenceAgent) -> None:

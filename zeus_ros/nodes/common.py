@@ -64,6 +64,8 @@ class TOPICS:
     CONTEXT = 'zeus/context'
     CONTEXT_READOUT = 'zeus/context_readout'
     """ContextTruth-typed: the estimate in the context's units (the checkpoint's read-out)."""
+    CONTEXT_NOVELTY = 'zeus/context_novelty'
+    """ContextTruth-typed: names novelty, threshold, novel (1.0 outside the training contexts)."""
     ACTION = 'zeus/action'
     CLOCK = '/clock'
     DIAGNOSTICS = '/diagnostics'

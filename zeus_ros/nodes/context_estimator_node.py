@@ -5,7 +5,9 @@ appends (o_{k-1}, a_{k-1}, r_k, o_k) to the history, or clears it at an episode 
 publishes ContextEstimate k with the stamp of observation k. A step that never arrives is a
 counted gap (the transition across it is not formed), never a silent misalignment. When the
 checkpoint holds a context read-out (offline/readout.py), the same step's estimate in the
-context's units goes out on zeus/context_readout (ContextTruth type: names and values).
+context's units goes out on zeus/context_readout (ContextTruth type: names and values); with a
+novelty monitor, zeus/context_novelty carries its score, threshold and flag per step, and
+/diagnostics warns while most steps lie outside the training contexts.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from zeus_ros.nodes.common import (
 )
 from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.offline.readout import NoveltyTracker
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint holding phi and psi; a live change loads it (same task, '
@@ -75,6 +78,10 @@ class ContextEstimatorNode(Node):
         # reads it): published whenever the checkpoint holds a read-out; the publisher exists
         # only then, so a viewer can tell "no read-out" from "not arrived yet".
         self._pub_readout: Any = None
+        self._pub_novelty: Any = None
+        self._novelty: NoveltyTracker | None = None
+        self._novel_steps = [0, 0]  # steps scored above / at or below the threshold, per second
+        self._last_novelty = float('nan')
         steady_timer(self, 1.0, self._publish_diagnostics)
         serve_live_changes(self, SPECS, self.params, self._apply_live,
                            prepare=self._prepare_live)
@@ -85,6 +92,13 @@ class ContextEstimatorNode(Node):
         self._log_readout()
 
     def _log_readout(self) -> None:
+        novelty = self.loaded.novelty
+        self._novelty = None if novelty is None else NoveltyTracker(novelty, self.agent.k)
+        if novelty is not None:
+            if self._pub_novelty is None:
+                self._pub_novelty = self.create_publisher(ContextTruth, TOPICS.CONTEXT_NOVELTY,
+                                                          step_qos())
+            self.get_logger().info(f'{self._pub_novelty.topic_name}: {novelty.describe()}')
         if self.loaded.readout is None:
             self.get_logger().info(f'no context read-out in the checkpoint: nothing on '
                                    f'{TOPICS.CONTEXT_READOUT} (zeus export calibrates one)')
@@ -162,10 +176,28 @@ class ContextEstimatorNode(Node):
             readout.names = list(self.loaded.readout.names)
             readout.values = self.loaded.readout.apply(context).tolist()
             self._pub_readout.publish(readout)
+        if self._novelty is not None and self._pub_novelty is not None:
+            self._publish_novelty(feedback, self._novelty.update(context, len(self.history),
+                                                                 feedback.first))
         self.counts['estimates'] += 1
         self._rate.tick()
         self._latency_ms.append((time.monotonic() - received) * 1e3)
         del self._latency_ms[:-500]
+
+    def _publish_novelty(self, feedback: StepFeedback, score: float | None) -> None:
+        """Publish the step's novelty (none before the history holds k transitions)."""
+        if score is None or self._novelty is None:
+            return
+        threshold = self._novelty.monitor.threshold
+        novel = score > threshold
+        self._novel_steps[0 if novel else 1] += 1
+        msg = ContextTruth()
+        msg.header.stamp = feedback.header.stamp
+        msg.step = feedback.step
+        msg.names = ['novelty', 'threshold', 'novel']
+        msg.values = [score, threshold, float(novel)]
+        self._pub_novelty.publish(msg)
+        self._last_novelty = score
 
     def _publish_diagnostics(self) -> None:
         latency = np.percentile(self._latency_ms, [50, 99]) if self._latency_ms else [0.0, 0.0]
@@ -175,6 +207,19 @@ class ContextEstimatorNode(Node):
         problems = [f'{self.counts[key]} {key}' for key in ('gaps', 'rejected')
                     if self.counts[key]]
         self._pub_diag.publish(diagnostics_message(self, 'context', values, problems))
+        if self._novelty is not None:
+            # WARN while most steps of the last second lay outside the training contexts.
+            novel, usual = self._novel_steps
+            self._novel_steps = [0, 0]
+            threshold = self._novelty.monitor.threshold
+            last = self._last_novelty
+            warn = [f'context novel: {novel} of {novel + usual} steps above the novelty '
+                    f'threshold {threshold:.3g} (latest {last:.3g}): a context it was not '
+                    'trained on'] if novel > usual else []
+            self._pub_diag.publish(diagnostics_message(
+                self, 'context novelty', {'novelty': f'{last:.3f}',
+                                          'threshold': f'{threshold:.3f}',
+                                          'novel_steps': novel, 'steps': novel + usual}, warn))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -89,6 +89,12 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         readout = ContextReadout.from_dict(extra['context_readout']).describe()
         readout = readout.removeprefix('context read-out (').removesuffix(')')
         lines.insert(-1, f'| context read-out | {readout} |')
+    if 'context_novelty' in extra:
+        from zeus_ros.offline.readout import NoveltyMonitor
+
+        novelty = NoveltyMonitor.from_dict(extra['context_novelty']).describe()
+        novelty = novelty.removeprefix('context novelty monitor (').split('; fitted on')[0]
+        lines.insert(-1, f'| context novelty monitor | {novelty} |')
     rows = _eval_rows(evals)
     if rows:
         episodes = rows[0][1].get('episodes') or 1
@@ -132,7 +138,8 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
         from zeus_ros.learning.inference import InferenceAgent
         from zeus_ros.offline.readout import calibrate_readout, store_readout
 
-        store_readout(out, calibrate_readout(InferenceAgent(loaded.agent), steps=readout_steps))
+        readout, novelty = calibrate_readout(InferenceAgent(loaded.agent), steps=readout_steps)
+        store_readout(out, readout, novelty=novelty)
         loaded = load_checkpoint(out)
     card = out.with_suffix('.md')
     card.write_text(card_text(out, loaded, evals=evals, command=command, commit=commit))
@@ -155,8 +162,10 @@ def main(argv: list[str] | None = None) -> int:
                         help='source commit it was trained on, for checkpoints without one')
     parser.add_argument('--readout-steps', type=int, default=2000,
                         help='steps of the policy on the train contexts that calibrate the '
-                        'context read-out stored in the export (psi -> context units, published '
-                        'on zeus/context_readout; default %(default)s, 0: none)')
+                        'context read-out (psi -> context units, on zeus/context_readout) and '
+                        'the novelty monitor (distance from the training contexts, on '
+                        'zeus/context_novelty and /diagnostics) stored in the export; default '
+                        '%(default)s, 0: none')
     args = parser.parse_args(argv)
     if args.out.suffix != '.pt':
         print(f'zeus export: --out {args.out} must end in .pt', file=sys.stderr)

@@ -1,4 +1,4 @@
-"""The context read-out: psi mapped to the context's physical units, calibrated offline.
+"""The context read-out and novelty monitor: psi in the context's units, and how far from training.
 
 psi lives in its own learned space. An affine map psi -> context, fitted by ridge least squares
 on the checkpoint's own estimates over the training contexts (in-process rollouts of the
@@ -7,6 +7,12 @@ estimated 1.21 m". It is calibrated once, stored in the checkpoint (`extra['cont
 and then only applied: never fitted on the run it shows, so it cannot overstate what psi
 carries. The rollout's segments are split into calibration and held-back ones; the held-back
 RMSE and R^2 are stored with it and say how far to trust it.
+
+Beside it, the novelty monitor (`extra['context_novelty']`): the distance of the live psi
+(averaged over the last `window` steps of the episode) from the nearest mean psi of a training
+context, in units of the typical within-context spread. Its threshold is the 99th percentile of
+that score on the held-back training segments, times a margin: above it, the robot runs in a
+context it was not trained on (the estimator warns on /diagnostics).
 """
 
 from __future__ import annotations
@@ -20,12 +26,31 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['EXTRA_KEY', 'ContextReadout', 'calibrate_readout', 'fit_readout',
-           'readout_from_checkpoint_bytes', 'store_readout']
+__all__ = [
+    'EXTRA_KEY',
+    'NOVELTY_KEY',
+    'ContextReadout',
+    'NoveltyMonitor',
+    'NoveltyTracker',
+    'calibrate_readout',
+    'fit_novelty',
+    'fit_readout',
+    'held_back',
+    'readout_from_checkpoint_bytes',
+    'store_readout',
+    'stored_monitors',
+]
 
 EXTRA_KEY = 'context_readout'
+NOVELTY_KEY = 'context_novelty'
 RIDGE = 1e-3
 """Ridge penalty (relative to the mean psi variance): keeps the map stable when psi is flat."""
+NOVELTY_WINDOW = 10
+"""Steps of psi averaged before scoring (per-step psi is noisy; within one episode)."""
+NOVELTY_QUANTILE = 0.95
+NOVELTY_MARGIN = 1.5
+"""Threshold = margin x the 95th percentile of the held-back training scores (the steps whose
+window lies inside one segment: right after a switch the window mixes two contexts)."""
 
 
 @dataclass(frozen=True)
@@ -73,6 +98,121 @@ class ContextReadout:
         return f'context read-out ({errors} on held-back data; fitted on {self.fitted_on})'
 
 
+@dataclass(frozen=True)
+class NoveltyMonitor:
+    """Distance of the recent psi from the training contexts' mean psi, and its threshold."""
+
+    centroids: np.ndarray
+    """(number of training context values, context_dim): mean psi per training value."""
+    scale: float
+    """Median distance of a training step's smoothed psi to its nearest centroid."""
+    threshold: float
+    window: int
+    fitted_on: str
+
+    def score(self, psi_mean: np.ndarray) -> float:
+        """Novelty of a (window-averaged) psi: nearest-centroid distance over `scale`."""
+        distances = np.linalg.norm(self.centroids - np.asarray(psi_mean, np.float64), axis=1)
+        return float(distances.min() / self.scale)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data, as checkpoints store `extra`."""
+        return {'centroids': self.centroids.tolist(), 'scale': self.scale,
+                'threshold': self.threshold, 'window': self.window, 'fitted_on': self.fitted_on}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> NoveltyMonitor:
+        """Inverse of to_dict; ValueError when a field is missing or not finite."""
+        try:
+            monitor = cls(np.atleast_2d(np.asarray(data['centroids'], np.float64)),
+                          float(data['scale']), float(data['threshold']), int(data['window']),
+                          str(data['fitted_on']))
+        except (KeyError, TypeError, ValueError) as error:
+            raise ValueError(f'context novelty monitor: malformed ({error})') from None
+        if not (np.isfinite(monitor.centroids).all() and monitor.scale > 0
+                and np.isfinite(monitor.threshold) and monitor.window >= 1):
+            raise ValueError('context novelty monitor: non-finite or non-positive values')
+        return monitor
+
+    def describe(self) -> str:
+        """One line: what it compares with and when it warns."""
+        return (f'context novelty monitor ({len(self.centroids)} training contexts, warns above '
+                f'{self.threshold:.3g} (psi averaged over {self.window} steps); fitted on '
+                f'{self.fitted_on})')
+
+
+class NoveltyTracker:
+    """Per-step novelty of a live psi stream: the window restarts with every episode."""
+
+    def __init__(self, monitor: NoveltyMonitor, k: int) -> None:
+        self.monitor, self.k = monitor, k
+        self._recent: list[np.ndarray] = []
+
+    def update(self, psi: np.ndarray, history_length: int, first: bool) -> float | None:
+        """The novelty after this step; None until the episode's history is full (k)."""
+        if first:
+            self._recent.clear()
+        if history_length < self.k:
+            return None
+        self._recent.append(np.asarray(psi, np.float64))
+        del self._recent[:-self.monitor.window]
+        return self.monitor.score(np.mean(self._recent, axis=0))
+
+
+def _smoothed(psi: np.ndarray, episodes: np.ndarray, window: int) -> np.ndarray:
+    """Mean of each step's psi with up to window - 1 earlier steps of the same episode."""
+    out = np.empty_like(psi)
+    for i in range(len(psi)):
+        start = i
+        while start > 0 and i - start + 1 < window and episodes[start - 1] == episodes[i]:
+            start -= 1
+        out[i] = psi[start:i + 1].mean(0)
+    return out
+
+
+def held_back(groups: np.ndarray, truth: np.ndarray, every: int = 4) -> np.ndarray:
+    """Mask of the held-back steps: every `every`-th segment of each context value.
+
+    Per value, so every value is both fitted and (when it has two segments or more) scored:
+    holding back every 4th segment outright would, with 8 values in a fixed cycle, hold back
+    the same two values always.
+    """
+    keys = [tuple(np.round(row, 6)) for row in np.asarray(truth, np.float64)]
+    segments: dict[tuple[float, ...], list[Any]] = {}
+    for label, key in zip(groups, keys, strict=True):
+        if label not in segments.setdefault(key, []):
+            segments[key].append(label)
+    held_labels = []
+    for labels in segments.values():
+        if len(labels) >= every:
+            held_labels += labels[every - 1::every]
+        elif len(labels) >= 2:
+            held_labels.append(labels[-1])
+    if not held_labels:
+        raise ValueError('context read-out: need two segments of one context value to hold '
+                         'one back (calibrate on more steps)')
+    return np.isin(groups, held_labels)
+
+
+def fit_novelty(psi: np.ndarray, truth: np.ndarray, groups: np.ndarray, episodes: np.ndarray,
+                *, fitted_on: str, window: int = NOVELTY_WINDOW) -> NoveltyMonitor:
+    """Centroids per training value from the fitted segments; threshold from held-back ones."""
+    psi = np.asarray(psi, np.float64)
+    held = held_back(groups, truth)
+    keys = np.asarray([hash(tuple(np.round(row, 6))) for row in np.asarray(truth, np.float64)])
+    centroids = np.stack([psi[(keys == key) & ~held].mean(0) for key in np.unique(keys[~held])])
+    smooth = _smoothed(psi, episodes, window)
+    distances = np.linalg.norm(smooth[:, None, :] - centroids[None], axis=2).min(1)
+    # Steps whose window lies inside their own segment (after a switch it mixes two contexts).
+    settled = np.asarray([i >= window - 1 and groups[i - window + 1] == groups[i]
+                          and episodes[i - window + 1] == episodes[i]
+                          for i in range(len(groups))])
+    scale = float(np.median(distances[~held & settled])) or 1e-9
+    threshold = NOVELTY_MARGIN * float(np.quantile(distances[held & settled] / scale,
+                                                   NOVELTY_QUANTILE))
+    return NoveltyMonitor(centroids, scale, threshold, window, fitted_on)
+
+
 def _ridge(psi: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mean_psi, mean_truth = psi.mean(0), truth.mean(0)
     centered = psi - mean_psi
@@ -83,18 +223,13 @@ def _ridge(psi: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fit_readout(psi: np.ndarray, truth: np.ndarray, names: Sequence[str], groups: np.ndarray,
-                *, fitted_on: str, holdout_every: int = 4) -> ContextReadout:
-    """Fit on the groups (context segments) not held back; score on every `holdout_every`-th.
+                *, fitted_on: str) -> ContextReadout:
+    """Fit on the context segments not held back (held_back); score on the held-back ones.
 
-    ValueError when there are too few groups to hold any back.
+    ValueError when no segment can be held back.
     """
     psi, truth = np.asarray(psi, np.float64), np.asarray(truth, np.float64)
-    labels = np.unique(groups)
-    if len(labels) < 2:
-        raise ValueError('context read-out: need at least 2 context segments to hold one back')
-    held_labels = labels[holdout_every - 1::holdout_every] if len(labels) >= holdout_every \
-        else labels[-1:]
-    held = np.isin(groups, held_labels)
+    held = held_back(groups, truth)
     weights, bias = _ridge(psi[~held], truth[~held])
     error = psi[held] @ weights + bias - truth[held]
     rmse = np.sqrt((error ** 2).mean(0))
@@ -107,8 +242,11 @@ def fit_readout(psi: np.ndarray, truth: np.ndarray, names: Sequence[str], groups
 
 
 def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None,
-                      seed: int = 1000, progress: bool = False) -> ContextReadout:
-    """Roll the agent out through its task's train contexts (switching, mid-episode) and fit.
+                      seed: int = 1000, progress: bool = False
+                      ) -> tuple[ContextReadout, NoveltyMonitor]:
+    """Roll the agent through its train contexts; fit the read-out and the novelty monitor.
+
+    Both on the same steps (switching mid-episode), with the same segments held back.
 
     `agent` is an InferenceAgent with a learned context. Only steps with a full history count
     (what the estimator publishes once an episode is k steps old).
@@ -134,33 +272,45 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
     if trace.psi is None or trace.psi.shape[1] == 0:
         raise ValueError(f'context read-out: a {agent.method} checkpoint has no learned context')
     full = trace.history_length >= agent.k
-    return fit_readout(trace.psi[full], trace.context[full], agent.context_names,
-                       trace.segment[full],
-                       fitted_on=f'{int(full.sum())} steps of the policy on the train contexts '
-                       f'of {agent.task}, switching every {every} steps, seed {seed}')
+    fitted_on = (f'{int(full.sum())} steps of the policy on the train contexts of {agent.task}, '
+                 f'switching every {every} steps, seed {seed}')
+    episodes = np.cumsum(trace.first)[full]
+    return (fit_readout(trace.psi[full], trace.context[full], agent.context_names,
+                        trace.segment[full], fitted_on=fitted_on),
+            fit_novelty(trace.psi[full], trace.context[full], trace.segment[full], episodes,
+                        fitted_on=fitted_on))
+
+
+def stored_monitors(data: bytes) -> tuple[ContextReadout | None, NoveltyMonitor | None]:
+    """The read-out and novelty monitor stored in a checkpoint file's bytes (None: absent)."""
+    import torch
+
+    payload = torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
+    extra = payload.get('extra', {}) if isinstance(payload, dict) else {}
+    readout, novelty = extra.get(EXTRA_KEY), extra.get(NOVELTY_KEY)
+    return (None if readout is None else ContextReadout.from_dict(readout),
+            None if novelty is None else NoveltyMonitor.from_dict(novelty))
 
 
 def readout_from_checkpoint_bytes(data: bytes) -> ContextReadout | None:
     """The read-out stored in a checkpoint file's bytes, or None when it has none."""
-    import torch
-
-    payload = torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
-    stored = payload.get('extra', {}).get(EXTRA_KEY) if isinstance(payload, dict) else None
-    return None if stored is None else ContextReadout.from_dict(stored)
+    return stored_monitors(data)[0]
 
 
 def store_readout(checkpoint: str | os.PathLike[str], readout: ContextReadout,
-                  out: str | os.PathLike[str] | None = None) -> Path:
-    """Write `checkpoint` with the read-out in its `extra` to `out` (default: in place), atomic.
+                  out: str | os.PathLike[str] | None = None,
+                  novelty: NoveltyMonitor | None = None) -> Path:
+    """Write `checkpoint` with the read-out (and novelty monitor) in `extra`, atomically.
 
-    Everything else in the file is kept as it is (weights, config, provenance).
+    To `out` (default: in place); everything else in the file is kept as it is.
     """
     import torch
 
     source = Path(checkpoint)
     target = Path(out) if out is not None else source
     payload = torch.load(source, map_location='cpu', weights_only=True)
-    payload['extra'] = {**payload.get('extra', {}), EXTRA_KEY: readout.to_dict()}
+    payload['extra'] = {**payload.get('extra', {}), EXTRA_KEY: readout.to_dict(),
+                        **({NOVELTY_KEY: novelty.to_dict()} if novelty is not None else {})}
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(f'.{target.name}.tmp{os.getpid()}')
     torch.save(payload, tmp)
