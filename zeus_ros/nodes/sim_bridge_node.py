@@ -185,7 +185,11 @@ class SimBridgeNode(Node):
         """Pair with the one action publisher (or action_sender) before step 0."""
         if not self.params['wait_for_peers'] or self._senders.paired is not None:
             return True
-        problem = self._senders.pair()
+        named = len(self._senders.publishers())
+        matched = self._sub_action.get_publisher_count()
+        # DDS may have matched a publisher the ROS graph cannot name yet: wait for its name.
+        problem = f'the ROS graph to name all {matched} publishers of {self._senders.topic}' \
+            if matched > named else self._senders.pair()
         if problem is not None:
             self._wait_report.waiting(problem)
         return problem is None
