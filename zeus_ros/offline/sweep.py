@@ -16,11 +16,12 @@ workers must see --out at the same path (docs/sweep.md).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 import csv
 from dataclasses import dataclass, field
 import itertools
 from pathlib import Path
+import signal
 import sys
 import time
 from typing import Any
@@ -168,8 +169,11 @@ def _gpus(trial: Trial, wanted: float | None, cluster_gpus: float) -> float:
 def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
               num_cpus: int | None = None, cpus_per_trial: int = 1,
               gpus_per_trial: float | None = None, retries: int = 1,
-              log: Any = print) -> SweepResult:
-    """Run the unfinished trials as Ray tasks; retry each failure `retries` times."""
+              log: Any = print, on_start: Callable[[], Any] | None = None) -> SweepResult:
+    """Run the unfinished trials as Ray tasks; retry each failure `retries` times.
+
+    `on_start` is called once Ray is up (before any trial is submitted).
+    """
     import ray
 
     from zeus_ros.offline.ray_runtime import start_ray
@@ -190,6 +194,8 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
     started_here = start_ray(address, num_cpus)
     pending: dict[Any, tuple[Trial, int]] = {}
     try:
+        if on_start is not None:
+            on_start()
         resources = ray.cluster_resources()
         if resources.get('CPU', 0) < cpus_per_trial:
             raise SweepError(f'--cpus-per-trial {cpus_per_trial}: the Ray cluster has only '
@@ -372,7 +378,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         result = run_sweep(trials, address=args.address, num_cpus=args.num_cpus,
                            cpus_per_trial=args.cpus_per_trial,
-                           gpus_per_trial=args.gpus_per_trial, retries=args.retries)
+                           gpus_per_trial=args.gpus_per_trial, retries=args.retries,
+                           # after ray.init, which installs its own: SIGTERM stops like Ctrl-C
+                           on_start=lambda: signal.signal(signal.SIGTERM,
+                                                          signal.default_int_handler))
     except SweepError as error:
         print(f'zeus sweep: {error}', file=sys.stderr)
         return 2
