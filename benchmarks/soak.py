@@ -73,12 +73,14 @@ def main() -> int:
                         'baseline (imports, first inferences, DDS buffers)')
     parser.add_argument('--max-rss-growth', type=float, default=5.0, help='MiB per node')
     parser.add_argument('--max-gap', type=float, default=1.0, help='seconds between steps')
+    parser.add_argument('--report-every', type=float, default=300.0,
+                        help='seconds between progress lines (figures so far)')
     args = parser.parse_args()
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
 
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from zeus_msgs.msg import StepFeedback
 
     from zeus_ros.nodes.common import TOPICS, step_qos
@@ -109,9 +111,14 @@ def main() -> int:
         baseline: dict[str, float] = {}
         failed = ''
         end = None
+        report_at = 0.0
         try:
             while True:
-                executor.spin_once(timeout_sec=0.1)
+                try:
+                    executor.spin_once(timeout_sec=0.1)
+                except (KeyboardInterrupt, ExternalShutdownException):
+                    failed = 'interrupted (a signal stopped the soak before its end)'
+                    break
                 if launch.poll() is not None:
                     failed = f'zeus launch exited with {launch.returncode}'
                     break
@@ -125,6 +132,13 @@ def main() -> int:
                     end = now + args.minutes * 60
                     print(f'soak: baseline RSS (MiB) {baseline}; running {args.minutes} min',
                           flush=True)
+                if baseline and now >= report_at:
+                    report_at = now + args.report_every
+                    sizes = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
+                    print(f'soak: +{(now - started_at[0]) / 60:.0f} min, {int(arrivals[0])} '
+                          f'steps, longest gap {arrivals[2] * 1000:.0f} ms, RSS growth (MiB) '
+                          + ', '.join(f'{n} {sizes.get(n, float("nan")) - v:+.2f}'
+                                      for n, v in baseline.items()), flush=True)
                 if end is not None and now >= end:
                     break
             final = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
@@ -141,7 +155,9 @@ def main() -> int:
     if not failed and not baseline:
         failed = 'the loop never ran past the warm-up'
     bad = [name for name, value in growth.items() if not value <= args.max_rss_growth]
-    if bad:
+    if failed:
+        pass  # the first reason stands
+    elif bad:
         failed = f'RSS grew more than {args.max_rss_growth} MiB: {bad}'
     elif gap > args.max_gap:
         failed = f'a step gap of {gap:.2f} s (limit {args.max_gap} s)'
