@@ -123,6 +123,9 @@ def test_grid_parsing() -> None:
     assert parse_sets(['alpha_psi=0.5,1.0', 'k=3']) == [{'alpha_psi': 0.5, 'k': 3},
                                                          {'alpha_psi': 1.0, 'k': 3}]
     assert parse_sets([]) == [{}]
+    for bad in (['alpha_psi'], ['k=1', 'k=2'], ['seed=3']):
+        with pytest.raises(ValueError, match='--set'):
+            parse_sets(bad)
 
 
 def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(

@@ -75,6 +75,9 @@ def parse_sets(items: Sequence[str]) -> list[dict[str, Any]]:
         if not sep or not key.strip() or not values.strip():
             raise SweepError(f'--set {item}: expected KEY=VALUE[,VALUE...], e.g. '
                              'alpha_psi=0.5,1.0')
+        if key.strip() in ('method', 'seed'):
+            raise SweepError(f'--set {item}: {key.strip()} is a grid axis of its own: use '
+                             f'--{key.strip()}s')
         if key.strip() in axes:
             raise SweepError(f'--set {item}: {key.strip()} is set twice; give its values as one '
                              'comma-separated list')
