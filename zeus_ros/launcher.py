@@ -34,6 +34,8 @@ from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
 
 RECORDER_RESPAWNS = 3
 """How often a recorder that dies is restarted before the loop runs on unrecorded."""
+BAD_PARAMETERS = 2
+"""A node's exit status for parameters it refused at start (run_node)."""
 RECORDING_GAPS = 3
 """Exit status of a run whose control loop was fine but whose recording has gaps."""
 _RECORDING_TO = re.compile(r'recording \d+ topics to (.+) \((?:mcap|sqlite3)\)')
@@ -130,7 +132,8 @@ class Supervisor:
                     continue
                 others = [n for n in self.nodes if n is not node and n.name not in
                           RECORDS_OTHERS and n.process is not None and n.process.poll() is None]
-                if node.name in RECORDS_OTHERS and others:
+                # Exit 2 is a refused configuration, not a crash: a restart would refuse it too.
+                if node.name in RECORDS_OTHERS and others and code != BAD_PARAMETERS:
                     self._respawn(node, code)
                     continue
                 return node.name, code
@@ -168,12 +171,14 @@ class Supervisor:
         Returns each node's exit code (and prints it), so a node that did not stop cleanly is
         named. A second Ctrl-C meanwhile is ignored: the nodes are already closing their files.
         """
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        previous = {sig: signal.signal(sig, signal.SIG_IGN)
+                    for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
             self._stop(grace)
             return self._exit_codes()
         finally:
-            signal.signal(signal.SIGINT, previous)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
 
     def _stop(self, grace: float) -> None:
         deadline = time.monotonic() + grace
@@ -216,13 +221,18 @@ class Supervisor:
 
 def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | None = None,
               out: IO[str] = sys.stdout) -> int:
-    """Start, supervise and stop a group; the exit code tells whether a node failed."""
+    """Start, supervise and stop a group; the exit code tells whether a node failed.
+
+    SIGTERM (systemd, `timeout`, a supervisor) stops the group like Ctrl-C: the children run in
+    their own sessions, so without this they would outlive the launcher and keep driving.
+    """
     supervisor = Supervisor(nodes, env, out)
-    supervisor.start()
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
+        supervisor.start()
         name, code = supervisor.wait(timeout)
     except KeyboardInterrupt:
-        print('[zeus launch] Ctrl-C: stopping all nodes', file=out, flush=True)
+        print('[zeus launch] Ctrl-C or SIGTERM: stopping all nodes', file=out, flush=True)
         codes = supervisor.stop()
         return _with_gaps(supervisor, 0 if not any(codes.values()) else 1)
     supervisor.stop()
@@ -235,6 +245,10 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
         return _with_gaps(supervisor, 1)
     print(f'[zeus launch] node {name!r} finished: stopped the others', file=out, flush=True)
     return _with_gaps(supervisor, 0)
+
+
+def _interrupt(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 def _with_gaps(supervisor: Supervisor, status: int) -> int:

@@ -1,0 +1,155 @@
+"""Fault matrix, `zeus launch` rows: a dying recorder stops nothing; SIGTERM stops everything.
+
+The real group (sim_bridge, context_estimator, policy, recorder) runs under `zeus launch`; the
+recorder gets SIGKILL mid-run. The loop keeps stepping to max_steps, the launcher restarts the
+recorder into a new bag, names the unfinished one and the gap, and exits 3; `zeus recover`
+closes the cut bag, and the two bags hold the steps before and after the gap. SIGTERM to the
+launcher alone (systemd, `timeout`) stops every node it started: none outlives it.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from live_fixtures import TASK, tiny_checkpoint
+from ros_harness import REPO, fresh_domain_id, ros_environment
+
+pytestmark = pytest.mark.ros
+
+MAX_STEPS = 700
+
+
+def _children(parent: int) -> dict[int, list[bytes]]:
+    """Pid -> argv of every child of `parent` (our own launch's nodes)."""
+    found = {}
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            argv = (entry / 'cmdline').read_bytes().split(b'\0')
+        except OSError:
+            continue
+        if int(stat.rsplit(')', 1)[1].split()[1]) == parent:
+            found[int(entry.name)] = argv
+    return found
+
+
+def _child(parent: int, module: str) -> int:
+    """The pid of the child of `parent` running `module`."""
+    for pid, argv in _children(parent).items():
+        if module.encode() in argv:
+            return pid
+    raise AssertionError(f'no child of {parent} runs {module}')
+
+
+def _params(tmp_path: Path, max_steps: int) -> Path:
+    """A params file for the whole group on the tiny checkpoint; the recorder writes tmp/bag."""
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    params = tmp_path / 'params.yaml'
+    params.write_text(
+        f'/**/sim_bridge:\n  ros__parameters:\n    task: {TASK}\n    log_every: 100\n'
+        f'    max_steps: {max_steps}\n'
+        + ''.join(f'/**/{name}:\n  ros__parameters:\n    checkpoint: {checkpoint}\n'
+                  f'    task: {TASK}\n' for name in ('context_estimator', 'policy'))
+        + f'/**/recorder:\n  ros__parameters:\n    output: {tmp_path / "bag"}\n')
+    return params
+
+
+def _launch(params: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params), '--record'],
+        cwd=REPO, env=ros_environment(fresh_domain_id()), stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+def _read_until(launch: subprocess.Popen[str], text: str, lines: list[str]) -> None:
+    """Read the launcher's output until a line holds `text` (fail after 120 s or at EOF)."""
+    assert launch.stdout is not None
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        line = launch.stdout.readline()
+        lines.append(line)
+        if text in line or not line:
+            break
+    assert text in lines[-1], ''.join(lines[-30:])
+
+
+def _recorded_steps(output: Path) -> list[int]:
+    """Step indices of /zeus/step in every bag of a recorder output directory."""
+    from rosbags.highlevel import AnyReader
+
+    steps = []
+    for bag in sorted(p for p in output.iterdir() if p.is_dir()):
+        with AnyReader([bag]) as reader:
+            connections = [c for c in reader.connections if c.topic == '/zeus/step']
+            for conn, _, raw in reader.messages(connections=connections):
+                steps.append(int(reader.deserialize(raw, conn.msgtype).step))
+    return sorted(steps)
+
+
+def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Path) -> None:
+    """SIGKILL to the recorder: loop to max_steps, new bag, gap named, exit 3, recoverable."""
+    from zeus_ros.offline import recover
+
+    out = tmp_path / 'bag'
+    launch = _launch(_params(tmp_path, MAX_STEPS))
+    lines: list[str] = []
+    try:
+        _read_until(launch, 'step 200 ', lines)
+        os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGKILL)
+        rest = launch.communicate(timeout=180)[0]
+    finally:
+        if launch.poll() is None:
+            os.killpg(launch.pid, signal.SIGKILL)
+            launch.wait(timeout=10)
+    output = ''.join(lines) + rest
+    assert launch.returncode == 3, output[-3000:]
+    assert f'max_steps={MAX_STEPS} reached' in output, output[-3000:]
+    assert re.search(rf'recorder died with exit code -9; the control loop keeps running; its '
+                     rf'bag {out} is unfinished: `zeus recover {out}`; restarting it into '
+                     rf'{out}_respawn1', output), output[-3000:]
+    assert 'the recording has 1 gap(s): recorder died at' in output, output[-2000:]
+    assert 'Traceback' not in output, output[-3000:]
+
+    assert recover.main([str(out)]) == 0
+    first_steps = _recorded_steps(out)
+    later_steps = _recorded_steps(out.with_name('bag_respawn1'))
+    assert first_steps and later_steps, (len(first_steps), len(later_steps))
+    assert min(first_steps) == 0  # up to one flush period (1 s) before the kill is lost
+    assert max(first_steps) < min(later_steps) and max(later_steps) >= MAX_STEPS - 1
+    print(f'recorder SIGKILL: bag 1 steps 0-{max(first_steps)}, bag 2 steps '
+          f'{min(later_steps)}-{max(later_steps)} (gap {min(later_steps) - max(first_steps) - 1}'
+          ' steps)')
+
+
+def test_sigterm_to_zeus_launch_stops_every_node_it_started(tmp_path: Path) -> None:
+    """SIGTERM to the launcher's pid only: all nodes stop, none is left driving; the bag closes."""
+    launch = _launch(_params(tmp_path, 0))
+    lines: list[str] = []
+    try:
+        _read_until(launch, 'step 100 ', lines)
+        nodes = _children(launch.pid)
+        assert len(nodes) == 4, nodes
+        launch.send_signal(signal.SIGTERM)
+        rest = launch.communicate(timeout=60)[0]
+    finally:
+        if launch.poll() is None:
+            os.killpg(launch.pid, signal.SIGKILL)
+            launch.wait(timeout=10)
+    output = ''.join(lines) + rest
+    alive = [pid for pid in nodes if Path(f'/proc/{pid}').exists()]
+    for pid in alive:  # never leave them running, even when the assertion below fails
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, f'nodes outlived zeus launch: {alive}\n{output[-2000:]}'
+    assert launch.returncode == 0, output[-3000:]
+    assert 'exit codes: sim_bridge 0, context_estimator 0, policy 0, recorder 0' in output
+    assert _recorded_steps(tmp_path / 'bag'), 'the bag holds no step'
