@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import yaml
@@ -65,6 +66,35 @@ def params_file(folder: Path) -> Path:
     return path
 
 
+_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _unblock_signals() -> None:
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGNALS)
+
+
+def _watch_signals() -> list[str]:
+    """Take SIGINT/SIGTERM in a thread that says who sent them: an interrupted soak names why.
+
+    They are blocked here and in the DDS threads rclpy starts later (launch is already running).
+    """
+    signals = _SIGNALS
+    signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    stop: list[str] = []
+
+    def wait() -> None:
+        info = signal.sigwaitinfo(signals)
+        try:
+            sender = Path(f'/proc/{info.si_pid}/cmdline').read_bytes().replace(b'\0', b' ')
+        except OSError:
+            sender = b'(gone)'
+        stop.append(f'{signal.Signals(info.si_signo).name} from pid {info.si_pid} '
+                    f'({sender.decode(errors="replace").strip()[:200]})')
+
+    threading.Thread(target=wait, daemon=True).start()
+    return stop
+
+
 def main() -> int:
     """Run the soak; print the figures; exit 1 on a failed criterion."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -77,6 +107,7 @@ def main() -> int:
                         help='seconds between progress lines (figures so far)')
     args = parser.parse_args()
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    stop = _watch_signals()  # before any import starts a thread
     domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
 
     import rclpy
@@ -90,7 +121,7 @@ def main() -> int:
         launch = subprocess.Popen(
             [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params',
              str(params_file(Path(tmp)))], cwd=REPO, env=env, stdout=subprocess.DEVNULL,
-            stderr=subprocess.STDOUT, start_new_session=True)
+            stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_unblock_signals)
         rclpy.init(domain_id=domain)
         probe = rclpy.create_node('soak_probe')
         arrivals: list[float] = [0, 0.0, 0.0]  # count, last arrival, longest gap
@@ -117,7 +148,9 @@ def main() -> int:
                 try:
                     executor.spin_once(timeout_sec=0.1)
                 except (KeyboardInterrupt, ExternalShutdownException):
-                    failed = 'interrupted (a signal stopped the soak before its end)'
+                    stop.append('a signal')
+                if stop:
+                    failed = f'interrupted by {stop[0]} before the end'
                     break
                 if launch.poll() is not None:
                     failed = f'zeus launch exited with {launch.returncode}'
@@ -143,8 +176,8 @@ def main() -> int:
                     break
             final = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
         finally:
-            if launch.poll() is None:
-                os.killpg(launch.pid, signal.SIGINT)
+            if launch.poll() is None:  # SIGTERM: SIGINT is ignored in a background job
+                launch.terminate()
                 launch.wait(timeout=30)
             probe.destroy_node()
             rclpy.try_shutdown()
