@@ -119,7 +119,11 @@ class PolicyNode(Node):
         # Steady clocks: with use_sim_time, ROS time only moves once sim_bridge steps.
         self._wait_report = WaitReport(self)
         self._ready_timer = steady_timer(self, 0.05, self._become_ready)
-        steady_timer(self, 0.002, self._check_deadline)
+        # Armed only while an observation waits for its context (no polling): it fires once,
+        # when context k is overdue by context_deadline.
+        self._deadline_timer = steady_timer(self, self.params['context_deadline'],
+                                            self._check_deadline)
+        self._deadline_timer.cancel()
         steady_timer(self, 1.0, self._publish_diagnostics)
         serve_live_changes(self, SPECS, self.params, self._apply_live,
                            check=lambda values: self._parse_frozen(values['frozen_context']),
@@ -210,6 +214,7 @@ class PolicyNode(Node):
         if self._waiting is not None and self._waiting[0] == msg.step:
             step, feedback, obs, _deadline = self._waiting
             self._waiting = None
+            self._deadline_timer.cancel()
             self._act(step, feedback, obs, context, 'fresh')
 
     def _reject(self, step: int, topic: str, error: ValueError) -> None:
@@ -230,6 +235,9 @@ class PolicyNode(Node):
         else:
             deadline = time.monotonic() + self.params['context_deadline']
             self._waiting = (parts.step, feedback, obs, deadline)
+            # Deadline first, then the timer: it cannot fire before the deadline.
+            self._deadline_timer.timer_period_ns = int(self.params['context_deadline'] * 1e9)
+            self._deadline_timer.reset()
 
     def _check_deadline(self) -> None:
         if self._waiting is not None and time.monotonic() >= self._waiting[3]:
@@ -240,6 +248,7 @@ class PolicyNode(Node):
         assert self._waiting is not None
         step, feedback, obs, _deadline = self._waiting
         self._waiting = None
+        self._deadline_timer.cancel()
         newest = self._newest_context
         last_seen = self._started if newest is None else newest[0]
         if newest is None or time.monotonic() - last_seen > self.params['context_timeout']:

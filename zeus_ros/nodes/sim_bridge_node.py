@@ -117,7 +117,9 @@ class SimBridgeNode(Node):
         self._period = self._control_period(task)
         tick = self._period if self.mode == 'realtime' else 0.005
         # Steady clocks: with use_sim_time, ROS time only moves once we publish /clock.
-        steady_timer(self, tick, self._on_tick)
+        # Lockstep polls every 5 ms only until step 0; then the same timer is the action
+        # deadline, re-armed by every step (_publish), so it fires only for an overdue action.
+        self._tick = steady_timer(self, tick, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
         self._wait_report = WaitReport(self)
         serve_live_changes(self, SPECS, self.params, lambda _changed: None)
@@ -291,6 +293,9 @@ class SimBridgeNode(Node):
             )
         self._awaiting = result.step
         self._deadline = time.monotonic() + self.params['action_timeout']
+        if self.mode == 'lockstep':  # deadline first: the timer cannot fire before it
+            self._tick.timer_period_ns = int(self.params['action_timeout'] * 1e9)
+            self._tick.reset()
 
     def _publish_diagnostics(self) -> None:
         self.counts['foreign'] = self._senders.refused
