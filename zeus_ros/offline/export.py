@@ -138,9 +138,15 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
         from zeus_ros.learning.inference import InferenceAgent
         from zeus_ros.offline.readout import calibrate_readout, store_readout
 
-        readout, novelty = calibrate_readout(InferenceAgent(loaded.agent), steps=readout_steps)
-        store_readout(out, readout, novelty=novelty)
-        loaded = load_checkpoint(out)
+        try:
+            readout, novelty = calibrate_readout(InferenceAgent(loaded.agent),
+                                                 steps=readout_steps)
+        except ValueError as error:  # the export is still valid without them
+            print(f'zeus export: warning: no context read-out stored ({error}); raise '
+                  '--readout-steps', file=sys.stderr)
+        else:
+            store_readout(out, readout, novelty=novelty)
+            loaded = load_checkpoint(out)
     card = out.with_suffix('.md')
     card.write_text(card_text(out, loaded, evals=evals, command=command, commit=commit))
     return out, card

@@ -262,7 +262,10 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
     )
 
     values = switching_order(split_values(agent.task, 'train'), seed)
-    every = every or max(agent.k * 4, default_switch_every(agent.task))
+    # Short enough that every value comes back at least twice (one of them can be held back),
+    # long enough for a full history plus a settled novelty window in each segment.
+    every = every or max(agent.k + NOVELTY_WINDOW + 5,
+                         min(default_switch_every(agent.task), steps // (2 * len(values))))
     env, task = _make_env(agent.task, _switch_schedule(values, every), seed)
     try:
         trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=seed), steps,
