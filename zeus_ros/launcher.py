@@ -125,7 +125,7 @@ class Supervisor:
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
-            for node in self.nodes:
+            for node in list(self.nodes):  # _respawn may drop a node
                 assert node.process is not None
                 code = node.process.poll()
                 if code is None:
@@ -147,11 +147,16 @@ class Supervisor:
             node.reader.join(timeout=2)
         bags = [m.group(1) for m in map(_RECORDING_TO.search, node.lines) if m]
         when = time.monotonic() - self.started
-        bag = f'its bag {bags[-1]} is unfinished: `zeus recover {bags[-1]}`' if bags else \
-            'it had not started a bag'
+        if not bags:
+            bag = 'it had not started a bag'
+        elif code == 0:  # stopped by someone: it closed its bag
+            bag = f'its bag {bags[-1]} is closed'
+        else:
+            bag = f'its bag {bags[-1]} is unfinished: `zeus recover {bags[-1]}`'
         respawn = len(self.gaps) < RECORDER_RESPAWNS
         self.gaps.append(f'{node.name} died at {when:.1f} s (exit code {code}); {bag}')
-        new_output = f'{bags[-1]}_respawn{len(self.gaps)}' if bags else ''
+        base = re.sub(r'_respawn\d+$', '', bags[-1]) if bags else ''
+        new_output = f'{base}_respawn{len(self.gaps)}' if bags else ''
         print(f'[zeus launch] {node.name} died with exit code {code}; the control loop keeps '
               f'running; {bag}; ' + (
                   f'restarting it into {new_output or "a new bag"} (steps until it records '

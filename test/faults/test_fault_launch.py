@@ -24,7 +24,7 @@ from ros_harness import REPO, fresh_domain_id, ros_environment
 
 pytestmark = pytest.mark.ros
 
-MAX_STEPS = 700
+MAX_STEPS = 1500
 
 
 def _children(parent: int) -> dict[int, list[bytes]]:
@@ -97,7 +97,10 @@ def _recorded_steps(output: Path) -> list[int]:
 
 
 def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Path) -> None:
-    """SIGKILL to the recorder: loop to max_steps, new bag, gap named, exit 3, recoverable."""
+    """SIGKILL, then SIGTERM to the recorder: loop to max_steps, new bags, gaps named, exit 3.
+
+    The SIGKILLed bag is recoverable; the SIGTERMed one closed itself.
+    """
     from zeus_ros.offline import recover
 
     out = tmp_path / 'bag'
@@ -106,6 +109,10 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
     try:
         _read_until(launch, 'step 200 ', lines)
         os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGKILL)
+        _read_until(launch, f'topics to {out}_respawn1 ', lines)
+        for _ in range(2):  # let it record a while (sim_bridge logs every 100 steps)
+            _read_until(launch, 'sim_bridge]: step ', lines)
+        os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGTERM)
         rest = launch.communicate(timeout=180)[0]
     finally:
         if launch.poll() is None:
@@ -117,18 +124,22 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
     assert re.search(rf'recorder died with exit code -9; the control loop keeps running; its '
                      rf'bag {out} is unfinished: `zeus recover {out}`; restarting it into '
                      rf'{out}_respawn1', output), output[-3000:]
-    assert 'the recording has 1 gap(s): recorder died at' in output, output[-2000:]
-    assert 'Traceback' not in output, output[-3000:]
+    assert re.search(rf'recorder died with exit code 0; .*its bag {out}_respawn1 is closed; '
+                     rf'restarting it into {out}_respawn2 ', output), output[-3000:]
+    assert 'the recording has 2 gap(s): recorder died at' in output, output[-2000:]
+    assert 'Traceback' not in output, output[output.find('Traceback') - 2000:][:4000]
 
     assert recover.main([str(out)]) == 0
     first_steps = _recorded_steps(out)
-    later_steps = _recorded_steps(out.with_name('bag_respawn1'))
-    assert first_steps and later_steps, (len(first_steps), len(later_steps))
+    middle = _recorded_steps(out.with_name('bag_respawn1'))
+    later_steps = _recorded_steps(out.with_name('bag_respawn2'))
+    assert first_steps and middle and later_steps, (len(first_steps), len(middle),
+                                                    len(later_steps))
     assert min(first_steps) == 0  # up to one flush period (1 s) before the kill is lost
-    assert max(first_steps) < min(later_steps) and max(later_steps) >= MAX_STEPS - 1
-    print(f'recorder SIGKILL: bag 1 steps 0-{max(first_steps)}, bag 2 steps '
-          f'{min(later_steps)}-{max(later_steps)} (gap {min(later_steps) - max(first_steps) - 1}'
-          ' steps)')
+    assert max(first_steps) < min(middle) <= max(middle) < min(later_steps)
+    assert max(later_steps) >= MAX_STEPS - 1
+    print(f'recorder SIGKILL at ~200, SIGTERM later: bags hold steps 0-{max(first_steps)}, '
+          f'{min(middle)}-{max(middle)}, {min(later_steps)}-{max(later_steps)}')
 
 
 def test_sigterm_to_zeus_launch_stops_every_node_it_started(tmp_path: Path) -> None:
