@@ -43,6 +43,19 @@ BAD_VALUES = [
     ('recover', ['--dry-run'], '--bags', 'required'),
     ('export', ['--checkpoint', 'c.pt'], '--out', 'required'),
     ('ingest', ['--strict'], '--bags', 'required'),
+    ('train', ['--bags', 'b', '--config', 'params/train/state_cpu.yaml', '--out', 'x', '--set',
+               'k=7', 'bacth_size=256'], '--set bacth_size=256', "did you mean 'batch_size'"),
+    ('train', ['--bags', 'b', '--config', 'params/train/state_cpu.yaml', '--out', 'x', '--set',
+               'k=-1'], '--set k=-1', 'k must be a positive integer, got -1'),
+    ('train', ['--bags', 'b', '--config', 'params/train/state_cpu.yaml', '--out', 'x', '--set',
+               'num_updates=5', '--updates', '7'], '--set num_updates=5', 'both set num_updates'),
+    ('loop', ['--task', 'Cheetah-Run-v0', '--config', 'params/train/state_cpu.yaml', '--out',
+              'x', '--set', 'critic_context_grad=maybe'], '--set critic_context_grad=maybe',
+     'must be true or false'),
+    ('loop', ['--task', 'Cheetah-Run-v0', '--config', 'params/train/state_cpu.yaml', '--out',
+              'x', '--set', 'k'], '--set k', 'expected KEY=VALUE'),
+    ('sweep', ['--tasks', 'Cheetah-Run-v0', '--methods', 'zeus', '--out', 'x', '--set',
+               'alpah_psi=0.5,1.0'], '--set alpah_psi=0.5,1.0', "did you mean 'alpha_psi'"),
 ]
 
 

@@ -302,6 +302,21 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
     assert len(list((tmp_path / 'bags').iterdir())) == 2
 
 
+def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path,
+                                                   tmp_path: Path) -> None:
+    """`zeus train --set k=3 batch_size=32`: the run is trained with (and records) those values."""
+    from zeus_ros.offline.train import main
+
+    out = tmp_path / 'run'
+    assert main(['--bags', str(bags), '--config', str(tiny_config), '--out', str(out),
+                 '--set', 'k=3', 'batch_size=32', '--set', 'actor_lr=3e-4', '--updates', '2',
+                 '--no-eval', '--no-progress']) == 0
+    recorded = yaml.safe_load((out / 'config.yaml').read_text())
+    assert (recorded['k'], recorded['batch_size'], recorded['actor_lr']) == (3, 32, 3e-4)
+    assert recorded['num_updates'] == 2 and recorded['hidden_dim'] == TINY['hidden_dim']
+    assert load_checkpoint(out / 'final.pt').config.k == 3
+
+
 def test_loop_resume_reads_its_stored_flags_and_time_continues(
         tiny_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
@@ -310,10 +325,14 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
 
     assert loop_main(['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
                       '--rounds', '1', '--random-steps', '300', '--steps', '200',
-                      '--updates', '20', '--no-eval', '--no-progress']) == 0
+                      '--updates', '20', '--no-eval', '--no-progress',
+                      '--set', 'eval_episodes=1', 'checkpoint_interval=40']) == 0
     assert 'final.pt' in capsys.readouterr().out.splitlines()[-1]
     monkeypatch.chdir(tmp_path.parent)  # another folder: the stored config path is absolute
-    assert loop_main(['--out', str(tmp_path), '--rounds', '2', '--resume']) == 0
+    assert loop_main(['--out', str(tmp_path), '--rounds', '2', '--resume',
+                      '--set', 'checkpoint_interval=50']) == 0  # a given --set wins per field
+    stored = yaml.safe_load((tmp_path / 'run' / 'config.yaml').read_text())
+    assert (stored['eval_episodes'], stored['checkpoint_interval']) == (1, 50)
     steps = [p.name for p in (tmp_path / 'bags').iterdir()]
     assert sorted(steps) == ['bag_000', 'bag_001']
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 40  # --updates 20 kept

@@ -24,6 +24,7 @@ import sys
 from typing import Any
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
+from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.collect import SCHEDULE_HELP, next_bag_path, parse_schedule
 from zeus_ros.offline.collect_workers import CollectJob, collect_bag
@@ -33,6 +34,7 @@ from zeus_ros.offline.train import (
     TrainError,
     apply_overrides,
     check_device,
+    own_flags,
     read_config,
     train,
 )
@@ -171,7 +173,7 @@ LOOP_JSON = 'loop.json'
 """The loop's flags, stored in --out at the start, so `--resume` needs only --out and --rounds."""
 DEFAULTS: dict[str, Any] = {'random_steps': 1500, 'steps': 1500, 'updates': None,
                             'noise': 0.2, 'schedule': 'switch:train:every=100', 'method': None,
-                            'seed': None, 'device': None, 'no_eval': False}
+                            'seed': None, 'device': None, 'no_eval': False, 'set': []}
 STORED = ('task', 'config', *DEFAULTS)
 
 
@@ -202,6 +204,8 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--schedule',
                         help='context schedule while collecting (default: '
                         f'{DEFAULTS["schedule"]}; grammar below)')
+    parser.add_argument('--set', nargs='+', action='extend', metavar='KEY=VALUE',
+                        help=f'{SET_HELP}; on --resume added to the stored ones')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
     parser.add_argument('--seed', type=int, help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
@@ -228,6 +232,9 @@ def settle_flags(args: argparse.Namespace) -> argparse.Namespace:
                              'flags of the first run') from None
     if args.task is not None and stored.get('task') not in (None, args.task):
         raise ValueError(f'--task {args.task}: the loop in {args.out} runs {stored["task"]}')
+    if args.set is not None:  # given --set items override the stored ones field by field
+        args.set = set_items({**parse_sets(stored.get('set') or [], f'{path}: set'),
+                              **parse_sets(args.set)})
     for key in STORED:
         if getattr(args, key) is None:
             setattr(args, key, stored.get(key, DEFAULTS.get(key)))
@@ -268,8 +275,10 @@ def main(argv: list[str] | None = None) -> int:
               'choose another --out', file=sys.stderr)
         return 2
     try:
-        config = apply_overrides(read_config(args.config), method=args.method, seed=args.seed,
-                                 device=args.device)
+        sets = parse_sets(args.set)
+        refuse_both(sets, own_flags(args))
+        config = apply_overrides(apply_sets(read_config(args.config), sets), method=args.method,
+                                 seed=args.seed, device=args.device)
         check_device(config.device, '--device' if args.device else
                      f'--config {args.config}: device')
         schedule = parse_schedule(args.schedule)

@@ -26,8 +26,6 @@ import sys
 import time
 from typing import Any
 
-import yaml
-
 from zeus_ros.offline.collect_workers import portable_task
 from zeus_ros.offline.trial import (
     LoopProtocol,
@@ -68,20 +66,18 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def parse_sets(items: Sequence[str]) -> list[dict[str, Any]]:
-    """['k=a,b', 'j=c'] -> [{k: a, j: c}, {k: b, j: c}]: the product of every key's values."""
-    axes: dict[str, list[Any]] = {}
+    """['k=a,b', 'j=c'] -> [{k: a, j: c}, {k: b, j: c}]: the product of every key's values.
+
+    Parsed by config_sets (the one --set parser of train, loop and sweep); method and seed are
+    axes of their own here.
+    """
+    from zeus_ros.config_sets import parse_set_grid
+
     for item in items:
-        key, sep, values = item.partition('=')
-        if not sep or not key.strip() or not values.strip():
-            raise SweepError(f'--set {item}: expected KEY=VALUE[,VALUE...], e.g. '
-                             'alpha_psi=0.5,1.0')
-        if key.strip() in ('method', 'seed'):
-            raise SweepError(f'--set {item}: {key.strip()} is a grid axis of its own: use '
-                             f'--{key.strip()}s')
-        if key.strip() in axes:
-            raise SweepError(f'--set {item}: {key.strip()} is set twice; give its values as one '
-                             'comma-separated list')
-        axes[key.strip()] = [yaml.safe_load(v) for v in values.split(',')]
+        key = item.partition('=')[0].strip()
+        if key in ('method', 'seed'):
+            raise SweepError(f'--set {item}: {key} is a grid axis of its own: use --{key}s')
+    axes = parse_set_grid(items)
     keys = list(axes)
     combos = itertools.product(*axes.values())
     return [dict(zip(keys, combo, strict=True)) for combo in combos] or [{}]

@@ -24,6 +24,7 @@ from tqdm import tqdm
 import yaml
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
+from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
@@ -31,7 +32,7 @@ from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
-           'build_spec', 'check_device', 'main', 'read_config', 'train']
+           'build_spec', 'check_device', 'main', 'own_flags', 'read_config', 'train']
 
 CHECKPOINT = 'checkpoint.pt'
 FINAL = 'final.pt'
@@ -101,6 +102,13 @@ def apply_overrides(config: ZeusConfig, *, method: str | None = None,
         if value is not None:
             changes[name] = value
     return config.replace(**changes) if changes else config
+
+
+def own_flags(args: argparse.Namespace) -> list[tuple[str, str, Any]]:
+    """(config field, flag, value) of the flags that override one field, for refuse_both."""
+    return [(name, flag, getattr(args, attr, None)) for name, flag, attr in (
+        ('method', '--method', 'method'), ('num_updates', '--updates', 'updates'),
+        ('seed', '--seed', 'seed'), ('device', '--device', 'device'))]
 
 
 def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
@@ -462,6 +470,8 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--strict', action='store_true',
                         help='refuse bags with any issue (gaps, NaN/Inf or wrong-length values) '
                         'instead of dropping the affected transitions and their histories')
+    parser.add_argument('--set', nargs='+', action='extend', default=[], metavar='KEY=VALUE',
+                        help=SET_HELP)
     parser.add_argument('--method', choices=METHODS, help='override the config method')
     parser.add_argument('--updates', type=int,
                         help='total updates of the run (overrides num_updates; a resumed run '
@@ -501,7 +511,9 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.offline.errors import BagError, IngestError
 
     try:
-        config = apply_overrides(read_config(args.config), method=args.method,
+        sets = parse_sets(args.set)
+        refuse_both(sets, own_flags(args))
+        config = apply_overrides(apply_sets(read_config(args.config), sets), method=args.method,
                                  updates=args.updates, seed=args.seed, device=args.device)
         check_device(config.device, '--device' if args.device else
                      f'--config {args.config}: device')
