@@ -7,12 +7,13 @@ import contextlib
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
 import time
 from typing import Any
+
+from zeus_ros import processes
 
 REPO = Path(__file__).resolve().parents[1]
 LOG_DIR = REPO / 'log' / 'test-processes'
@@ -31,18 +32,13 @@ def require_ros() -> None:
 
 
 def fresh_domain_id() -> int:
-    """A domain id in 1..100 (Fast DDS ports stay valid) unlikely to clash with a parallel run."""
-    return random.SystemRandom().randint(1, 100)
+    """A domain id unlikely to clash with a parallel run (1..100, or $ZEUS_DOMAIN_RANGE)."""
+    return processes.fresh_domain_id()
 
 
 def ros_environment(domain_id: int) -> dict[str, str]:
-    """Environment for a child ROS process: loopback-only discovery and the given domain."""
-    env = dict(os.environ)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['ROS_DOMAIN_ID'] = str(domain_id)
-    env['PYTHONUNBUFFERED'] = '1'
-    env.setdefault('MUJOCO_GL', 'egl')
-    return env
+    """Environment for a child ROS process: the project's (processes.ros_env), this domain."""
+    return processes.ros_env(domain_id)
 
 
 @dataclass
@@ -59,10 +55,7 @@ class ProcessGroup:
         env = ros_environment(self.domain_id)
         env.update(extra_env or {})
         log = open(LOG_DIR / f'{name}.log', 'wb')  # noqa: SIM115 - closed with the process
-        process = subprocess.Popen(
-            argv, cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+        process = processes.start_node(argv, env, stdout=log, cwd=REPO)
         self.processes.append((name, process))
         return process
 
@@ -82,16 +75,8 @@ class ProcessGroup:
 
     def stop(self, process: subprocess.Popen[bytes], sig: int = signal.SIGINT,
              timeout: float = 10.0) -> int:
-        """Signal a process group, wait, and kill it if it does not exit in time."""
-        if process.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(process.pid, sig)
-            try:
-                process.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(process.pid, signal.SIGKILL)
-                process.wait(timeout=5)
+        """Signal a process group, wait, then escalate (processes.stop_nodes); the exit code."""
+        processes.stop_nodes([process], sig=sig, deadline=time.monotonic() + timeout)
         return int(process.returncode)
 
     def stop_all(self) -> None:

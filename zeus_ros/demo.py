@@ -17,7 +17,6 @@ import argparse
 from collections.abc import Sequence
 import os
 from pathlib import Path
-import random
 import sys
 import time
 from typing import Any
@@ -28,7 +27,8 @@ from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspect import Inspector, write_csv
 from zeus_ros.inspection import format_segments, percentile, plot_inspection
-from zeus_ros.launcher import NodeProcess, Supervisor, node_argv, ros_env
+from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
+from zeus_ros.processes import group_domain_id, ros_env
 
 DEMO_CHECKPOINTS = {
     'Cheetah-Run-v0': 'cheetah_run_v0_zeus_state.pt',
@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     if checkpoint is not None:
         checkpoint = with_readout(checkpoint, args.out)
-    domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
+    domain = group_domain_id()
     env = ros_env(domain)
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     args.out.mkdir(parents=True, exist_ok=True)

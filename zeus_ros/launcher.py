@@ -15,11 +15,8 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-import contextlib
 from dataclasses import dataclass, field
-import os
 from pathlib import Path
-import random
 import re
 import signal
 import subprocess
@@ -31,6 +28,7 @@ from typing import IO
 from zeus_ros import launch_defaults
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
+from zeus_ros.processes import ros_env, start_node, stop_nodes
 
 RECORDER_RESPAWNS = 3
 """How often a recorder that dies is restarted before the loop runs on unrecorded."""
@@ -54,19 +52,6 @@ class NodeProcess:
     process: subprocess.Popen[bytes] | None = None
     reader: threading.Thread | None = None
     lines: list[str] = field(default_factory=list)
-
-
-def ros_env(domain_id: int | None) -> dict[str, str]:
-    """The children's environment: loopback-only discovery and one domain id for the group."""
-    env = dict(os.environ)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    if domain_id is not None:
-        env['ROS_DOMAIN_ID'] = str(domain_id)
-    elif 'ROS_DOMAIN_ID' not in env:
-        env['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
-    env['PYTHONUNBUFFERED'] = '1'
-    env.setdefault('MUJOCO_GL', 'egl')
-    return env
 
 
 def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) -> list[str]:
@@ -109,10 +94,7 @@ class Supervisor:
             self._start(node)
 
     def _start(self, node: NodeProcess) -> None:
-        node.process = subprocess.Popen(
-            node.argv, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+        node.process = start_node(node.argv, self.env, stdout=subprocess.PIPE)
         assert node.process.stdout is not None
         node.reader = threading.Thread(
             target=_pump, args=(node, node.process.stdout, self.out), daemon=True)
@@ -171,7 +153,7 @@ class Supervisor:
         self._start(node)
 
     def stop(self, grace: float = 10.0) -> dict[str, int]:
-        """SIGINT every running node, wait up to `grace` seconds, then SIGKILL what is left.
+        """SIGINT every running node, wait up to `grace` seconds, then SIGTERM, then SIGKILL.
 
         Returns each node's exit code (and prints it), so a node that did not stop cleanly is
         named. A second Ctrl-C meanwhile is ignored: the nodes are already closing their files.
@@ -194,25 +176,11 @@ class Supervisor:
         for group in (producers, recorders):
             if group is recorders and recorders and producers:
                 time.sleep(RECORDER_DRAIN_S)  # the producers' last messages are still in flight
+            stop_nodes([node.process for node in group if node.process is not None],
+                       deadline=deadline)
             for node in group:
-                if node.process is not None and node.process.poll() is None:
-                    with contextlib.suppress(ProcessLookupError):
-                        os.killpg(node.process.pid, signal.SIGINT)
-            for node in group:
-                self._wait_or_kill(node, deadline)
-
-    def _wait_or_kill(self, node: NodeProcess, deadline: float) -> None:
-        """Wait for one signalled node until `deadline`, then SIGKILL it."""
-        if node.process is None:
-            return
-        try:
-            node.process.wait(timeout=max(0.1, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(node.process.pid, signal.SIGKILL)
-            node.process.wait(timeout=5)
-        if node.reader is not None:
-            node.reader.join(timeout=2)
+                if node.reader is not None:
+                    node.reader.join(timeout=2)
 
     def _exit_codes(self) -> dict[str, int]:
         """Each node's exit code, printed on one line."""

@@ -1,0 +1,101 @@
+"""Node processes with the project's environment, started and stopped one way.
+
+`zeus launch` (launcher.Supervisor), the demo (through the same Supervisor) and the test harness
+(test/ros_harness.py) all start their ROS children here: loopback-only discovery, one domain id
+for the group, unbuffered output, each child in its own session (a signal reaches the node and
+whatever it spawned). Stopping escalates: SIGINT (the node closes its bag or files), then SIGTERM
+after the grace period, then SIGKILL, so a node that ignores one signal still ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import contextlib
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import time
+from typing import IO
+
+__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'fresh_domain_id', 'group_domain_id',
+           'ros_env', 'start_node', 'stop_nodes']
+
+DOMAIN_RANGE_ENV = 'ZEUS_DOMAIN_RANGE'
+"""'FIRST-LAST': where fresh domain ids are drawn (default 1-100), so parallel users keep apart."""
+TERM_GRACE_S = 3.0
+"""How long a node that outlived its SIGINT grace gets after SIGTERM before SIGKILL."""
+KILL_WAIT_S = 5.0
+"""How long to wait for the kernel to reap a SIGKILLed node."""
+
+
+def fresh_domain_id() -> int:
+    """A random domain id in $ZEUS_DOMAIN_RANGE (default 1-100: Fast DDS ports stay valid)."""
+    text = os.environ.get(DOMAIN_RANGE_ENV, '1-100')
+    first, _sep, last = text.partition('-')
+    try:
+        low, high = int(first), int(last or first)
+    except ValueError:
+        raise ValueError(f'{DOMAIN_RANGE_ENV}={text}: expected FIRST-LAST, e.g. 200-219') from None
+    if not 0 <= low <= high <= 232:
+        raise ValueError(f'{DOMAIN_RANGE_ENV}={text}: domain ids must lie in 0..232')
+    return random.SystemRandom().randint(low, high)
+
+
+def group_domain_id(wanted: int | None = None) -> int:
+    """The domain of a group: `wanted`, else $ROS_DOMAIN_ID, else a fresh one."""
+    if wanted is not None:
+        return wanted
+    return int(os.environ.get('ROS_DOMAIN_ID') or fresh_domain_id())
+
+
+def ros_env(domain_id: int | None = None) -> dict[str, str]:
+    """The children's environment: loopback-only discovery and one domain id for the group."""
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_DOMAIN_ID'] = str(group_domain_id(domain_id))
+    env['PYTHONUNBUFFERED'] = '1'
+    env.setdefault('MUJOCO_GL', 'egl')
+    return env
+
+
+def start_node(argv: Sequence[str], env: dict[str, str], *, stdout: int | IO[bytes],
+               cwd: Path | None = None) -> subprocess.Popen[bytes]:
+    """Start one child in its own session, stderr merged into `stdout` (a PIPE or a file)."""
+    return subprocess.Popen(list(argv), cwd=cwd, env=env, stdout=stdout,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def _signal(process: subprocess.Popen[bytes], sig: int) -> None:
+    if process.poll() is None:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, sig)
+
+
+def _wait(process: subprocess.Popen[bytes], seconds: float) -> bool:
+    try:
+        process.wait(timeout=max(0.1, seconds))
+    except subprocess.TimeoutExpired:
+        return False
+    return True
+
+
+def stop_nodes(processes: Sequence[subprocess.Popen[bytes]], *, deadline: float,
+               sig: int = signal.SIGINT, term_grace: float = TERM_GRACE_S) -> None:
+    """Stop children together: `sig` to every one at once, then escalate per child.
+
+    Each gets until `deadline` (time.monotonic()); one still running gets SIGTERM and
+    `term_grace` seconds more, then SIGKILL.
+    """
+    for process in processes:
+        _signal(process, sig)
+    for process in processes:
+        if _wait(process, deadline - time.monotonic()):
+            continue
+        if sig not in (signal.SIGTERM, signal.SIGKILL):
+            _signal(process, signal.SIGTERM)
+            if _wait(process, term_grace):
+                continue
+        _signal(process, signal.SIGKILL)
+        process.wait(timeout=KILL_WAIT_S)
