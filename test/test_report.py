@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from zeus_ros.offline.metrics import read_csv, write_csv
-from zeus_ros.offline.report import aggregate, main, wall_time_table
+from zeus_ros.offline.report import aggregate, main, per_run, wall_time_table
+from zeus_ros.offline.run_state import mark_evaluated, mark_trained, read_state
 
 
 def _run(folder: Path, name: str, returns: dict[str, float], *, train: int,
@@ -60,3 +61,46 @@ def test_report_on_a_folder_without_evaluations_fails_clearly(tmp_path: Path,
     """No finished evaluation: exit 2 and a message naming the folder and the layout."""
     assert main([str(tmp_path), '--out', str(tmp_path / 'out')]) == 2
     assert 'no finished evaluations' in capsys.readouterr().err
+
+
+def test_runs_recorded_in_state_json_and_old_markers_report_alike(tmp_path: Path) -> None:
+    """A new run's state.json and an old run's .done markers give the same report rows."""
+    folder = tmp_path / 'exp'
+    _run(folder, 'zeus_s0', {'train': 100.0}, train=300)  # old layout: markers
+    new = folder / 'zeus_s1'
+    _run(folder, 'zeus_s1', {'train': 200.0, 'extrapolation': 70.0}, train=0)
+    for marker in (new / '.done_train', *new.glob('eval_*/.done')):
+        marker.unlink()  # a new run keeps no markers: only state.json says what finished
+    assert read_state(new).evaluated == {} and not read_state(new).trained
+    mark_trained(new, 310.04)
+    mark_evaluated(new, 'train', 7.0)
+    assert read_state(new).done(['train']) and not read_state(new).done(['train',
+                                                                        'extrapolation'])
+    rows = per_run(folder)  # extrapolation of zeus_s1 is not finished: left out
+    assert [(r['seed'], r['split'], r['train_seconds'], r['eval_seconds']) for r in rows] == [
+        (0, 'train', '300', '7'), (1, 'train', '310', '7')]
+    mark_evaluated(new, 'extrapolation', 9.5)
+    assert [r['eval_seconds'] for r in per_run(folder)][-1] == '9.5'
+    assert [p.name for p in new.iterdir() if p.is_file()] == ['state.json']
+
+
+def test_parallel_evaluations_of_one_run_all_land_in_its_state(tmp_path: Path) -> None:
+    """Splits finishing at once in worker processes (zeus eval --jobs) are all recorded."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    splits = [f'split{i}' for i in range(8)]
+    with ProcessPoolExecutor(4) as pool:
+        list(pool.map(mark_evaluated, [tmp_path] * len(splits), splits, range(len(splits))))
+    assert read_state(tmp_path).evaluated == {s: float(i) for i, s in enumerate(splits)}
+
+
+def test_an_unreadable_state_file_is_one_clear_error(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture) -> None:
+    """A truncated state.json names the file and what to do, instead of a JSON traceback."""
+    _run(tmp_path / 'exp', 'zeus_s0', {'train': 1.0}, train=3)
+    (tmp_path / 'exp' / 'zeus_s0' / 'state.json').write_text('{"train": ')
+    with pytest.raises(ValueError, match=r'state.json: unreadable run state .* delete it'):
+        read_state(tmp_path / 'exp' / 'zeus_s0')
+    assert main(['--folder', str(tmp_path / 'exp'), '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and 'zeus_s0/state.json: unreadable run state' in err

@@ -24,6 +24,7 @@ import yaml
 
 from zeus_ros.cli import main as zeus_main
 from zeus_ros.learning.config import config_from_dict
+from zeus_ros.offline.run_state import read_state
 from zeus_ros.offline.sweep import main as sweep_main
 from zeus_ros.offline.sweep import parse_seeds, parse_sets, plan, run_sweep
 from zeus_ros.offline.trial import LoopProtocol, trial_steps
@@ -142,7 +143,7 @@ def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(
     assert (group / 'table.md').is_file()
 
     for trial in _trials(tmp_path / 'sequential', ['zeus', 'no_context'], [0, 1]):
-        for _what, args, _marker in trial_steps(trial):  # the trial's commands, one by one
+        for _what, args, _record in trial_steps(trial):  # the trial's commands, one by one
             assert zeus_main(args) == 0
         swept = group / trial.folder.name
         summary = 'eval_extrapolation/summary.csv'
@@ -188,7 +189,7 @@ def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(
     assert outcome.done == [killed.name] and outcome.attempts[killed.name] == 2
     assert any('was killed by SIGKILL' in line and 'retrying (attempt 2)' in line
                for line in lines), lines
-    assert (killed.folder / 'eval_extrapolation' / '.done').is_file()
+    assert 'extrapolation' in read_state(killed.folder).evaluated
     assert killed.log.read_text().count('== ') == 2  # one header per attempt
     assert list(outcome.failed) == [cuda.name] and outcome.attempts[cuda.name] == 2
     assert f'training exited with code 2 (log: {cuda.log})' in outcome.failed[cuda.name]

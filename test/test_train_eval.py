@@ -16,6 +16,7 @@ from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.config import load_config
 from zeus_ros.offline import collect
 from zeus_ros.offline.metrics import read_csv
+from zeus_ros.offline.run_state import read_state
 from zeus_ros.offline.train import TrainError, train
 
 TASK = 'Cheetah-Run-v0'
@@ -273,7 +274,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
     assert main(argv) == 0
     runs = out / f'cheetah_run_v0_{first.step}'
     for seed in (0, 1):
-        assert (runs / f'zeus_s{seed}' / 'eval_interpolation' / '.done').is_file()
+        assert 'interpolation' in read_state(runs / f'zeus_s{seed}').evaluated
     rows = aggregate(runs)
     assert len(rows) == 1 and rows[0]['seeds'] == 2 and rows[0]['split'] == 'interpolation'
     assert rows[0]['mean_return_se'] == pytest.approx(0.0, abs=1e-6)  # same weights twice

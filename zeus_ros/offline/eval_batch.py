@@ -3,9 +3,10 @@
     zeus eval --checkpoint checkpoints/comparison --split all --out out/tables --jobs 2
 
 Each checkpoint is evaluated into <out>/<group>/<method>_s<seed>/eval_<split>/, where the group
-names task and update budget (cheetah_run_v0_10k). Finished parts are skipped, so an interrupted
-run resumes. report.write_report then writes per-group summary.csv / runs.csv / table.md /
-returns.png, and <out>/tables.md holds every group's table.
+names task and update budget (cheetah_run_v0_10k). Finished parts (recorded in
+<method>_s<seed>/state.json, run_state.py) are skipped, so an interrupted run resumes.
+report.write_report then writes per-group summary.csv / runs.csv / table.md / returns.png, and
+<out>/tables.md holds every group's table.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import time
 from typing import Any
 
 from tqdm import tqdm
+
+from zeus_ros.offline.run_state import mark_evaluated, read_state
 
 __all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'group_name']
 
@@ -87,10 +90,10 @@ def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
             tasks.append(group)
         wanted = splits or [s for s in ('train', 'interpolation', 'extrapolation')
                             if _has_split(load_preset, task, s)]
+        finished = read_state(run).evaluated
         for split in wanted:
-            target = run / f'eval_{split}'
-            if force or not (target / '.done').exists():
-                jobs.append(EvalJob(path, task, split, target))
+            if force or split not in finished:
+                jobs.append(EvalJob(path, task, split, run / f'eval_{split}'))
     return jobs, tasks
 
 
@@ -102,7 +105,7 @@ def _has_split(load_preset: Any, task: str, split: str) -> bool:
 
 
 def _run_job(job: EvalJob, protocol: dict[str, Any]) -> tuple[EvalJob, float]:
-    """Worker: one evaluation on one torch thread; writes `.done` with its seconds."""
+    """Worker: one evaluation on one torch thread; records it in the run's state.json."""
     import torch
 
     from zeus_ros.offline.evaluate import evaluate
@@ -112,7 +115,7 @@ def _run_job(job: EvalJob, protocol: dict[str, Any]) -> tuple[EvalJob, float]:
     evaluate(job.checkpoint, split=job.split, task=job.task, out=job.out, progress=False,
              **protocol)
     seconds = time.perf_counter() - start
-    (job.out / '.done').write_text(f'{seconds:.1f}\n')
+    mark_evaluated(job.out.parent, job.split, seconds)
     return job, seconds
 
 

@@ -3,14 +3,16 @@
     zeus report runs/exp/walker_walk_v0 --out docs/results/walker_walk_v0
 
 Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
-`experiments/run_one.sh` and of `zeus eval` on several checkpoints), writes summary.csv,
-returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into --out and prints
-the markdown table (as in docs/results.md).
+`experiments/run_one.sh` and of `zeus eval` on several checkpoints) of the evaluations that
+<method>_s<seed>/state.json (or an old .done marker) says finished (run_state.py), writes
+summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
+--out and prints the markdown table (as in docs/results.md).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Iterator
 import csv
 from pathlib import Path
 import re
@@ -23,6 +25,7 @@ from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.diagnostics import DIAGNOSTICS
+from zeus_ros.offline.run_state import RunState, RunStateError, read_state
 
 __all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'diagnostics_table', 'headroom_rows',
            'headroom_table', 'markdown_table', 'mean_se', 'method_order_key',
@@ -53,32 +56,39 @@ def method_order_key(method: str) -> tuple[int, str]:
     return _rank(method, METHOD_ORDER)
 
 
-def _seconds(path: Path) -> str:
-    """Wall seconds written into a `.done` marker by the experiment scripts ('' if absent)."""
-    try:
-        return path.read_text().strip()
-    except OSError:
-        return ''
+def _seconds(value: float | None) -> str:
+    """Wall seconds from a run's state ('' if not recorded)."""
+    return '' if value is None else f'{value:.1f}'.removesuffix('.0')
+
+
+def _finished_summaries(folder: Path) -> Iterator[tuple[re.Match[str], Path, RunState]]:
+    """(run name match, eval_<split>/summary.csv, run state) of every finished evaluation."""
+    states: dict[Path, RunState] = {}
+    for summary in sorted(folder.glob('*/eval_*/summary.csv')):
+        run = summary.parent.parent
+        match = RUN_NAME.match(run.name)
+        if match is None:
+            continue
+        state = states.setdefault(run, read_state(run))
+        if summary.parent.name.removeprefix('eval_') in state.evaluated:
+            yield match, summary, state
 
 
 def per_run(folder: Path) -> list[dict[str, Any]]:
     """One row per finished (run, split): method, seed, split and the agent's metrics."""
     rows = []
-    for summary in sorted(folder.glob('*/eval_*/summary.csv')):
-        match = RUN_NAME.match(summary.parent.parent.name)
-        if match is None or not (summary.parent / '.done').exists():
-            continue
+    for match, summary, state in _finished_summaries(folder):
         with summary.open(newline='') as handle:
             for row in csv.DictReader(handle):
                 if row['policy'] == 'agent':
                     rows.append({'method': match['method'], 'seed': int(match['seed']),
                                  'split': row['split'],
                                  **{metric: row.get(metric, '') for metric in METRICS},
-                                 'train_seconds': _seconds(summary.parents[1] / '.done_train'),
+                                 'train_seconds': _seconds(state.train_seconds),
                                  # a longer run resumed from a shorter one: that one's seconds
-                                 'earlier_train_seconds': _seconds(
-                                     summary.parents[1] / '.done_train_first'),
-                                 'eval_seconds': _seconds(summary.parent / '.done')})
+                                 'earlier_train_seconds': _seconds(state.earlier_train_seconds),
+                                 'eval_seconds': _seconds(state.evaluated[
+                                     summary.parent.name.removeprefix('eval_')])})
     return sorted(rows, key=lambda r: (method_order_key(r['method']), r['seed'],
                                        _rank(r['split'], SPLIT_ORDER)))
 
@@ -87,10 +97,7 @@ def aggregate(folder: Path) -> list[dict[str, Any]]:
     """One row per (method, split): seeds, then mean and s.e. of every metric with data."""
     table: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     random_returns: dict[str, list[float]] = defaultdict(list)
-    for summary in sorted(folder.glob('*/eval_*/summary.csv')):
-        match = RUN_NAME.match(summary.parent.parent.name)
-        if match is None or not (summary.parent / '.done').exists():
-            continue
+    for match, summary, _state in _finished_summaries(folder):
         with summary.open(newline='') as handle:
             for row in csv.DictReader(handle):
                 if row['policy'] == 'random':
@@ -264,7 +271,9 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
     rows = aggregate(folder)
     if not rows:
         raise FileNotFoundError(f'{folder}: no finished evaluations '
-                                '(<method>_s<seed>/eval_<split>/summary.csv with .done)')
+                                '(<method>_s<seed>/eval_<split>/summary.csv, finished in '
+                                '<method>_s<seed>/state.json or by an eval_<split>/.done '
+                                'marker)')
     out.mkdir(parents=True, exist_ok=True)
     fields = ['method', 'split', 'seeds'] + [f for m in METRICS for f in (m, f'{m}_se')]
     with (out / 'summary.csv').open('w', newline='') as handle:
@@ -305,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         rows = write_report(args.folder, args.out, args.title)
-    except FileNotFoundError as error:
+    except (FileNotFoundError, RunStateError) as error:
         print(f'zeus report: {error}', file=sys.stderr)
         return 2
     print(markdown_table(rows))

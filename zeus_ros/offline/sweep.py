@@ -27,6 +27,7 @@ import time
 from typing import Any
 
 from zeus_ros.offline.collect_workers import portable_task
+from zeus_ros.offline.run_state import RunStateError
 from zeus_ros.offline.trial import (
     LoopProtocol,
     Trial,
@@ -381,7 +382,7 @@ def main(argv: list[str] | None = None) -> int:
                            # after ray.init, which installs its own: SIGTERM stops like Ctrl-C
                            on_start=lambda: signal.signal(signal.SIGTERM,
                                                           signal.default_int_handler))
-    except SweepError as error:
+    except (SweepError, RunStateError) as error:
         print(f'zeus sweep: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -6,8 +6,9 @@ Layout (that of experiments/run_one.sh, which `zeus report` reads):
   <out>/<group>/<method>_s<seed>/config.yaml    the trial's training config, overrides applied
   <out>/<group>/<method>_s<seed>/protocol.yaml  its loop and evaluation flags (LoopProtocol)
   <out>/<group>/<method>_s<seed>/bags, run/      what `zeus loop --out` writes
-  <out>/<group>/<method>_s<seed>/.done_train     training wall seconds (the trial trained)
-  <out>/<group>/<method>_s<seed>/eval_<split>/   `zeus eval` output; .done: its wall seconds
+  <out>/<group>/<method>_s<seed>/state.json     what is finished, with wall seconds
+                                                 (run_state.py; old .done markers still read)
+  <out>/<group>/<method>_s<seed>/eval_<split>/   `zeus eval` output
   <out>/<group>/<method>_s<seed>.log             every attempt's output, appended
   <out>/<group>/<method>_s<seed>.pid             the running step's process id (while it runs)
 Each step is a subprocess: a killed or crashed step leaves the worker alive to say so, a
@@ -17,9 +18,11 @@ steps are skipped, so running a trial again resumes it (`zeus loop --resume`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import ctypes
 from dataclasses import asdict, dataclass, field
 import datetime
+from functools import partial
 import os
 from pathlib import Path
 import signal
@@ -30,6 +33,8 @@ import time
 from typing import Any
 
 import yaml
+
+from zeus_ros.offline.run_state import mark_evaluated, mark_trained, read_state
 
 __all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'recorded_differences',
            'run_trial', 'trial_done', 'trial_steps']
@@ -109,8 +114,7 @@ def recorded_differences(trial: Trial) -> list[str]:
 
 def trial_done(trial: Trial) -> bool:
     """Trained and every requested split evaluated."""
-    return (trial.folder / '.done_train').is_file() and all(
-        (trial.folder / f'eval_{split}' / '.done').is_file() for split in trial.splits)
+    return read_state(trial.folder).done(trial.splits)
 
 
 def _prctl() -> Any:
@@ -164,16 +168,17 @@ def _run_step(trial: Trial, what: str, args: list[str], threads: int) -> float:
     return time.perf_counter() - start
 
 
-def trial_steps(trial: Trial) -> list[tuple[str, list[str], Path]]:
-    """The `zeus` commands the trial still has to run, each with the marker it completes.
+def trial_steps(trial: Trial) -> list[tuple[str, list[str], Callable[[float], None]]]:
+    """The `zeus` commands the trial still has to run, each with what records it as finished.
 
     Writes the trial's config.yaml (the training command reads it). A trial with bags or a run
-    folder but no .done_train was cut off: its loop resumes.
+    folder but not trained in its state was cut off: its loop resumes.
     """
     folder, protocol = trial.folder, trial.protocol
     folder.mkdir(parents=True, exist_ok=True)
+    state = read_state(folder)
     steps = []
-    if not (folder / '.done_train').is_file():
+    if not state.trained:
         config = folder / 'config.yaml'
         config.write_text(yaml.safe_dump(trial.config, sort_keys=False))
         (folder / 'protocol.yaml').write_text(yaml.safe_dump(asdict(trial.protocol),
@@ -186,17 +191,17 @@ def trial_steps(trial: Trial) -> list[tuple[str, list[str], Path]]:
             '--noise', str(protocol.noise),
             '--schedule', protocol.schedule or default_schedule(trial.task),
             '--no-eval', '--no-progress', *(['--resume'] if resume else [])],
-            folder / '.done_train'))
+            partial(mark_trained, folder)))
     for split in trial.splits:
         target = folder / f'eval_{split}'
-        if (target / '.done').is_file():
+        if split in state.evaluated:
             continue
         args = ['eval', '--checkpoint', str(folder / 'run' / 'final.pt'), '--task', trial.task,
                 '--split', split, '--switch-episodes', '1', '--probe-steps', '0',
                 '--seed', str(protocol.eval_seed), '--out', str(target), '--no-progress']
         if protocol.eval_episodes is not None:
             args += ['--episodes', str(protocol.eval_episodes)]
-        steps.append((f'evaluation ({split})', args, target / '.done'))
+        steps.append((f'evaluation ({split})', args, partial(mark_evaluated, folder, split)))
     return steps
 
 
@@ -211,8 +216,6 @@ def run_trial(trial: Trial, threads: int = 1) -> float:
     with trial.log.open('a') as log:
         stamp = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M:%S UTC')
         log.write(f'== {stamp} {trial.name} on {socket.gethostname()}, {threads} thread(s)\n')
-    for what, args, marker in steps:
-        seconds = _run_step(trial, what, args, threads)
-        marker.parent.mkdir(parents=True, exist_ok=True)
-        marker.write_text(f'{seconds:.0f}\n')
+    for what, args, record in steps:
+        record(_run_step(trial, what, args, threads))
     return time.perf_counter() - start
