@@ -99,7 +99,9 @@ def spread_over_noise(contexts: Sequence[np.ndarray | None]) -> tuple[float, flo
     spread = float(np.sqrt(np.mean(np.sum((means - means.mean(0)) ** 2, axis=1))))
     within = np.concatenate([np.sum((c - c.mean(0)) ** 2, axis=1) for c in contexts])
     noise = float(np.sqrt(np.mean(within)))
-    if noise <= 1e-6 * max(spread, 1e-30):  # a constant per value (the true context)
+    # a constant per value (the true context; float32 rounding of small values such as goal
+    # coordinates leaves ~1e-6 of the spread)
+    if noise <= 1e-4 * max(spread, 1e-30):
         return spread, noise, float('inf')
     ratio = spread / noise
     return spread, noise, ratio
