@@ -190,7 +190,7 @@ def test_spread_over_noise_and_extremes() -> None:
     assert ratio == pytest.approx(5.0)
     assert spread_over_noise([np.ones((3, 1)), np.zeros((3, 1))])[2] == float('inf')
     # true goals near 0.07 m through float32: rounding is not noise
-    goals = [np.full((4, 2), g, np.float32) + np.float32(1e-8) * np.arange(4)[:, None]
+    goals = [np.full((4, 2), g, np.float32) + np.float32(3e-7) * np.arange(4)[:, None]
              for g in (0.0714, 0.0742, -0.0755)]
     assert spread_over_noise(goals)[2] == float('inf')
     assert np.isnan(spread_over_noise([a, None])[2])
