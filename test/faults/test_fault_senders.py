@@ -150,7 +150,7 @@ def test_a_second_context_publisher_never_reaches_the_policy(
         _watch(probe, steps, diagnostics)
         assert spin_until(probe, lambda: len(steps) > 100, timeout=90), \
             ros_processes.log_text('policy')[-2000:]
-        flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER), '3', '4',
+        flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER), '6', '4',
                                                    'context'])
         assert spin_until(probe, lambda: flooder.poll() is not None, 90)
         after = len(steps)
