@@ -9,11 +9,16 @@ import subprocess
 import sys
 import time
 
+import pytest
 import yaml
 
 from zeus_ros.offline.ingest import ingest_bags
 
 from ros_harness import REPO
+
+# kill -9 at each phase of a round: ~2.5 min, so `make faults` runs them, `make test` does not
+# (issue 15: the fault matrix in make test where it takes a few minutes, the rest in make faults).
+pytestmark = pytest.mark.faults_only
 
 TASK = 'Cheetah-Run-v0'
 TINY = {
