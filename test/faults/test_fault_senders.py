@@ -198,8 +198,16 @@ def test_two_action_publishers_at_start_wait_until_action_sender_names_one(
                                                 'action_sender:=/policy'))
         assert spin_until(probe, lambda: len(steps) > 5, timeout=60), \
             ros_processes.log_text('sim_bridge2')
-        for _ in range(20):
+
+        def stray_is_named() -> bool:
+            # keep sending until sim_bridge has refused one and named its node (the graph may
+            # know the endpoint before its node name)
             stray.publish(Action(step=steps[-1][1].step, data=[0.4321] * 6))
+            return 'a second publisher on /zeus/action: /stray' in \
+                ros_processes.log_text('sim_bridge2')
+
+        assert spin_until(probe, stray_is_named, timeout=30), \
+            ros_processes.log_text('sim_bridge2')
         assert spin_until(probe, lambda: len(steps) > 100, timeout=60)
     log = ros_processes.log_text('sim_bridge2')
     assert 'paired with /policy' in log and 'a second publisher on /zeus/action: /stray' in log, \
