@@ -95,10 +95,6 @@ def _recorded_steps(output: Path) -> list[int]:
     return sorted(steps)
 
 
-# Known flaky (1 run in 3 here): a respawned recorder sometimes records no step at all, although
-# the launcher reports it started; the control-loop half holds every time. `make faults` runs it
-# until that is found (issue 15 note).
-@pytest.mark.faults_only
 def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Path) -> None:
     """SIGKILL, then SIGTERM to the recorder: the loop runs on, new bags, gaps named, exit 3.
 
@@ -114,13 +110,15 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
         _read_until(launch, 'step 200 ', lines)
         os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGKILL)
         _read_until(launch, f'topics to {out}_respawn1 ', lines)
-        # let it record a while (sim_bridge logs every 100 steps; the new recorder needs
-        # discovery time before its subscriptions match, and the loop does not wait for it)
-        for _ in range(6):
+        # the new recorder needs discovery time before its subscriptions match (the loop does
+        # not wait for it): wait until it logs its first step, then let it record a while
+        _read_until(launch, '/zeus/step: first message at step', lines)
+        for _ in range(3):
             _read_until(launch, 'sim_bridge]: step ', lines)
         os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGTERM)
         _read_until(launch, f'topics to {out}_respawn2 ', lines)
-        for _ in range(6):
+        _read_until(launch, '/zeus/step: first message at step', lines)
+        for _ in range(3):
             _read_until(launch, 'sim_bridge]: step ', lines)
         launch.send_signal(signal.SIGINT)  # the launcher alone, as Ctrl-C would
         rest = launch.communicate(timeout=60)[0]

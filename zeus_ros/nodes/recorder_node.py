@@ -255,6 +255,8 @@ class RecorderNode(Node):
 
     def _track_step(self, topic: str, step: int) -> None:
         last = self.last_step.get(topic)
+        if last is None:  # says when recording really starts (discovery takes a while)
+            self.get_logger().info(f'{topic}: first message at step {step}')
         if last is not None and step > last + 1:
             missing = step - last - 1
             self.gaps[topic] += missing
