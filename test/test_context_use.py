@@ -142,6 +142,31 @@ def test_psi_target_trails_psi_and_feeds_the_td_target() -> None:
         torch.testing.assert_close(losses.next_context, target(next_history))
 
 
+def test_zero_context_input_init_starts_blind_and_learns_to_look() -> None:
+    """context_input_init: zero: actor and critics ignore psi at first, not after updates.
+
+    The feature columns start as usual (same seed: identical to the orthogonal init there).
+    """
+    system = SyntheticSystem(k=3)
+    plain = make_agent(_config('zeus', seed=5), system.spec())
+    agent = make_agent(_config('zeus', context_input_init='zero', seed=5), system.spec())
+    context = slice(agent.config.feature_dim, agent.config.feature_dim + agent.context_dim)
+    layers = [(a.modules[m].net if m == 'actor' else getattr(a.modules['critic'], m))[0].weight
+              for a in (agent, plain) for m in ('actor', 'q1', 'q2')]
+    zeroed, untouched = layers[:3], layers[3:]
+    for weight, original in zip(zeroed, untouched, strict=True):
+        assert torch.count_nonzero(weight[:, context]) == 0
+        assert torch.count_nonzero(original[:, context]) > 0
+        torch.testing.assert_close(weight[:, :context.start], original[:, :context.start])
+    target = agent.modules['critic_target'].q1[0].weight
+    assert torch.count_nonzero(target[:, context]) == 0
+    for step in range(3):
+        agent.update(system.sample(8), system.sample(8), step)
+    assert all(torch.count_nonzero(w[:, context]) > 0 for w in zeroed)
+    with pytest.raises(ConfigError, match='context_input_init'):
+        _config('zeus', context_input_init='ones')
+
+
 def test_old_checkpoints_keep_the_config_they_were_trained_with() -> None:
     """A stored config without the new fields gets the legacy values; 'oracle' was plain SAC."""
     stored = {**_config('oracle').to_dict()}

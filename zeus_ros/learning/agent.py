@@ -125,6 +125,12 @@ class ZeusAgent:
         self.modules['critic'] = Critic(policy_in, a_dim, cfg.hidden_dim)
         for module in self.modules.values():
             module.apply(weight_init)
+        if cfg.context_input_init == 'zero' and self.context_dim > 0:
+            context_inputs = slice(cfg.feature_dim, policy_in)  # input order: [phi, psi, (a)]
+            for net in (self.modules['actor'].net, self.modules['critic'].q1,
+                        self.modules['critic'].q2):
+                with torch.no_grad():
+                    net[0].weight[:, context_inputs] = 0.0
         if cfg.context_norm == 'running' and self.context_dim > 0:
             self.modules['context_norm'] = ContextNormalizer(self.context_dim,
                                                              cfg.context_norm_momentum)

@@ -35,6 +35,8 @@ __all__ = [
 
 CONTEXT_NORMS = ('none', 'running')
 """How the context is scaled at the actor/critic input (one normaliser for every method)."""
+CONTEXT_INPUT_INITS = ('orthogonal', 'zero')
+"""How the actor's and critic's first-layer weights on the context inputs start."""
 
 CONTEXT_LOSSES = ('paper', 'scale_free')
 """Form of eq. 1's context loss: as written, or distances matched up to a batch-wise scale."""
@@ -99,6 +101,11 @@ class ZeusConfig:
     learning on Cheetah-Run-v0, docs/results.md)."""
     context_norm_momentum: float = 0.01
     """Update rate of the running context statistics."""
+    context_input_init: str = 'orthogonal'
+    """'orthogonal': the actor's and critic's first-layer weights on the context inputs start
+    like the others; 'zero': they start at 0, so the networks begin as no_context and weight the
+    context only as far as its correlation with their losses builds those weights up (noise in
+    psi averages out of the gradient instead of entering at full strength from update 0)."""
     critic_context_grad: bool = False
     """True: the critic's TD loss trains psi too. Measured harmful at every budget we ran
     (docs/results.md); False: psi is trained by its method's objective only and reaches actor and
@@ -191,6 +198,7 @@ class ZeusConfig:
         _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
         _check_choice('context_loss', self.context_loss, CONTEXT_LOSSES)
         _check_choice('context_norm', self.context_norm, CONTEXT_NORMS)
+        _check_choice('context_input_init', self.context_input_init, CONTEXT_INPUT_INITS)
         _check_choice('exploration', self.exploration, EXPLORATIONS)
         if not isinstance(self.critic_context_grad, bool):
             raise ConfigError(f'critic_context_grad must be true or false, '
