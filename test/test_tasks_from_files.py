@@ -184,16 +184,20 @@ def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> Non
     try:
         with driver_node(group.domain_id) as driver:
             truths: dict[int, float] = {}
+            # A passive observer does not pace the lockstep loop: under load it falls behind,
+            # and a keep-last-10 reader would drop steps (seen: 5-6 in a row), so it keeps 1000.
+            deep = step_qos(1000)
             driver.create_subscription(StepFeedback, 'zeus/step', lambda m: seen.__setitem__(
-                m.step, m.task), step_qos())
+                m.step, m.task), deep)
             driver.create_subscription(ContextTruth, 'zeus/context_truth', lambda m: truths
-                                       .__setitem__(m.step, m.values[0]), step_qos())
+                                       .__setitem__(m.step, m.values[0]), deep)
             bridge = group.start('sim_bridge_task_file', node(
                 'sim_bridge', f'task:={PAYLOAD}', 'max_steps:=30', 'min_observers:=2',
                 'schedule.kind:=switch', 'schedule.values:=train', 'schedule.every:=10'))
             group.start('policy_task_file', node('policy', f'task:={PAYLOAD}'))
-            assert spin_until(driver, lambda: len(seen) > 30, 90), \
-                group.log_text('sim_bridge_task_file')[-2000:]
+            assert spin_until(driver, lambda: len(seen) > 30, 90), (
+                f'steps never seen: {sorted(set(range(31)) - set(seen))}',
+                group.log_text('sim_bridge_task_file')[-2000:])
         assert bridge.wait(timeout=30) == 0
     finally:
         group.stop_all()
