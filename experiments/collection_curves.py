@@ -16,9 +16,9 @@ import warnings
 
 import numpy as np
 
-from zeus_ros.offline.ingest import ingest_bags
-from zeus_ros.offline.metrics import write_csv
-from zeus_ros.offline.report import RUN_NAME, mean_se, method_order_key
+from zeus_ros.offline.data.ingest import ingest_bags
+from zeus_ros.offline.evaluation.metrics import write_csv
+from zeus_ros.offline.evaluation.report import RUN_NAME, mean_se, method_order_key
 
 
 def main() -> None:

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.eval_batch import evaluate_many, find_checkpoints, group_name
-from zeus_ros.offline.metrics import write_csv
-from zeus_ros.offline.report import (
+from zeus_ros.offline.evaluation.eval_batch import evaluate_many, find_checkpoints, group_name
+from zeus_ros.offline.evaluation.metrics import write_csv
+from zeus_ros.offline.evaluation.report import (
     BOUND,
     REFERENCE,
     SPLIT_ORDER,
@@ -168,7 +168,7 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
 def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) -> None:
     """Ship each finished run of the variant as a deployment checkpoint with its card."""
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.export import export
+    from zeus_ros.offline.evaluation.export import export
 
     for run in sorted((root / variant / _task_folder(task)).glob('*_s*/')):
         final = run / 'run' / 'final.pt'

@@ -16,8 +16,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from zeus_ros.learning.checkpoint import load_checkpoint
-from zeus_ros.offline.eval_batch import group_name
-from zeus_ros.offline.export import export
+from zeus_ros.offline.evaluation.eval_batch import group_name
+from zeus_ros.offline.evaluation.export import export
 
 LEGACY_COMMIT = 'a70cad4'
 

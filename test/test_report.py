@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from zeus_ros.offline.metrics import read_csv, write_csv
-from zeus_ros.offline.report import aggregate, main, per_run, wall_time_table
-from zeus_ros.offline.run_state import mark_evaluated, mark_trained, read_state
+from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
+from zeus_ros.offline.evaluation.report import main, per_method, per_run, wall_time_table
+from zeus_ros.offline.training.run_state import mark_evaluated, mark_trained, read_state
 
 
 def _run(folder: Path, name: str, returns: dict[str, float], *, train: int,
@@ -36,7 +36,7 @@ def test_report_means_standard_errors_and_wall_times(tmp_path: Path,
     _run(folder, 'no_context_s0', {'train': 90.0}, train=120)
     (folder / 'no_context_s0' / 'eval_train' / '.done').unlink()  # still running: left out
 
-    rows = aggregate(folder)
+    rows = per_method(folder)
     assert [(r['method'], r['split'], r['seeds']) for r in rows] == [
         ('zeus', 'train', 2), ('zeus', 'extrapolation', 2)]
     assert rows[0]['mean_return'] == pytest.approx(150.0)

@@ -86,7 +86,7 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
 
 def zeus_train(bags: list[Path], out: Path, tmp: Path) -> Path:
     """A tiny `zeus train` run on the bags (the robot's task from its params file)."""
-    from zeus_ros.offline.train import main as train
+    from zeus_ros.offline.training.train import main as train
 
     config = tmp / 'tiny.yaml'
     config.write_text(yaml.safe_dump(TINY))
@@ -112,7 +112,7 @@ def read_bag(bag: Path) -> dict[str, dict[int, object]]:
 def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
                                                  tmp_path: Path) -> None:
     """Random policy records, the bag trains, the checkpoint drives the robot 300 steps."""
-    from zeus_ros.offline.ingest import ingest_bags
+    from zeus_ros.offline.data.ingest import ingest_bags
 
     bag_a, _ = run_live(robot_processes, tmp_path, 'random', 120, None)
     checkpoint = zeus_train([bag_a], tmp_path / 'run_a', tmp_path)

@@ -24,12 +24,24 @@ import numpy as np
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.diagnostics import DIAGNOSTICS
-from zeus_ros.offline.run_state import RunState, RunStateError, read_state
+from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
+from zeus_ros.offline.training.run_state import RunState, RunStateError, read_state
 
-__all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'diagnostics_table', 'headroom_rows',
-           'headroom_table', 'markdown_table', 'mean_se', 'method_order_key',
-           'paired_difference', 'per_run', 'wall_time_table', 'write_report']
+__all__ = [
+    'METRICS',
+    'RUN_NAME',
+    'diagnostics_table',
+    'headroom_rows',
+    'headroom_table',
+    'markdown_table',
+    'mean_se',
+    'method_order_key',
+    'paired_difference',
+    'per_method',
+    'per_run',
+    'wall_time_table',
+    'write_report',
+]
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman', *DIAGNOSTICS)
 """Columns of an eval summary that are averaged over seeds."""
@@ -93,7 +105,7 @@ def per_run(folder: Path) -> list[dict[str, Any]]:
                                        _rank(r['split'], SPLIT_ORDER)))
 
 
-def aggregate(folder: Path) -> list[dict[str, Any]]:
+def per_method(folder: Path) -> list[dict[str, Any]]:
     """One row per (method, split): seeds, then mean and s.e. of every metric with data."""
     table: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     random_returns: dict[str, list[float]] = defaultdict(list)
@@ -268,7 +280,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
 
 def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict[str, Any]]:
     """Aggregate `folder`; write summary.csv, runs.csv, table.md, wall_times.md, returns.png."""
-    rows = aggregate(folder)
+    rows = per_method(folder)
     if not rows:
         raise FileNotFoundError(f'{folder}: no finished evaluations '
                                 '(<method>_s<seed>/eval_<split>/summary.csv, finished in '

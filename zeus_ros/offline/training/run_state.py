@@ -108,7 +108,9 @@ def _locked(folder: Path) -> Iterator[None]:
 
 
 def _update(folder: Path, change: Any) -> None:
-    from zeus_ros.offline.durable import replace_text  # bag writing's atomic write (tmp + rename)
+    from zeus_ros.offline.data.durable import (
+        replace_text,  # bag writing's atomic write (tmp + rename)
+    )
 
     with _locked(folder):
         data = _read_json(folder)
