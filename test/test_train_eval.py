@@ -374,16 +374,58 @@ def test_adaptation_latency_counts_steps_back_to_steady_and_skips_zero_reward() 
     assert adaptation_latencies(_trace(reward, context, segment), {(2.0,): 0.0}) == []
 
 
-def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
-    """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
+def _experiment(name: str) -> Any:
+    """The module experiments/<name>.py (a script, not a package)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / 'experiments' / 'context_scale.py'
-    spec = importlib.util.spec_from_file_location('context_scale', path)
+    path = Path(__file__).resolve().parents[1] / 'experiments' / f'{name}.py'
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    row = module.context_scale(trained.out / 'final.pt', 'interpolation')
+    return module
+
+
+def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
+    """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
+    row = _experiment('context_scale').context_scale(trained.out / 'final.pt', 'interpolation')
     assert row['method'] == 'zeus' and row['split'] == 'interpolation'
     assert row['spread'] > 0 and row['noise'] >= 0 and row['norm'] > 0
     assert np.isfinite([row['spread'], row['noise'], row['norm']]).all()
+
+
+def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """experiments/collection_curves.py: only trained runs (state.json or old marker).
+
+    Methods with the very same curve each keep their own marker and dash.
+    """
+    import sys
+
+    from matplotlib.figure import Figure
+
+    from zeus_ros.offline.training.run_state import mark_trained
+
+    folder = tmp_path / 'task'
+    bag = next(bags.glob('bag_*'))
+    for name, round_ in itertools.product(('zeus_s0', 'no_context_s0', 'oracle_s0',
+                                           'unfinished_s0'), range(3)):
+        shutil.copytree(bag, folder / name / 'bags' / f'bag_{round_:03d}')  # three rounds
+    mark_trained(folder / 'zeus_s0', 12.0)
+    for name in ('no_context_s0', 'oracle_s0'):
+        (folder / name / '.done_train').write_text('12\n')  # runs of experiments/run_one.sh
+    module = _experiment('collection_curves')
+    figures: list[Figure] = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, 'savefig',
+                        lambda fig, *a, **k: (figures.append(fig), save(fig, *a, **k))[1])
+    monkeypatch.setattr(sys, 'argv', ['collection_curves', str(folder), '--out',
+                                      str(tmp_path / 'out')])
+    module.main()
+    rows = read_csv(tmp_path / 'out' / 'collection.csv')
+    assert sorted({r['method'] for r in rows}) == ['no_context', 'oracle', 'zeus']
+    assert len(rows) == 9 and len({r['reward_per_step'] for r in rows}) == 1
+    lines = [line for line in figures[0].axes[0].get_lines() if line.get_linestyle() != 'None']
+    assert len(lines) == 3  # the curves, not the error-bar caps
+    assert len({(line.get_marker(), line.get_linestyle()) for line in lines}) == 3
+    assert (tmp_path / 'out' / 'collection.png').stat().st_size > 10_000
