@@ -4,8 +4,8 @@
 
 Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
 `experiments/run_one.sh` and of `zeus eval` on several checkpoints) of the evaluations that
-<method>_s<seed>/state.json (or an old .done marker) says finished (run_state.py), writes
-summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
+<method>_s<seed>/state.json (or an old .done marker) says finished (training/run_state.py),
+writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
 --out and prints the markdown table (as in docs/results.md).
 """
 

@@ -1,8 +1,8 @@
 """Experiment state of one run folder in one JSON file, `<run>/state.json`.
 
-A run (`<group>/<method>_s<seed>/`, written by `zeus sweep` trials and `zeus eval` on many
-checkpoints) is trained, then evaluated per split. What is finished, and how long it took, is
-recorded here:
+A run (`<group>/<method>_s<seed>/`, written by `zeus sweep` trials, experiments/run_one.sh and
+`zeus eval` on many checkpoints) is trained, then evaluated per split. What is finished, and
+how long it took, is recorded here:
 
     {"train": {"seconds": 812.0, "earlier_seconds": 300.0},
      "eval": {"interpolation": {"seconds": 41.5}, "extrapolation": {"seconds": 40.2}}}
