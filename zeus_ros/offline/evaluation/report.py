@@ -184,48 +184,43 @@ def headroom_table(rows: list[dict[str, Any]]) -> str:
     lines = [f'| split | method | seeds | method - {REFERENCE} | headroom ({BOUND} - '
              f'{REFERENCE}) | share of headroom recovered |', '|---|---|---|---|---|---|']
     for row in rows:
-        headroom = (f'{row["headroom"]:.1f} ± {row["headroom_se"]:.1f}' if 'headroom' in row
-                    else '-')
         share = f'{row["recovered"]:.2f}' if 'recovered' in row else '-'
         lines.append(f'| {row["split"]} | {row["method"]} | {row["seeds"]} | '
-                     f'{row["gain"]:.1f} ± {row["gain_se"]:.1f} | {headroom} | {share} |')
+                     f'{_pm(row, "gain", 1)} | {_pm(row, "headroom", 1)} | {share} |')
     return '\n'.join(lines)
+
+
+def _pm(row: dict[str, Any], metric: str, digits: int) -> str:
+    """Table cell `mean ± s.e.` of `metric` (its `_se` beside it in the row); '-' without it."""
+    if metric not in row:
+        return '-'
+    return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
 
 
 def diagnostics_table(rows: list[dict[str, Any]]) -> str:
     """Markdown: the adaptation diagnostics per method and split (mean ± s.e. over seeds)."""
-    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
-        if metric not in row:
-            return '-'
-        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
-
     lines = ['| method | split | seeds | context sensitivity (mean abs. delta action) | '
              'context spread / noise | value of adaptation (frozen to other extreme) | '
              'value of adaptation (frozen to mean) |', '|---|---|---|---|---|---|---|']
     for row in rows:
         lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
-                     f'{cell(row, "sensitivity", 3)} | {cell(row, "spread_noise", 2)} | '
-                     f'{cell(row, "adaptation_value_other", 1)} | '
-                     f'{cell(row, "adaptation_value_mean", 1)} |')
+                     f'{_pm(row, "sensitivity", 3)} | {_pm(row, "spread_noise", 2)} | '
+                     f'{_pm(row, "adaptation_value_other", 1)} | '
+                     f'{_pm(row, "adaptation_value_mean", 1)} |')
     return '\n'.join(lines)
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The results table as markdown (returns to one decimal, Spearman to two)."""
-
-    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
-        if metric not in row:
-            return '-'
-        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
-
     lines = ['| method | split | seeds | return | return, switching episode | '
              'adaptation latency (steps) | Spearman | random policy |',
              '|---|---|---|---|---|---|---|---|']
     for row in rows:
         random = f'{row["random_return"]:.1f}' if 'random_return' in row else '-'
         lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
-                     f'{cell(row, "mean_return", 1)} | {cell(row, "switching_return", 1)} | '
-                     f'{cell(row, "mean_latency", 1)} | {cell(row, "spearman", 2)} | '
+                     f'{_pm(row, "mean_return", 1)} | '
+                     f'{_pm(row, "switching_return", 1)} | '
+                     f'{_pm(row, "mean_latency", 1)} | {_pm(row, "spearman", 2)} | '
                      f'{random} |')
     return '\n'.join(lines)
 
