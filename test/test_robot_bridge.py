@@ -12,7 +12,6 @@ from collections.abc import Iterator
 import json
 import math
 from pathlib import Path
-import random
 import signal
 import sys
 
@@ -21,7 +20,15 @@ import pytest
 import yaml
 
 from live_fixtures import node
-from ros_harness import REPO, ProcessGroup, driver_node, python_module, require_ros, spin_until
+from ros_harness import (
+    REPO,
+    ProcessGroup,
+    driver_node,
+    fresh_domain_id,
+    python_module,
+    require_ros,
+    spin_until,
+)
 
 pytestmark = pytest.mark.ros
 PARAMS = REPO / 'params' / 'robot_bridge.yaml'
@@ -40,7 +47,7 @@ ACTION_TO_CONTROLLER = [1, 0]
 def robot_processes() -> Iterator[ProcessGroup]:
     """A process group on a domain of this issue's range (180-199), always cleaned up."""
     require_ros()
-    group = ProcessGroup(domain_id=random.SystemRandom().randint(180, 199))
+    group = ProcessGroup(domain_id=fresh_domain_id())
     try:
         yield group
     finally:

@@ -169,17 +169,15 @@ def test_a_bad_observation_or_reward_is_found_when_the_file_is_read(tmp_path: Pa
 @pytest.mark.ros
 def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> None:
     """The same file for the node: steps carry the declared name and context."""
-    import random
-
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
     from zeus_ros.nodes.common import step_qos
 
     from live_fixtures import node
-    from ros_harness import ProcessGroup, driver_node, require_ros, spin_until
+    from ros_harness import ProcessGroup, driver_node, fresh_domain_id, require_ros, spin_until
 
     require_ros()
-    group = ProcessGroup(domain_id=random.SystemRandom().randint(180, 199))
+    group = ProcessGroup(domain_id=fresh_domain_id())
     seen: dict[int, str] = {}
     try:
         with driver_node(group.domain_id) as driver:
