@@ -18,9 +18,9 @@ import time
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from zeus_ros.offline.bag_writer import StepBagWriter, StepRecord
-from zeus_ros.offline.ingest import find_bags, ingest_bags
-from zeus_ros.offline.schema import StepFeedbackFields
+from zeus_ros.offline.data.bag_writer import SimStep, StepBagWriter
+from zeus_ros.offline.data.ingest import find_bags, ingest_bags
+from zeus_ros.offline.data.schema import StepFeedbackFields
 
 EP_LEN = 500
 STATE_DIM = 17
@@ -40,7 +40,7 @@ def write_bag(path: Path, steps: int, *, pixels: bool, storage: str) -> None:
                 reward=float(rng.random()),
                 applied_action=np.zeros(0) if es == 0 else rng.random(ACTION_DIM),
                 action_status=0 if es == 0 else 1, task='Cheetah-Run-v0')
-            writer.write_step(StepRecord(
+            writer.write_step(SimStep(
                 step=k, stamp_ns=stamp, state=rng.random(STATE_DIM), feedback=fb,
                 context_names=('torso_length',), context_values=np.array([0.5 + ep % 3]),
                 segment=ep, frame=np.roll(frame, k, axis=1) if pixels else None))

@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from zeus_ros.learning import load_config, make_agent
 from zeus_ros.learning.synthetic import SyntheticSystem
-from zeus_ros.offline.metrics import format_table
+from zeus_ros.offline.evaluation.metrics import format_table
 
 REPO = Path(__file__).resolve().parents[1]
 TASK = 'Cheetah-Run-v0'

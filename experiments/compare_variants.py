@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.eval_batch import evaluate_many, find_checkpoints, group_name
-from zeus_ros.offline.metrics import write_csv
-from zeus_ros.offline.report import (
+from zeus_ros.offline.evaluation.eval_batch import evaluate_many, find_checkpoints, group_name
+from zeus_ros.offline.evaluation.metrics import write_csv
+from zeus_ros.offline.evaluation.report import (
     BOUND,
     REFERENCE,
     SPLIT_ORDER,
@@ -33,6 +33,7 @@ from zeus_ros.offline.report import (
     per_run,
     wall_time_table,
 )
+from zeus_ros.offline.training.run_state import read_state
 
 REFERENCE_VARIANT = 'default'
 """The variant whose no_context and oracle runs define the headroom."""
@@ -46,8 +47,8 @@ def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
                      splits: list[str] | None, episodes: int, jobs: int) -> Path | None:
     """Evaluate the finished runs of one variant; returns the folder of its tables."""
     runs = root / variant / _task_folder(task)
-    finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*'))
-              if (p / '.done_train').is_file()]
+    finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*/'))
+              if read_state(p).trained]
     if not finals:
         return None
     evaluate_many(find_checkpoints(finals), evals / variant, splits=splits, jobs=jobs,
@@ -168,11 +169,11 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
 def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) -> None:
     """Ship each finished run of the variant as a deployment checkpoint with its card."""
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.export import export
+    from zeus_ros.offline.evaluation.export import export
 
     for run in sorted((root / variant / _task_folder(task)).glob('*_s*/')):
         final = run / 'run' / 'final.pt'
-        if not (run / '.done_train').is_file() or not final.is_file():
+        if not read_state(run).trained or not final.is_file():
             continue
         loaded = load_checkpoint(final, load_optimizers=False)
         group = group_name(task, loaded.step)
@@ -182,10 +183,10 @@ def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) 
 
 
 def _with_train_seconds(runs: list[dict[str, Any]], folder: Path) -> list[dict[str, Any]]:
-    """Evaluation rows with the training seconds their run folder recorded (.done_train)."""
+    """Evaluation rows with the training seconds their run folder recorded (its run state)."""
     for run in runs:
-        marker = folder / f'{run["method"]}_s{run["seed"]}' / '.done_train'
-        run['train_seconds'] = marker.read_text().strip() if marker.is_file() else ''
+        seconds = read_state(folder / f'{run["method"]}_s{run["seed"]}').train_seconds
+        run['train_seconds'] = '' if seconds is None else f'{seconds:g}'
     return runs
 
 

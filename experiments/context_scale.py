@@ -23,10 +23,14 @@ from scipy.spatial.distance import pdist
 from tqdm import tqdm
 
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.eval_batch import find_checkpoints
-from zeus_ros.offline.evaluate import evaluate_contexts, mean_context_per_value, split_values
-from zeus_ros.offline.metrics import write_csv
-from zeus_ros.offline.report import RUN_NAME, mean_se, method_order_key
+from zeus_ros.offline.evaluation.eval_batch import find_checkpoints
+from zeus_ros.offline.evaluation.evaluate import (
+    evaluate_contexts,
+    mean_context_per_value,
+    split_values,
+)
+from zeus_ros.offline.evaluation.metrics import write_csv
+from zeus_ros.offline.evaluation.report import RUN_NAME, mean_se, method_order_key
 
 
 def context_scale(path: Path, split: str) -> dict[str, float | str] | None:

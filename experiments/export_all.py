@@ -16,19 +16,20 @@ from pathlib import Path
 from tqdm import tqdm
 
 from zeus_ros.learning.checkpoint import load_checkpoint
-from zeus_ros.offline.eval_batch import group_name
-from zeus_ros.offline.export import export
+from zeus_ros.offline.evaluation.eval_batch import group_name
+from zeus_ros.offline.evaluation.export import export
+from zeus_ros.offline.training.run_state import read_state
 
 LEGACY_COMMIT = 'a70cad4'
 
 
 def main() -> None:
-    """Export each run folder that finished training (.done_train)."""
+    """Export each run folder that finished training (its run state)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('root', type=Path, nargs='?', default=Path('runs/exp'))
     parser.add_argument('--target', type=Path, default=Path('checkpoints/comparison'))
     args = parser.parse_args()
-    runs = sorted(p.parent for p in args.root.glob('*/*_s*/.done_train'))
+    runs = [run for run in sorted(args.root.glob('*/*_s*/')) if read_state(run).trained]
     for run in tqdm(runs, desc='export', unit='run'):
         final = run / 'run' / 'final.pt'
         loaded = load_checkpoint(final, load_optimizers=False)

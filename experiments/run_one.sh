@@ -6,6 +6,8 @@
 # (ROUNDS > 5, folder <task>_<updates>k) starts from a copy of the finished 5-round run and
 # continues it with `zeus loop --resume`, which is the same as running all rounds at once.
 # Finished parts are skipped, so rerunning resumes; a lock folder stops two copies of a run.
+# What is finished is recorded in <run>/state.json (zeus_ros/offline/training/run_state.py);
+# runs finished before it, marked by .done_train / eval_<split>/.done files, count as finished.
 # CONFIG (default params/train/state_cpu.yaml) picks the training config (a variant goes in its
 # own OUT_ROOT); EVAL=0 skips the evaluation (run `zeus eval` over the checkpoints later).
 #   usage: [ROUNDS=10] [CONFIG=...] [EVAL=0] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
@@ -20,6 +22,10 @@ BASE="$ROOT/$(echo "$TASK" | tr 'A-Z-' 'a-z_')"
 OUT=$BASE
 if [ "$ROUNDS" != 5 ]; then OUT="${BASE}_$((ROUNDS * 2))k"; fi
 run="$OUT/${METHOD}_s${SEED}"
+state() { python -m zeus_ros.offline.training.run_state "$@"; }
+# finished RUN [SPLIT...]: 0 finished, 1 not yet; an unreadable state.json ends the script (its
+# one-line error says what to do)
+finished() { local rc=0; state done "$@" || rc=$?; [ "$rc" -le 1 ] || exit "$rc"; return "$rc"; }
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 # Collection switches the context every 100 steps (5 times per 500-step episode); the
 # reward-varying family has 40-step episodes, so it switches every 20 steps there (`zeus eval`
@@ -29,11 +35,13 @@ if [ "$TASK" = Cheetah-Run-v1 ]; then collect_every=20; fi
 mkdir -p "$OUT"
 if ! mkdir "$run.lock" 2>/dev/null; then echo "skip: $run is running elsewhere"; exit 0; fi
 trap 'rmdir "$run.lock"' EXIT
-if [ ! -f "$run/run/final.pt" ] || [ ! -f "$run/.done_train" ]; then
+base_run="$BASE/${METHOD}_s${SEED}"
+if [ ! -f "$run/run/final.pt" ] || ! finished "$run"; then
   resume=()
-  if [ "$OUT" != "$BASE" ] && [ ! -d "$run/run" ] && [ -f "$BASE/${METHOD}_s${SEED}/.done_train" ]; then
-    mkdir -p "$run" && cp -r "$BASE/${METHOD}_s${SEED}/bags" "$BASE/${METHOD}_s${SEED}/run" "$run/"
-    cp "$BASE/${METHOD}_s${SEED}/.done_train" "$run/.done_train_first"
+  if [ "$OUT" != "$BASE" ] && [ ! -d "$run/run" ] && finished "$base_run"; then
+    mkdir -p "$run" && cp -r "$base_run/bags" "$base_run/run" "$run/"
+    earlier=$(state seconds "$base_run")
+    if [ -n "$earlier" ]; then state mark-continued "$run" "$earlier"; fi
   fi
   if [ -d "$run/run" ]; then resume=(--resume); else rm -rf "$run"; fi
   start=$(date +%s)
@@ -41,16 +49,16 @@ if [ ! -f "$run/run/final.pt" ] || [ ! -f "$run/.done_train" ]; then
     --seed "$SEED" --out "$run" --rounds "$ROUNDS" --random-steps 1500 --steps 2000 \
     --updates 2000 --noise 0.2 --schedule "switch:train:every=$collect_every" \
     "${resume[@]}" --no-eval --no-progress >> "$run.train.log" 2>&1
-  echo $(( $(date +%s) - start )) > "$run/.done_train"
+  state mark-trained "$run" $(( $(date +%s) - start ))
 fi
-if [ "${EVAL:-1}" = 0 ]; then echo "done: $run (train $(cat "$run/.done_train") s)"; exit 0; fi
+if [ "${EVAL:-1}" = 0 ]; then echo "done: $run (train $(state seconds "$run") s)"; exit 0; fi
 for split in $(python -c "import yaml,sys; p=yaml.safe_load(open('params/contexts/$TASK.yaml')); print(' '.join(s for s in ('train','interpolation','extrapolation') if p.get(s)))"); do
-  if [ ! -f "$run/eval_$split/.done" ]; then
+  if ! finished "$run" "$split"; then
     start=$(date +%s)
     zeus eval --checkpoint "$run/run/final.pt" --task "$TASK" --split "$split" \
       --switch-episodes 1 --probe-steps 0 \
       --seed 100 --out "$run/eval_$split" --no-progress > "$run.eval_$split.log" 2>&1
-    echo $(( $(date +%s) - start )) > "$run/eval_$split/.done"
+    state mark-evaluated "$run" "$split" $(( $(date +%s) - start ))
   fi
 done
-echo "done: $run (train $(cat "$run/.done_train") s)"
+echo "done: $run (train $(state seconds "$run") s)"

@@ -3,17 +3,23 @@
 # (default 2: one per core), counting every `zeus loop` on the machine:
 #   CONFIG TASK METHOD SEED OUT_ROOT      (one run per line; '#' starts a comment)
 # The file is read again before each start, so lines can be added or reordered while it runs;
-# finished runs (.done_train) and runs locked by another copy are skipped, unfinished ones resume.
+# trained runs (their state.json, or the .done_train marker of runs from before it) and runs
+# locked by another copy are skipped, unfinished ones resume.
 #   usage: [JOBS=2] [EVAL=0] nice bash experiments/run_queue.sh experiments/queues/issue10.txt
 set -uo pipefail
 cd "$(dirname "$0")/.."
+source scripts/env.sh
 QUEUE=$1 JOBS=${JOBS:-2}
 next_line() {
   grep -v '^\s*#' "$QUEUE" | grep -v '^\s*$' | while read -r config task method seed root; do
     run="$root/$(echo "$task" | tr 'A-Z-' 'a-z_')/${method}_s${seed}"
-    if [ ! -f "$run/.done_train" ] && [ ! -d "$run.lock" ]; then
-      echo "$config $task $method $seed $root"; break
-    fi
+    [ -d "$run.lock" ] && continue
+    python -m zeus_ros.offline.training.run_state done "$run" < /dev/null
+    case $? in
+      0) ;;  # trained
+      1) echo "$config $task $method $seed $root"; break ;;
+      *) echo "queue: skip $run (its state is unreadable, see above)" >&2 ;;
+    esac
   done
 }
 while true; do

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from zeus_ros.offline.bag_writer import StepBagWriter
-from zeus_ros.offline.errors import BagError, IngestError
-from zeus_ros.offline.ingest import IngestWarning, ingest_bags
-from zeus_ros.offline.schema import (
+from zeus_ros.offline.data.bag_errors import BagError, IngestError
+from zeus_ros.offline.data.bag_writer import StepBagWriter
+from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
+from zeus_ros.offline.data.schema import (
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
     TOPIC_STATE,
@@ -155,7 +155,7 @@ def test_bag_metadata_is_what_jazzy_writes(tmp_path: Path) -> None:
     """Version 9, ros_distro jazzy (also inside the mcap), offered QoS and RIHS01 per topic."""
     from ruamel.yaml import YAML
 
-    from zeus_ros.offline.schema import MSGTYPES, typestore
+    from zeus_ros.offline.data.schema import MSGTYPES, typestore
 
     for storage in ('mcap', 'sqlite3'):
         bag = _write_synthetic(tmp_path / storage, 3, storage=storage)
@@ -179,7 +179,7 @@ def _renamed(src: Path, dst: Path, namespace: str) -> Path:
     """Copy a bag with every zeus topic moved under /namespace (as `ros2 bag record` sees it)."""
     from rosbags.rosbag2 import Writer
 
-    from zeus_ros.offline.ingest import bag_topic
+    from zeus_ros.offline.data.ingest import bag_topic
 
     with AnyReader([src]) as reader, Writer(dst, version=9) as writer:
         conns = {c.id: writer.add_connection(bag_topic(c.topic, namespace), c.msgtype,
@@ -195,7 +195,7 @@ def test_namespaced_bag_needs_its_namespace(tmp_path: Path, capsys: Any) -> None
 
     Without it: 'no zeus topics (found these: ...)', never 'corrupt'.
     """
-    from zeus_ros.offline.ingest import main
+    from zeus_ros.offline.data.ingest import main
 
     plain = _write_synthetic(tmp_path / 'plain', 12)
     spaced = _renamed(plain, tmp_path / 'spaced', 'r1')
@@ -298,7 +298,7 @@ def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.collect import collect, random_policy
+    from zeus_ros.offline.training.collect import collect, random_policy
 
     task = make_task(ROUND_TRIP_TASK, seed=3)
     env = RecordingEnv(ScheduledEnv(task, schedule_from_config({'kind': 'constant'}, task, 3)))
@@ -324,7 +324,7 @@ def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[
 def _check_against_env(ds: Any, env: RecordingEnv, actions: dict, frames: dict,
                        steps: int) -> None:
     """Every ingested field equals what the env produced for that step."""
-    from zeus_ros.offline.schema import ns_from_sim_time
+    from zeus_ros.offline.data.schema import ns_from_sim_time
 
     covered = sorted(int(s) for ep in ds.episodes for s in ep.steps)
     assert covered == list(range(steps))
@@ -381,7 +381,7 @@ def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:
     """A second `zeus collect` into the same --out needs --append and adds bag_001."""
-    from zeus_ros.offline.collect import main
+    from zeus_ros.offline.training.collect import main
 
     argv = ['--task', ROUND_TRIP_TASK, '--steps', '30', '--out', str(tmp_path),
             '--no-progress']
@@ -397,7 +397,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
     """The documented inline forms of --schedule give configs the schedule code accepts."""
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.collect import parse_schedule
+    from zeus_ros.offline.training.collect import parse_schedule
 
     task = make_task('Cheetah-Run-v0')
     for text in ('constant', 'constant:value=0.8', 'switch:train:every=100',
@@ -411,8 +411,8 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
 
 def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
     """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
-    from zeus_ros.offline.collect import main as collect
-    from zeus_ros.offline.train import main as train
+    from zeus_ros.offline.training.collect import main as collect
+    from zeus_ros.offline.training.train import main as train
 
     assert collect(['--task', ROUND_TRIP_TASK, '--steps', '200', '--out', str(tmp_path / 'c'),
                     '--no-progress']) == 0

@@ -85,7 +85,7 @@ def test_help_lists_the_task_names(command: str, capsys: pytest.CaptureFixture) 
 
 def test_schedule_is_spelled_one_way_in_every_help(capsys: pytest.CaptureFixture) -> None:
     """`zeus collect` and `zeus loop` show the same grammar; loop's default is written in it."""
-    from zeus_ros.offline.collect import parse_schedule
+    from zeus_ros.offline.training.collect import parse_schedule
 
     _run('loop', ['--help'])
     text = capsys.readouterr().out
@@ -109,7 +109,7 @@ def test_train_config_is_found_in_the_package_share_from_any_folder(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """--config params/train/state_cpu.yaml works outside the repository; a typo names both."""
     from zeus_ros.learning.errors import ConfigError
-    from zeus_ros.offline.train import read_config
+    from zeus_ros.offline.training.train import read_config
 
     monkeypatch.chdir(tmp_path)
     assert read_config(Path('params/train/state_cpu.yaml')).method

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from zeus_ros.offline import collect
-from zeus_ros.offline.collect_workers import split_steps, worker_seeds
-from zeus_ros.offline.ingest import ingest_bags
+from zeus_ros.offline.data.ingest import ingest_bags
+from zeus_ros.offline.training import collect
+from zeus_ros.offline.training.collect_workers import split_steps, worker_seeds
 
 TASK = 'Cheetah-Run-v0'
 STEPS, SEED = 301, 5

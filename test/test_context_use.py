@@ -15,14 +15,14 @@ from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
 from zeus_ros.learning.models import RewardModel, TransitionModel
 from zeus_ros.learning.representation import context_loss, representation_losses
 from zeus_ros.learning.synthetic import SyntheticSystem
-from zeus_ros.offline.diagnostics import (
+from zeus_ros.offline.evaluation.diagnostics import (
     context_sensitivity,
     extreme_indices,
     farthest_extreme,
     spread_over_noise,
 )
-from zeus_ros.offline.evaluate import Trace, parse_values, switching_order
-from zeus_ros.offline.report import headroom_rows
+from zeus_ros.offline.evaluation.evaluate import Trace, parse_values, switching_order
+from zeus_ros.offline.evaluation.report import headroom_rows
 
 torch.set_num_threads(1)
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import subprocess
 
 from zeus_ros.demo import DEFAULT_TASK, default_checkpoint
-from zeus_ros.offline.metrics import read_csv
+from zeus_ros.offline.evaluation.metrics import read_csv
 
 from ros_harness import fresh_domain_id, python_module, require_ros, ros_environment
 

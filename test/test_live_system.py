@@ -28,8 +28,8 @@ def test_three_nodes_act_on_every_step_and_the_bag_trains(
 
     from zeus_ros.learning.agent import make_agent
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.ingest import ingest_bags
-    from zeus_ros.offline.replay import ReplayBuffer
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.data.replay import ReplayBuffer
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
@@ -162,8 +162,8 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
 def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
         ros_processes: ProcessGroup, tmp_path) -> None:
     """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays."""
-    from zeus_ros.offline import collect
-    from zeus_ros.offline.ingest import ingest_bags
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.training import collect
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'live'

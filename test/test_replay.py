@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from zeus_ros.offline.ingest import Dataset, Episode, IngestReport
-from zeus_ros.offline.replay import ReplayBuffer
+from zeus_ros.offline.data.ingest import Dataset, Episode, IngestReport
+from zeus_ros.offline.data.replay import ReplayBuffer
 
 OBS_DIM = 3
 ACT_DIM = 2

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from zeus_ros.offline.metrics import read_csv, write_csv
-from zeus_ros.offline.report import aggregate, main, per_run, wall_time_table
-from zeus_ros.offline.run_state import mark_evaluated, mark_trained, read_state
+from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
+from zeus_ros.offline.evaluation.report import main, per_method, per_run, wall_time_table
+from zeus_ros.offline.training.run_state import mark_evaluated, mark_trained, read_state
 
 
 def _run(folder: Path, name: str, returns: dict[str, float], *, train: int,
@@ -36,7 +36,7 @@ def test_report_means_standard_errors_and_wall_times(tmp_path: Path,
     _run(folder, 'no_context_s0', {'train': 90.0}, train=120)
     (folder / 'no_context_s0' / 'eval_train' / '.done').unlink()  # still running: left out
 
-    rows = aggregate(folder)
+    rows = per_method(folder)
     assert [(r['method'], r['split'], r['seeds']) for r in rows] == [
         ('zeus', 'train', 2), ('zeus', 'extrapolation', 2)]
     assert rows[0]['mean_return'] == pytest.approx(150.0)
@@ -104,3 +104,33 @@ def test_an_unreadable_state_file_is_one_clear_error(tmp_path: Path,
     assert main(['--folder', str(tmp_path / 'exp'), '--out', str(tmp_path / 'out')]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and 'zeus_s0/state.json: unreadable run state' in err
+
+
+def test_the_scripts_state_command_line_reads_old_markers_and_continued_runs(
+        tmp_path: Path) -> None:
+    """`python -m ...run_state` as experiments/run_one.sh and run_queue.sh call it."""
+    import subprocess
+    import sys
+
+    def state(*args: object) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, '-m', 'zeus_ros.offline.training.run_state',
+                               *map(str, args)], capture_output=True, text=True, check=False,
+                              timeout=60)
+
+    _run(tmp_path, 'old_s0', {'train': 1.0}, train=156)  # finished under the old markers
+    old = tmp_path / 'old_s0'
+    assert state('done', old).returncode == 0 and state('done', old, 'train').returncode == 0
+    assert state('done', old, 'extrapolation').returncode == 1
+    assert state('seconds', old).stdout == '156\n'
+    longer = tmp_path / 'longer_s0'  # a longer run continuing old_s0: not trained until marked
+    assert state('mark-continued', longer, 156).returncode == 0
+    assert state('done', longer).returncode == 1 and state('seconds', longer).stdout == '\n'
+    assert state('mark-trained', longer, 400).returncode == 0
+    assert state('mark-evaluated', longer, 'train', 12).returncode == 0
+    assert state('done', longer, 'train').returncode == 0
+    assert (read_state(longer).train_seconds, read_state(longer).earlier_train_seconds) == (
+        400.0, 156.0)
+    (longer / 'state.json').write_text('{"train": ')
+    broken = state('done', longer)
+    assert broken.returncode == 2 and len(broken.stderr.splitlines()) == 1
+    assert 'state.json: unreadable run state' in broken.stderr

@@ -12,7 +12,6 @@ from collections.abc import Iterator
 import json
 import math
 from pathlib import Path
-import random
 import signal
 import sys
 
@@ -21,7 +20,15 @@ import pytest
 import yaml
 
 from live_fixtures import node
-from ros_harness import REPO, ProcessGroup, driver_node, python_module, require_ros, spin_until
+from ros_harness import (
+    REPO,
+    ProcessGroup,
+    driver_node,
+    fresh_domain_id,
+    python_module,
+    require_ros,
+    spin_until,
+)
 
 pytestmark = pytest.mark.ros
 PARAMS = REPO / 'params' / 'robot_bridge.yaml'
@@ -40,7 +47,7 @@ ACTION_TO_CONTROLLER = [1, 0]
 def robot_processes() -> Iterator[ProcessGroup]:
     """A process group on a domain of this issue's range (180-199), always cleaned up."""
     require_ros()
-    group = ProcessGroup(domain_id=random.SystemRandom().randint(180, 199))
+    group = ProcessGroup(domain_id=fresh_domain_id())
     try:
         yield group
     finally:
@@ -86,7 +93,7 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
 
 def zeus_train(bags: list[Path], out: Path, tmp: Path) -> Path:
     """A tiny `zeus train` run on the bags (the robot's task from its params file)."""
-    from zeus_ros.offline.train import main as train
+    from zeus_ros.offline.training.train import main as train
 
     config = tmp / 'tiny.yaml'
     config.write_text(yaml.safe_dump(TINY))
@@ -112,7 +119,7 @@ def read_bag(bag: Path) -> dict[str, dict[int, object]]:
 def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
                                                  tmp_path: Path) -> None:
     """Random policy records, the bag trains, the checkpoint drives the robot 300 steps."""
-    from zeus_ros.offline.ingest import ingest_bags
+    from zeus_ros.offline.data.ingest import ingest_bags
 
     bag_a, _ = run_live(robot_processes, tmp_path, 'random', 120, None)
     checkpoint = zeus_train([bag_a], tmp_path / 'run_a', tmp_path)

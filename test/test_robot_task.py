@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-import random
 import subprocess
 
 import numpy as np
@@ -14,7 +13,7 @@ from sim_bridge.registry import is_simulated, make_task, register_task_file
 from sim_bridge.rewards import JointObservation, load_reward
 from sim_bridge.robot import RobotSpec, robot_section
 
-from ros_harness import REPO, driver_node, python_module, ros_environment
+from ros_harness import REPO, driver_node, fresh_domain_id, python_module, ros_environment
 
 PARAMS = REPO / 'params' / 'robot_bridge.yaml'
 
@@ -96,7 +95,7 @@ def test_command_messages_follow_the_controllers_order() -> None:
     from zeus_ros.nodes.robot_io import CommandPublisher, hold_positions, parse_safe_command
 
     action = np.asarray([0.25, -0.5])
-    with driver_node(random.SystemRandom().randint(180, 199)) as node:
+    with driver_node(fresh_domain_id()) as node:
         array = CommandPublisher(node, 'float64_multi_array', 'a', ['shoulder', 'elbow'],
                                  ['elbow', 'shoulder'], [], 0.02).message(action)
         assert list(array.data) == [-0.5, 0.25]
@@ -130,7 +129,7 @@ def test_the_node_refuses_a_bad_params_file_in_one_line() -> None:
     argv = [*python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args', '--params-file',
             str(PARAMS), '-p', 'reward:=velocity:knee']
     result = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, timeout=60,
-                            env=ros_environment(random.SystemRandom().randint(180, 199)))
+                            env=ros_environment(fresh_domain_id()))
     assert result.returncode == 2, result.stderr
     assert "error: reward velocity:knee: no joint 'knee'" in result.stderr
     assert 'Traceback' not in result.stderr

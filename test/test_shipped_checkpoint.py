@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.evaluate import evaluate_contexts
+from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
 
 CHECKPOINT = Path(__file__).resolve().parents[1] / 'checkpoints' / 'cheetah_run_v0_zeus_state.pt'
 VALUES = [{'torso_length': 0.75}, {'torso_length': 1.0}, {'torso_length': 1.15}]
@@ -56,7 +56,7 @@ def test_zeus_eval_reproduces_the_results_table_from_a_shipped_checkpoint(tmp_pa
 
     import torch
 
-    from zeus_ros.offline.evaluate import evaluate
+    from zeus_ros.offline.evaluation.evaluate import evaluate
 
     torch.set_num_threads(1)
     result = evaluate(COMPARISON / 'cheetah_run_v0_10k' / 'zeus_s0.pt', split='train',
@@ -76,7 +76,7 @@ def test_an_issue10_checkpoint_reproduces_its_card(tmp_path: Path) -> None:
 
     import torch
 
-    from zeus_ros.offline.evaluate import evaluate
+    from zeus_ros.offline.evaluation.evaluate import evaluate
 
     torch.set_num_threads(1)
     path = ROOT / 'checkpoints' / 'issue10' / 'scale_free_only' / 'cheetah_run_v1_10k'

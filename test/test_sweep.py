@@ -24,10 +24,10 @@ import yaml
 
 from zeus_ros.cli import main as zeus_main
 from zeus_ros.learning.config import config_from_dict
-from zeus_ros.offline.run_state import read_state
-from zeus_ros.offline.sweep import main as sweep_main
-from zeus_ros.offline.sweep import parse_seeds, parse_sets, plan, run_sweep
-from zeus_ros.offline.trial import LoopProtocol, trial_steps
+from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.training.sweep import main as sweep_main
+from zeus_ros.offline.training.sweep import parse_seeds, parse_sets, plan, run_sweep
+from zeus_ros.offline.training.trial import LoopProtocol, trial_steps
 
 torch.set_num_threads(1)  # as the trials' OMP_NUM_THREADS=1
 TASK = 'Cheetah-Run-v1'
@@ -46,7 +46,7 @@ FLAGS = ['--rounds', '1', '--random-steps', '100', '--updates', '30', '--eval-ep
 def ray_session() -> Iterator[None]:
     """One local Ray instance for the module (starting one takes 5-15 s)."""
     ray = pytest.importorskip('ray')
-    from zeus_ros.offline.ray_runtime import start_ray
+    from zeus_ros.offline.training.ray_runtime import start_ray
 
     assert start_ray(num_cpus=2)
     try:
@@ -201,7 +201,7 @@ def test_collect_workers_as_ray_tasks_equal_sequential_collections(ray_session: 
                                                                    tmp_path: Path) -> None:
     from test_collect_workers import COMMON, SEED, STEPS, assert_same_data, sequential_bags
 
-    from zeus_ros.offline import collect
+    from zeus_ros.offline.training import collect
 
     out = tmp_path / 'ray'
     assert collect.main([*COMMON, '--steps', str(STEPS), '--seed', str(SEED), '--out', str(out),

@@ -47,10 +47,10 @@ def test_walker_friction_as_a_task_file_matches_the_class_step_for_step() -> Non
 
 def test_the_example_task_collects_trains_and_evaluates(tmp_path: Path) -> None:
     """`zeus collect` / `train` / `eval` with --task-file on the shipped payload point mass."""
-    from zeus_ros.offline.collect import main as collect
-    from zeus_ros.offline.evaluate import main as evaluate
-    from zeus_ros.offline.ingest import ingest_bags
-    from zeus_ros.offline.train import main as train
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.evaluation.evaluate import main as evaluate
+    from zeus_ros.offline.training.collect import main as collect
+    from zeus_ros.offline.training.train import main as train
 
     bags = tmp_path / 'bags'
     assert collect(['--task-file', str(PAYLOAD), '--steps', '300', '--schedule',
@@ -169,17 +169,15 @@ def test_a_bad_observation_or_reward_is_found_when_the_file_is_read(tmp_path: Pa
 @pytest.mark.ros
 def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> None:
     """The same file for the node: steps carry the declared name and context."""
-    import random
-
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
     from zeus_ros.nodes.common import step_qos
 
     from live_fixtures import node
-    from ros_harness import ProcessGroup, driver_node, require_ros, spin_until
+    from ros_harness import ProcessGroup, driver_node, fresh_domain_id, require_ros, spin_until
 
     require_ros()
-    group = ProcessGroup(domain_id=random.SystemRandom().randint(180, 199))
+    group = ProcessGroup(domain_id=fresh_domain_id())
     seen: dict[int, str] = {}
     try:
         with driver_node(group.domain_id) as driver:

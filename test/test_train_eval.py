@@ -14,10 +14,10 @@ import yaml
 
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.config import load_config
-from zeus_ros.offline import collect
-from zeus_ros.offline.metrics import read_csv
-from zeus_ros.offline.run_state import read_state
-from zeus_ros.offline.train import TrainError, train
+from zeus_ros.offline.evaluation.metrics import read_csv
+from zeus_ros.offline.training import collect
+from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.training.train import TrainError, train
 
 TASK = 'Cheetah-Run-v0'
 TINY = {
@@ -96,7 +96,7 @@ def test_checkpoint_carries_data_normalisation_and_task_bounds(trained: Any) -> 
 def test_resume_continues_step_count_and_optimizer(trained: Any, bags: Path,
                                                   tiny_config: Path, tmp_path: Path) -> None:
     """--resume goes on from the checkpoint's step with its optimizer state."""
-    from zeus_ros.offline.train import main
+    from zeus_ros.offline.training.train import main
 
     run = tmp_path / 'run'
     shutil.copytree(trained.out, run)
@@ -137,7 +137,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
                                                             capsys: pytest.CaptureFixture
                                                             ) -> None:
     """The eval command writes CSV/PNG, prints a table, reports Spearman rho in [-1, 1]."""
-    from zeus_ros.offline.evaluate import main
+    from zeus_ros.offline.evaluation.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--task', TASK,
@@ -177,7 +177,7 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                                                                 capsys: pytest.CaptureFixture
                                                                 ) -> None:
     """--values: any torso lengths, several episodes each; live vs frozen on the same seeds."""
-    from zeus_ros.offline.evaluate import main
+    from zeus_ros.offline.evaluation.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.65,1.4',
@@ -203,8 +203,8 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
 
 def test_probe_beats_predicting_the_mean() -> None:
     """On random-policy Cheetah data the probe's held-out MSE is below the mean predictor's."""
-    from zeus_ros.offline.evaluate import random_rollout, split_values
-    from zeus_ros.offline.probe import probe_context
+    from zeus_ros.offline.evaluation.evaluate import random_rollout, split_values
+    from zeus_ros.offline.evaluation.probe import probe_context
 
     values = split_values(TASK, 'train')
     rollout = random_rollout(TASK, values, 3000, every=50, seed=1, progress=False)
@@ -214,8 +214,8 @@ def test_probe_beats_predicting_the_mean() -> None:
 
 def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) -> None:
     """Two rounds: random bag + fresh training, then an agent bag + resumed training."""
-    from zeus_ros.offline.collect import parse_schedule
-    from zeus_ros.offline.loop import run_loop
+    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.training.loop import run_loop
 
     results = run_loop(TASK, load_config(tiny_config), tmp_path, rounds=2, random_steps=300,
                        steps=200, updates=30, noise=0.2,
@@ -229,7 +229,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
 def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,
                                                   tmp_path: Path) -> None:
     """`zeus export` writes a small checkpoint + card; training refuses to resume from it."""
-    from zeus_ros.offline.export import main as export_main
+    from zeus_ros.offline.evaluation.export import main as export_main
 
     target = tmp_path / 'ship' / 'zeus_s0.pt'
     assert export_main(['--checkpoint', str(trained.out / 'final.pt'), '--out',
@@ -258,8 +258,8 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
                                                              ) -> None:
     """Two seeds of a method -> per-run evals, a resumable batch, mean ± s.e. tables."""
     from zeus_ros.learning.checkpoint import save_checkpoint
-    from zeus_ros.offline.evaluate import main
-    from zeus_ros.offline.report import aggregate
+    from zeus_ros.offline.evaluation.evaluate import main
+    from zeus_ros.offline.evaluation.report import per_method
 
     first = load_checkpoint(trained.out / 'final.pt')
     ships = tmp_path / 'ship'
@@ -275,7 +275,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
     runs = out / f'cheetah_run_v0_{first.step}'
     for seed in (0, 1):
         assert 'interpolation' in read_state(runs / f'zeus_s{seed}').evaluated
-    rows = aggregate(runs)
+    rows = per_method(runs)
     assert len(rows) == 1 and rows[0]['seeds'] == 2 and rows[0]['split'] == 'interpolation'
     assert rows[0]['mean_return_se'] == pytest.approx(0.0, abs=1e-6)  # same weights twice
     assert (runs / 'returns.png').is_file() and (runs / 'summary.csv').is_file()
@@ -289,7 +289,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
 
 def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) -> None:
     """--resume adds rounds to a finished loop without recollecting or retraining old ones."""
-    from zeus_ros.offline.loop import main as loop_main
+    from zeus_ros.offline.training.loop import main as loop_main
 
     argv = ['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
             '--random-steps', '300', '--steps', '200', '--updates', '20', '--no-eval',
@@ -306,7 +306,7 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
 def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path,
                                                    tmp_path: Path) -> None:
     """`zeus train --set k=3 batch_size=32`: the run is trained with (and records) those values."""
-    from zeus_ros.offline.train import main
+    from zeus_ros.offline.training.train import main
 
     out = tmp_path / 'run'
     assert main(['--bags', str(bags), '--config', str(tiny_config), '--out', str(out),
@@ -322,7 +322,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
         tiny_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
     """--resume needs only --out and --rounds (flags from OUT/loop.json); time_s adds up."""
-    from zeus_ros.offline.loop import main as loop_main
+    from zeus_ros.offline.training.loop import main as loop_main
 
     assert loop_main(['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
                       '--rounds', '1', '--random-steps', '300', '--steps', '200',
@@ -347,7 +347,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
 
 
 def _trace(reward: list[float], context: list[float], segment: list[int]) -> Any:
-    from zeus_ros.offline.evaluate import Trace
+    from zeus_ros.offline.evaluation.evaluate import Trace
 
     n = len(reward)
     first = np.zeros(n, bool)
@@ -360,7 +360,7 @@ def _trace(reward: list[float], context: list[float], segment: list[int]) -> Any
 
 def test_adaptation_latency_counts_steps_back_to_steady_and_skips_zero_reward() -> None:
     """Latency = steps until the 10-step mean is within 10% of steady; no latency for r = 0."""
-    from zeus_ros.offline.evaluate import adaptation_latencies
+    from zeus_ros.offline.evaluation.evaluate import adaptation_latencies
 
     # 30 steps at context 1 (reward 1), then context 2: 5 bad steps, then reward 2 for 45 steps.
     reward = [1.0] * 30 + [0.0] * 5 + [2.0] * 45
@@ -374,16 +374,58 @@ def test_adaptation_latency_counts_steps_back_to_steady_and_skips_zero_reward() 
     assert adaptation_latencies(_trace(reward, context, segment), {(2.0,): 0.0}) == []
 
 
-def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
-    """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
+def _experiment(name: str) -> Any:
+    """The module experiments/<name>.py (a script, not a package)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / 'experiments' / 'context_scale.py'
-    spec = importlib.util.spec_from_file_location('context_scale', path)
+    path = Path(__file__).resolve().parents[1] / 'experiments' / f'{name}.py'
+    spec = importlib.util.spec_from_file_location(name, path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    row = module.context_scale(trained.out / 'final.pt', 'interpolation')
+    return module
+
+
+def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
+    """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
+    row = _experiment('context_scale').context_scale(trained.out / 'final.pt', 'interpolation')
     assert row['method'] == 'zeus' and row['split'] == 'interpolation'
     assert row['spread'] > 0 and row['noise'] >= 0 and row['norm'] > 0
     assert np.isfinite([row['spread'], row['noise'], row['norm']]).all()
+
+
+def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """experiments/collection_curves.py: only trained runs (state.json or old marker).
+
+    Methods with the very same curve each keep their own marker and dash.
+    """
+    import sys
+
+    from matplotlib.figure import Figure
+
+    from zeus_ros.offline.training.run_state import mark_trained
+
+    folder = tmp_path / 'task'
+    bag = next(bags.glob('bag_*'))
+    for name, round_ in itertools.product(('zeus_s0', 'no_context_s0', 'oracle_s0',
+                                           'unfinished_s0'), range(3)):
+        shutil.copytree(bag, folder / name / 'bags' / f'bag_{round_:03d}')  # three rounds
+    mark_trained(folder / 'zeus_s0', 12.0)
+    for name in ('no_context_s0', 'oracle_s0'):
+        (folder / name / '.done_train').write_text('12\n')  # runs of experiments/run_one.sh
+    module = _experiment('collection_curves')
+    figures: list[Figure] = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, 'savefig',
+                        lambda fig, *a, **k: (figures.append(fig), save(fig, *a, **k))[1])
+    monkeypatch.setattr(sys, 'argv', ['collection_curves', str(folder), '--out',
+                                      str(tmp_path / 'out')])
+    module.main()
+    rows = read_csv(tmp_path / 'out' / 'collection.csv')
+    assert sorted({r['method'] for r in rows}) == ['no_context', 'oracle', 'zeus']
+    assert len(rows) == 9 and len({r['reward_per_step'] for r in rows}) == 1
+    lines = [line for line in figures[0].axes[0].get_lines() if line.get_linestyle() != 'None']
+    assert len(lines) == 3  # the curves, not the error-bar caps
+    assert len({(line.get_marker(), line.get_linestyle()) for line in lines}) == 3
+    assert (tmp_path / 'out' / 'collection.png').stat().st_size > 10_000

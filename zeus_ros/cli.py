@@ -10,17 +10,19 @@ import importlib
 import sys
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    'collect': ('zeus_ros.offline.collect', 'run a task in-process and write bags (no ROS)'),
-    'ingest': ('zeus_ros.offline.ingest', 'read bags as training does; report what they hold'),
-    'train': ('zeus_ros.offline.train', 'train a checkpoint from bags'),
-    'eval': ('zeus_ros.offline.evaluate', 'evaluate checkpoints in-process (+ tables)'),
-    'report': ('zeus_ros.offline.report', 'mean ± s.e. over seeds of evaluations'),
-    'export': ('zeus_ros.offline.export', 'small deployment checkpoint + card'),
-    'loop': ('zeus_ros.offline.loop', 'random collection -> train -> collect -> retrain'),
-    'sweep': ('zeus_ros.offline.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
+    'collect': ('zeus_ros.offline.training.collect',
+                'run a task in-process and write bags (no ROS)'),
+    'ingest': ('zeus_ros.offline.data.ingest',
+               'read bags as training does; report what they hold'),
+    'train': ('zeus_ros.offline.training.train', 'train a checkpoint from bags'),
+    'eval': ('zeus_ros.offline.evaluation.evaluate', 'evaluate checkpoints in-process (+ tables)'),
+    'report': ('zeus_ros.offline.evaluation.report', 'mean ± s.e. over seeds of evaluations'),
+    'export': ('zeus_ros.offline.evaluation.export', 'small deployment checkpoint + card'),
+    'loop': ('zeus_ros.offline.training.loop', 'random collection -> train -> collect -> retrain'),
+    'sweep': ('zeus_ros.offline.training.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
-    'inspect': ('zeus_ros.inspect', 'live view of the context topics (subscribe only)'),
-    'recover': ('zeus_ros.offline.recover', 'restore a bag cut off by a crash'),
+    'inspect': ('zeus_ros.inspector', 'live view of the context topics (subscribe only)'),
+    'recover': ('zeus_ros.offline.data.recover', 'restore a bag cut off by a crash'),
     'demo': ('zeus_ros.demo', 'the live demo of the README'),
 }
 

@@ -25,10 +25,10 @@ import numpy as np
 
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
-from zeus_ros.inspect import Inspector, write_csv
-from zeus_ros.inspection import format_segments, percentile, plot_inspection
+from zeus_ros.inspector import Inspector
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
+from zeus_ros.step_log import format_segments, percentile, plot_inspection
 
 DEMO_CHECKPOINTS = {
     'Cheetah-Run-v0': 'cheetah_run_v0_zeus_state.pt',
@@ -191,7 +191,7 @@ def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
     """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.learning.methods import method_spec
-    from zeus_ros.offline.readout import (
+    from zeus_ros.offline.evaluation.readout import (
         calibrate_readout,
         readout_from_checkpoint_bytes,
         store_readout,
@@ -271,7 +271,7 @@ def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str],
           f'({len(log.records) / max(wall, 1e-9):.1f} steps/s incl. start-up); '
           f'observation->action latency p50 {percentile(latency, 50):.2f} ms, '
           f'p99 {percentile(latency, 99):.2f} ms')
-    print(f'[demo] per-step log: {write_csv(log, out / "steps.csv")}')
+    print(f'[demo] per-step log: {log.save_csv(out / "steps.csv")}')
     print(f'[demo] figure: {plot_inspection(log, out / "inspection.png", f"zeus demo ({label})")}')
     return log, failed
 

@@ -21,11 +21,12 @@ import yaml
 
 from zeus_ros.learning.checkpoint import load_checkpoint, nonfinite_tensors, save_checkpoint
 from zeus_ros.learning.errors import CheckpointError
-from zeus_ros.offline import collect, export, train
-from zeus_ros.offline.bag_writer import StepBagWriter
-from zeus_ros.offline.errors import IngestError
-from zeus_ros.offline.ingest import IngestWarning, ingest_bags
-from zeus_ros.offline.schema import TOPIC_ACTION, TOPIC_STATE, TOPIC_STEP, codec
+from zeus_ros.offline.data.bag_errors import IngestError
+from zeus_ros.offline.data.bag_writer import StepBagWriter
+from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
+from zeus_ros.offline.data.schema import TOPIC_ACTION, TOPIC_STATE, TOPIC_STEP, codec
+from zeus_ros.offline.evaluation import export
+from zeus_ros.offline.training import collect, train
 
 from ros_harness import REPO, fresh_domain_id, ros_environment
 
@@ -245,7 +246,7 @@ def test_every_offline_load_refuses_a_nan_checkpoint_in_one_line(
     with pytest.raises(CheckpointError, match=r'refused: 1 of \d+ tensors hold NaN/Inf '
                        r'\(first: modules\.actor\.'):
         load_checkpoint(bad)
-    from zeus_ros.offline import evaluate
+    from zeus_ros.offline.evaluation import evaluate
 
     for main, argv in (
             (export.main, ['--checkpoint', str(bad), '--out', str(tmp_path / 'x.pt')]),

@@ -12,7 +12,7 @@ import time
 import pytest
 import yaml
 
-from zeus_ros.offline.ingest import ingest_bags
+from zeus_ros.offline.data.ingest import ingest_bags
 
 from ros_harness import REPO
 

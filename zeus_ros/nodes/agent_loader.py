@@ -18,7 +18,7 @@ import torch
 from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.readout import ContextReadout, NoveltyMonitor, stored_monitors
+from zeus_ros.offline.evaluation.readout import ContextReadout, NoveltyMonitor, stored_monitors
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 

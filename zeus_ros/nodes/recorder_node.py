@@ -37,15 +37,15 @@ from zeus_ros.nodes.common import (
     step_qos,
 )
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
-from zeus_ros.offline.durable import DurableBagWriter
-from zeus_ros.offline.errors import BagError
-from zeus_ros.offline.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
-from zeus_ros.offline.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE
+from zeus_ros.offline.data.bag_errors import BagError
+from zeus_ros.offline.data.durable import DurableBagWriter
+from zeus_ros.offline.data.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
+from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration
 
-    from zeus_ros.offline.bag_writer import Storage
+    from zeus_ros.offline.data.bag_writer import Storage
 
 STORAGES = ('mcap', 'sqlite3')
 MAX_FLUSH_PERIOD_S = 60.0

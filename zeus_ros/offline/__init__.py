@@ -1,1 +1,1 @@
-"""Bags in, checkpoints out: collection, ingest, replay, training and evaluation (no ROS)."""
+"""Bags in, checkpoints out (no ROS): data/ (bags), training/ (runs), evaluation/ (results)."""

@@ -251,8 +251,7 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
     `agent` is an InferenceAgent with a learned context. Only steps with a full history count
     (what the estimator publishes once an episode is k steps old).
     """
-    from zeus_ros.offline.collect import AgentPolicy
-    from zeus_ros.offline.evaluate import (
+    from zeus_ros.offline.evaluation.evaluate import (
         _make_env,
         _switch_schedule,
         default_switch_every,
@@ -260,6 +259,7 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
         split_values,
         switching_order,
     )
+    from zeus_ros.offline.training.collect import AgentPolicy
 
     values = switching_order(split_values(agent.task, 'train'), seed)
     # Short enough that every value comes back at least twice (one of them can be held back),

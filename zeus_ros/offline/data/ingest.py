@@ -33,8 +33,8 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.errors import BagError, IngestError
-from zeus_ros.offline.schema import (
+from zeus_ros.offline.data.bag_errors import BagError, IngestError
+from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,

@@ -26,9 +26,9 @@ import sys
 import time
 from typing import Any
 
-from zeus_ros.offline.collect_workers import portable_task
-from zeus_ros.offline.run_state import RunStateError
-from zeus_ros.offline.trial import (
+from zeus_ros.offline.training.collect_workers import portable_task
+from zeus_ros.offline.training.run_state import RunStateError
+from zeus_ros.offline.training.trial import (
     LoopProtocol,
     Trial,
     TrialError,
@@ -176,7 +176,7 @@ def run_sweep(trials: Sequence[Trial], *, address: str | None = None,
     """
     import ray
 
-    from zeus_ros.offline.ray_runtime import start_ray
+    from zeus_ros.offline.training.ray_runtime import start_ray
 
     result = SweepResult()
     for trial in trials:
@@ -269,7 +269,7 @@ class _StartedNames:
 
 def write_tables(trials: Iterable[Trial], out: Path) -> str:
     """`zeus report` of every group with a finished evaluation; <out>/tables.md; its text."""
-    from zeus_ros.offline.report import markdown_table, write_report
+    from zeus_ros.offline.evaluation.report import markdown_table, write_report
 
     sections = []
     for group in dict.fromkeys(t.group for t in trials):
@@ -352,7 +352,7 @@ def _build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus sweep`; returns 0, 1 (a trial failed) or 2 (bad input)."""
     from zeus_ros.learning.errors import ConfigError
-    from zeus_ros.offline.train import read_config
+    from zeus_ros.offline.training.train import read_config
 
     args = _build_parser().parse_args(argv)
     try:

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    'SeenStep',
     'SegmentSummary',
     'StepLog',
-    'StepRecord',
     'format_segments',
     'percentile',
     'plot_inspection',
@@ -20,7 +20,7 @@ __all__ = [
 
 
 @dataclass
-class StepRecord:
+class SeenStep:
     """Everything seen about one control step."""
 
     step: int
@@ -72,15 +72,15 @@ class StepLog:
     """Step records keyed by step index, in arrival order of their parts."""
 
     context_names: tuple[str, ...] = ()
-    records: dict[int, StepRecord] = field(default_factory=dict)
+    records: dict[int, SeenStep] = field(default_factory=dict)
 
-    def record(self, step: int) -> StepRecord:
+    def record(self, step: int) -> SeenStep:
         """The record of `step`, created on first use."""
         if step not in self.records:
-            self.records[step] = StepRecord(step)
+            self.records[step] = SeenStep(step)
         return self.records[step]
 
-    def ordered(self) -> list[StepRecord]:
+    def ordered(self) -> list[SeenStep]:
         """Records sorted by step index."""
         return [self.records[key] for key in sorted(self.records)]
 
@@ -91,7 +91,7 @@ class StepLog:
         o_k), so it is credited to that segment; reset observations earn nothing.
         """
         summaries: list[SegmentSummary] = []
-        current: list[StepRecord] = []
+        current: list[SeenStep] = []
 
         def close() -> None:
             if not current:
@@ -123,6 +123,26 @@ class StepLog:
             current.append(record)
         close()
         return summaries
+
+    def save_csv(self, path: Path) -> Path:
+        """One row per step (truth, estimate, novelty, reward, latency, psi), as metric tables."""
+        from zeus_ros.offline.evaluation.metrics import write_csv
+
+        names = self.context_names
+        columns = ['step', 'episode', 'segment', 'first', 'reward',
+                   *[f'true_{n}' for n in names], *[f'estimated_{n}' for n in names],
+                   'novelty', 'novelty_threshold', 'history_length', 'latency_ms', 'psi']
+        rows = []
+        for r in self.ordered():
+            row = {'step': r.step, 'episode': r.episode, 'segment': r.segment,
+                   'first': int(r.first), 'reward': r.reward,
+                   'history_length': r.history_length, 'latency_ms': r.latency_ms,
+                   'psi': None if r.estimate is None else ' '.join(f'{v:.5g}' for v in r.estimate)}
+            row.update(zip((f'true_{n}' for n in names), r.truth or (), strict=False))
+            row.update(zip((f'estimated_{n}' for n in names), r.readout or (), strict=False))
+            row.update(zip(('novelty', 'novelty_threshold'), r.novelty or (), strict=False))
+            rows.append(row)
+        return write_csv(path, rows, columns)
 
     def latencies_ms(self) -> np.ndarray:
         """All measured observation-to-action latencies."""

@@ -19,6 +19,7 @@ __all__ = [
     'MetricsLog',
     'RunningMean',
     'format_table',
+    'overlap_style',
     'plot_bars',
     'plot_grouped_lines',
     'plot_heatmaps',
@@ -134,6 +135,18 @@ OVERLAP_STYLES = ('-', '--', '-.', ':')
 """Marker and dash per line of one plot, so coinciding lines stay distinguishable."""
 
 
+def overlap_style(index: int, count: int) -> dict[str, Any]:
+    """Matplotlib line keywords for line `index` of `count`, so lines that coincide stay visible.
+
+    Each line gets its own marker and dash, and later lines are drawn thinner with smaller
+    markers on top of the earlier ones (e.g. several methods at return 0).
+    """
+    share = index / max(count, 1)
+    return {'marker': OVERLAP_MARKERS[index % len(OVERLAP_MARKERS)], 'ms': 7 - 4 * share,
+            'ls': OVERLAP_STYLES[index % len(OVERLAP_STYLES)], 'lw': 2.2 - 1.4 * share,
+            'alpha': 0.85}
+
+
 def _pyplot() -> Any:
     """Matplotlib with the file-only backend (no display on robots and CI)."""
     import matplotlib
@@ -191,11 +204,7 @@ def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, gro
     for index, key in enumerate(keys):
         points = sorted(groups[key])
         color = cmap(index / max(len(keys) - 1, 1))
-        # Lines that coincide (e.g. several at return 0) stay visible: each its own dash and
-        # marker, drawn thinner on top of the ones before.
-        ax.plot(*zip(*points, strict=True), marker=OVERLAP_MARKERS[index % len(OVERLAP_MARKERS)],
-                ms=7 - 4 * index / max(len(keys), 1), ls=OVERLAP_STYLES[index % 4],
-                lw=2.2 - 1.4 * index / max(len(keys), 1), color=color, alpha=0.85,
+        ax.plot(*zip(*points, strict=True), color=color, **overlap_style(index, len(keys)),
                 label=f'{group}={key:g}' if isinstance(key, float) else f'{group}={key}')
     ax.set_xlabel('update' if x == 'step' else x)
     ax.set_ylabel(ylabel or y)

@@ -25,7 +25,7 @@ from rosbags.interfaces import (
 )
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from zeus_ros.offline.errors import SchemaError
+from zeus_ros.offline.data.bag_errors import SchemaError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -109,7 +109,7 @@ ACTION_STATUS_NONE = 0
 def find_msg_dir() -> Path:
     """Directory holding the zeus_msgs .msg files: this checkout, else an ament share dir."""
     tried: list[str] = []
-    repo_dir = Path(__file__).resolve().parents[2] / 'msg_defs' / 'msg'
+    repo_dir = Path(__file__).resolve().parents[3] / 'msg_defs' / 'msg'
     candidates = [repo_dir]
     for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
         if prefix:

@@ -23,8 +23,8 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from ruamel.yaml import YAML
 
-from zeus_ros.offline.errors import BagError
-from zeus_ros.offline.schema import (
+from zeus_ros.offline.data.bag_errors import BagError
+from zeus_ros.offline.data.schema import (
     MSGTYPES,
     OFFERED_QOS,
     TOPIC_ACTION,
@@ -42,10 +42,18 @@ if TYPE_CHECKING:
 
     from rosbags.interfaces import Connection, Qos
 
-    from zeus_ros.offline.schema import StepFeedbackFields
+    from zeus_ros.offline.data.schema import StepFeedbackFields
 
-__all__ = ['BAG_VERSION', 'ROS_DISTRO', 'JazzyWriter', 'QosSource', 'StepBagWriter', 'StepRecord',
-           'Storage', 'jazzy_metadata']
+__all__ = [
+    'BAG_VERSION',
+    'ROS_DISTRO',
+    'JazzyWriter',
+    'QosSource',
+    'SimStep',
+    'StepBagWriter',
+    'Storage',
+    'jazzy_metadata',
+]
 
 Storage = Literal['mcap', 'sqlite3']
 BAG_VERSION: Literal[9] = 9
@@ -90,7 +98,7 @@ class JazzyWriter(Writer):
 
 
 @dataclass(frozen=True)
-class StepRecord:
+class SimStep:
     """What the simulator publishes for control step `step` (one header stamp for all)."""
 
     step: int
@@ -175,7 +183,7 @@ class StepBagWriter:
         """Bag time of simulation time `sim_ns`: counted from the run's wall-clock start."""
         return self.start_ns + int(sim_ns)
 
-    def write_step(self, rec: StepRecord, *, log_ns: int | None = None) -> None:
+    def write_step(self, rec: SimStep, *, log_ns: int | None = None) -> None:
         """Write /clock, /zeus/context_truth, the frame, /zeus/step and the state of one step.
 
         `log_ns` (default: the stamp) is simulation time; the bag stores `bag_time(log_ns)`.

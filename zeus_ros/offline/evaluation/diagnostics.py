@@ -24,7 +24,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluate import Trace
+    from zeus_ros.offline.evaluation.evaluate import Trace
 
 __all__ = ['DIAGNOSTICS', 'context_sensitivity', 'extreme_indices', 'farthest_extreme',
            'policy_contexts', 'spread_over_noise']

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from zeus_ros.inspect import write_csv
-from zeus_ros.inspection import StepLog, format_segments, plot_inspection
+from zeus_ros.step_log import StepLog, format_segments, plot_inspection
 
 
 def make_log() -> StepLog:
@@ -37,6 +36,6 @@ def test_latency_and_outputs(tmp_path) -> None:
     """Latency comes from receipt times; the CSV has a row per step and the PNG is written."""
     log = make_log()
     np.testing.assert_allclose(log.latencies_ms(), 2.0, rtol=1e-6)
-    rows = write_csv(log, tmp_path / 'steps.csv').read_text().splitlines()
+    rows = log.save_csv(tmp_path / 'steps.csv').read_text().splitlines()
     assert len(rows) == 21 and rows[0].startswith('step,episode,segment')
     assert plot_inspection(log, tmp_path / 'fig.png').stat().st_size > 10_000

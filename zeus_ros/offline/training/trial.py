@@ -34,7 +34,7 @@ from typing import Any
 
 import yaml
 
-from zeus_ros.offline.run_state import mark_evaluated, mark_trained, read_state
+from zeus_ros.offline.training.run_state import mark_evaluated, mark_trained, read_state
 
 __all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'recorded_differences',
            'run_trial', 'trial_done', 'trial_steps']

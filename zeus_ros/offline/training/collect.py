@@ -20,13 +20,13 @@ from tqdm import tqdm
 import yaml
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
-from zeus_ros.offline.bag_writer import StepBagWriter, StepRecord
-from zeus_ros.offline.schema import StepFeedbackFields, ns_from_sim_time
+from zeus_ros.offline.data.bag_writer import SimStep, StepBagWriter
+from zeus_ros.offline.data.schema import StepFeedbackFields, ns_from_sim_time
 
 if TYPE_CHECKING:
     from zeus_ros.learning.inference import InferenceAgent
 
-__all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyOutput', 'collect', 'main',
+__all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyDecision', 'collect', 'main',
            'next_bag_path', 'parse_schedule', 'random_policy']
 
 SCHEDULE_HELP = """\
@@ -60,7 +60,7 @@ class CollectStats:
 
 
 @dataclass(frozen=True)
-class PolicyOutput:
+class PolicyDecision:
     """A policy's answer to one step: the action, and psi(H) when it estimates a context."""
 
     action: np.ndarray
@@ -68,8 +68,8 @@ class PolicyOutput:
     history_length: int = 0
 
 
-Policy = Callable[[Any, StepRecord], PolicyOutput]
-"""policy(env_step, step_record) -> PolicyOutput; the record holds the frame when recording."""
+Policy = Callable[[Any, SimStep], PolicyDecision]
+"""policy(env_step, sim_step) -> PolicyDecision; the SimStep holds the frame when recording."""
 
 
 def parse_schedule(text: str) -> dict[str, Any]:
@@ -134,12 +134,12 @@ class _LogClock:
         return self.last
 
 
-def _record(es: Any, task: Any, pixels: bool) -> StepRecord:
-    """The StepRecord the sim_bridge node publishes for one EnvStep."""
+def _record(es: Any, task: Any, pixels: bool) -> SimStep:
+    """The SimStep the sim_bridge node publishes for one EnvStep."""
     obs = es.observation
     applied = es.applied_action
     names = tuple(obs.context)
-    return StepRecord(
+    return SimStep(
         step=int(es.step),
         stamp_ns=ns_from_sim_time(es.sim_time),
         state=obs.state,
@@ -201,7 +201,7 @@ def random_policy(task: Any, seed: int) -> Policy:
     """Uniform actions inside the task's bounds, from a seeded generator."""
     low, high = task.action_bounds
     rng = np.random.default_rng(seed)
-    return lambda _es, _rec: PolicyOutput(rng.uniform(low, high).astype(np.float32))
+    return lambda _es, _rec: PolicyDecision(rng.uniform(low, high).astype(np.float32))
 
 
 class AgentPolicy:
@@ -236,7 +236,7 @@ class AgentPolicy:
         self.frames = FrameStack() if agent.obs_kind == 'pixels' else None
         self._prev: np.ndarray | None = None
 
-    def _observation(self, es: Any, rec: StepRecord) -> np.ndarray:
+    def _observation(self, es: Any, rec: SimStep) -> np.ndarray:
         if self.frames is None:
             return np.asarray(es.observation.state, np.float32)
         if rec.frame is None:
@@ -245,7 +245,7 @@ class AgentPolicy:
             return self.frames.reset(rec.frame)
         return self.frames.push(rec.frame)
 
-    def __call__(self, es: Any, rec: StepRecord) -> PolicyOutput:
+    def __call__(self, es: Any, rec: SimStep) -> PolicyDecision:
         """Update H with the step's transition, estimate psi(H) and act on o_k."""
         obs = self._observation(es, rec)
         if es.observation.first or self._prev is None:
@@ -260,7 +260,7 @@ class AgentPolicy:
             psi = self.frozen_context
         action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
                                 rng=self.rng)
-        return PolicyOutput(action, None if self.agent.needs_true_context else psi,
+        return PolicyDecision(action, None if self.agent.needs_true_context else psi,
                             len(self.history))
 
 
@@ -351,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
         policy = AgentPolicy(agent, noise=args.noise, seed=args.seed)
     if args.workers > 1 or args.ray:  # checked above, collected by the workers
         task.close()
-        from zeus_ros.offline.collect_workers import main_workers
+        from zeus_ros.offline.training.collect_workers import main_workers
 
         return main_workers(args, schedule_config, bag)
     # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.

@@ -22,7 +22,7 @@ from zeus_ros.learning.batch import HistoryBatch
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-    from zeus_ros.offline.ingest import Dataset, Episode
+    from zeus_ros.offline.data.ingest import Dataset, Episode
 
 __all__ = ['FRAME_STACK', 'ReplayBuffer']
 

@@ -30,9 +30,9 @@ from tqdm import tqdm
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
 from zeus_ros.labels import context_label
-from zeus_ros.offline.collect import AgentPolicy, Policy, random_policy
-from zeus_ros.offline.metrics import format_table, plot_heatmaps, write_csv
-from zeus_ros.offline.probe import ProbeResult, Rollout, probe_context
+from zeus_ros.offline.evaluation.metrics import format_table, plot_heatmaps, write_csv
+from zeus_ros.offline.evaluation.probe import ProbeResult, Rollout, probe_context
+from zeus_ros.offline.training.collect import AgentPolicy, Policy, random_policy
 
 __all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
            'evaluate_contexts', 'main', 'mid_episode_switches', 'parse_values', 'run_steps',
@@ -102,7 +102,7 @@ class Trace:
 def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = '',
               progress: bool = True) -> Trace:
     """Drive `env` for `steps` observations with `policy`, as collect.collect does."""
-    from zeus_ros.offline.collect import _record
+    from zeus_ros.offline.training.collect import _record
 
     cols: dict[str, list[Any]] = {k: [] for k in ('reward', 'first', 'context', 'segment',
                                                    'psi', 'hist', 'obs', 'action')}
@@ -313,13 +313,13 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     Cheetah-Run-v1 switches every 10 steps).
     """
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.diagnostics import (
+    from zeus_ros.offline.evaluation.diagnostics import (
         context_sensitivity,
         frozen_contexts,
         policy_contexts,
         spread_over_noise,
     )
-    from zeus_ros.offline.metrics import plot_bars, plot_trace
+    from zeus_ros.offline.evaluation.metrics import plot_bars, plot_trace
 
     agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
     out = Path(out) if out is not None else Path(checkpoint).parent / f'eval_{split}'
@@ -493,8 +493,8 @@ def main(argv: list[str] | None = None) -> int:
 def _main_many(args: argparse.Namespace) -> int:
     """Several checkpoints (or all splits): evaluate each, then the tables over seeds."""
     from zeus_ros.learning.errors import CheckpointError
-    from zeus_ros.offline.eval_batch import evaluate_many, find_checkpoints
-    from zeus_ros.offline.report import markdown_table
+    from zeus_ros.offline.evaluation.eval_batch import evaluate_many, find_checkpoints
+    from zeus_ros.offline.evaluation.report import markdown_table
 
     if args.out is None:
         print('zeus eval: several checkpoints (or --split all) need --out', file=sys.stderr)

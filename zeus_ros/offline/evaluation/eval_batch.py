@@ -4,7 +4,7 @@
 
 Each checkpoint is evaluated into <out>/<group>/<method>_s<seed>/eval_<split>/, where the group
 names task and update budget (cheetah_run_v0_10k). Finished parts (recorded in
-<method>_s<seed>/state.json, run_state.py) are skipped, so an interrupted run resumes.
+<method>_s<seed>/state.json, training/run_state.py) are skipped, so an interrupted run resumes.
 report.write_report then writes per-group summary.csv / runs.csv / table.md / returns.png, and
 <out>/tables.md holds every group's table.
 """
@@ -21,7 +21,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from zeus_ros.offline.run_state import mark_evaluated, read_state
+from zeus_ros.offline.training.run_state import mark_evaluated, read_state
 
 __all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'group_name']
 
@@ -108,7 +108,7 @@ def _run_job(job: EvalJob, protocol: dict[str, Any]) -> tuple[EvalJob, float]:
     """Worker: one evaluation on one torch thread; records it in the run's state.json."""
     import torch
 
-    from zeus_ros.offline.evaluate import evaluate
+    from zeus_ros.offline.evaluation.evaluate import evaluate
 
     torch.set_num_threads(1)
     start = time.perf_counter()
@@ -124,7 +124,7 @@ def evaluate_many(checkpoints: Sequence[Path], out: Path, *, splits: Sequence[st
                   expect_task: str | None = None, **protocol: Any
                   ) -> dict[str, list[dict[str, Any]]]:
     """Evaluate every checkpoint on `splits` (None: all its task defines); tables per task."""
-    from zeus_ros.offline.report import markdown_table, write_report
+    from zeus_ros.offline.evaluation.report import markdown_table, write_report
 
     todo, tasks = plan(checkpoints, out, splits, force, expect_task)
     print(f'zeus eval: {len(checkpoints)} checkpoint(s), {len(todo)} evaluation(s) to run '

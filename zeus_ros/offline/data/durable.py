@@ -18,7 +18,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
-from zeus_ros.offline.bag_writer import (
+from zeus_ros.offline.data.bag_writer import (
     BAG_VERSION,
     ROS_DISTRO,
     QosSource,

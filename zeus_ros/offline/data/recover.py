@@ -1,7 +1,7 @@
 """`zeus recover`: turn what a killed recorder left on disk back into a bag every reader opens.
 
 The writer side of crash durability (periodic flush, provisional metadata.yaml) is
-`zeus_ros.offline.durable.DurableBagWriter`; this module reads what it leaves behind.
+`zeus_ros.offline.data.durable.DurableBagWriter`; this module reads what it leaves behind.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.bag_writer import BAG_VERSION, JazzyWriter
-from zeus_ros.offline.durable import STATE_KEY, bag_metadata, replace_text
-from zeus_ros.offline.errors import BagError
-from zeus_ros.offline.schema import MSGTYPES, typestore
+from zeus_ros.offline.data.bag_errors import BagError
+from zeus_ros.offline.data.bag_writer import BAG_VERSION, JazzyWriter
+from zeus_ros.offline.data.durable import STATE_KEY, bag_metadata, replace_text
+from zeus_ros.offline.data.schema import MSGTYPES, typestore
 
 if TYPE_CHECKING:
     from collections.abc import Iterable

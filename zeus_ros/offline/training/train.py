@@ -28,7 +28,12 @@ from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
-from zeus_ros.offline.metrics import MetricsLog, RunningMean, plot_grouped_lines, plot_metric_grid
+from zeus_ros.offline.evaluation.metrics import (
+    MetricsLog,
+    RunningMean,
+    plot_grouped_lines,
+    plot_metric_grid,
+)
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
@@ -192,7 +197,7 @@ def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
 
 def _report_cut_bags(bags: Sequence[str], log: Callable[[str], None]) -> None:
     """Say which bags a crash cut short: their round may hold fewer steps than it asked for."""
-    from zeus_ros.offline.recover import bag_state
+    from zeus_ros.offline.data.recover import bag_state
 
     cut = [f'{bag} ({state})' for bag in bags
            if (state := bag_state(Path(bag))) in ('recovered', 'unfinished', 'provisional')
@@ -212,8 +217,8 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
 def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
                device: Any, seed: int, namespace: str = '', strict: bool = False
                ) -> tuple[Any, Any]:
-    from zeus_ros.offline.ingest import ingest_bags
-    from zeus_ros.offline.replay import ReplayBuffer
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.data.replay import ReplayBuffer
 
     dataset = ingest_bags(list(bags), namespace=namespace, strict=strict)
     if task is not None and dataset.task != task:
@@ -430,7 +435,7 @@ def checkpoint_step(path: Path) -> int:
 def _evaluate(agent: Any, task: str, cfg: ZeusConfig, step: int) -> list[dict[str, Any]]:
     """Periodic evaluation: deterministic episodes at train-split context values."""
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluate import evaluate_contexts, split_values
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts, split_values
 
     values = split_values(task, 'train')
     picks = np.linspace(0, len(values) - 1, min(cfg.eval_episodes, len(values)))
@@ -491,7 +496,7 @@ def _print_ingest_warnings() -> Callable[..., None]:
     """Show what ingest found (dropped values, gaps) as plain lines; returns the old hook."""
     import warnings
 
-    from zeus_ros.offline.ingest import IngestWarning
+    from zeus_ros.offline.data.ingest import IngestWarning
 
     default = warnings.showwarning
 
@@ -508,7 +513,7 @@ def _print_ingest_warnings() -> Callable[..., None]:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus train`; returns the process exit code."""
     args = _build_parser().parse_args(argv)
-    from zeus_ros.offline.errors import BagError, IngestError
+    from zeus_ros.offline.data.bag_errors import BagError, IngestError
 
     try:
         sets = parse_sets(args.set)

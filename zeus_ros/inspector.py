@@ -12,7 +12,6 @@ observation-to-action latency and the health counters that the nodes publish on 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 from pathlib import Path
 import sys
@@ -21,34 +20,13 @@ import time
 import numpy as np
 
 from zeus_ros.cli_args import ZeusArgumentParser
-from zeus_ros.inspection import (
+from zeus_ros.step_log import (
+    SeenStep,
     StepLog,
-    StepRecord,
     format_segments,
     percentile,
     plot_inspection,
 )
-
-
-def write_csv(log: StepLog, path: Path) -> Path:
-    """One row per step: truth, estimate, reward, latency."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open('w', newline='') as handle:
-        writer = csv.writer(handle)
-        names = log.context_names
-        writer.writerow(['step', 'episode', 'segment', 'first', 'reward',
-                         *[f'true_{n}' for n in names], *[f'estimated_{n}' for n in names],
-                         'novelty', 'novelty_threshold', 'history_length', 'latency_ms', 'psi'])
-        for r in log.ordered():
-            psi = '' if r.estimate is None else ' '.join(f'{v:.5g}' for v in r.estimate)
-            latency = '' if r.latency_ms is None else f'{r.latency_ms:.3f}'
-            truth = r.truth or ('',) * len(names)
-            readout = tuple(f'{v:.5g}' for v in r.readout) if r.readout else ('',) * len(names)
-            novelty = tuple(f'{v:.4g}' for v in r.novelty) if r.novelty else ('', '')
-            writer.writerow([r.step, r.episode, r.segment, int(r.first), f'{r.reward:.6g}',
-                             *truth, *readout, *novelty, r.history_length, latency, psi])
-    return path
-
 
 NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the same '
                 'ROS_DOMAIN_ID (and --namespace, if it runs in one)')
@@ -157,7 +135,7 @@ class Inspector:
         return f'[inspect] waiting for {self.listening()}; {NOTHING_HINT}'
 
 
-    def current(self) -> StepRecord | None:
+    def current(self) -> SeenStep | None:
         """The newest step seen whole, or None before the first one.
 
         Whole: feedback and true context, and the estimate (and its read-out) when an estimator
@@ -185,7 +163,7 @@ class Inspector:
             return None
         return (len(times) - 1) / (times[-1] - times[0])
 
-    def estimate_text(self, record: StepRecord) -> str:
+    def estimate_text(self, record: SeenStep) -> str:
         """'torso_length: estimated 1.21, true 1.25' with a read-out, else psi's first values."""
         names = self.log.context_names
         truth = record.truth or ()
@@ -274,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     print(format_segments(log.segments(), log.context_names))
     if args.csv:
-        print(f'[inspect] per-step log: {write_csv(log, args.csv)}')
+        print(f'[inspect] per-step log: {log.save_csv(args.csv)}')
     if args.png:
         print(f'[inspect] figure: {plot_inspection(log, args.png, "zeus inspect")}')
     return 0

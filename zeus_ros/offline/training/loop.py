@@ -26,9 +26,9 @@ from typing import Any
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.collect import SCHEDULE_HELP, next_bag_path, parse_schedule
-from zeus_ros.offline.collect_workers import CollectJob, collect_bag
-from zeus_ros.offline.train import (
+from zeus_ros.offline.training.collect import SCHEDULE_HELP, next_bag_path, parse_schedule
+from zeus_ros.offline.training.collect_workers import CollectJob, collect_bag
+from zeus_ros.offline.training.train import (
     CHECKPOINT,
     FINAL,
     TrainError,
@@ -55,7 +55,7 @@ def _bag_steps(bag: Path) -> int:
     """Control steps in a closed bag: the /zeus/step messages its metadata counts."""
     from rosbags.rosbag2 import Reader
 
-    from zeus_ros.offline.schema import TOPIC_STEP
+    from zeus_ros.offline.data.schema import TOPIC_STEP
 
     reader = Reader(bag)
     reader.open()
@@ -71,8 +71,8 @@ def _recover_unfinished(out: Path, bags: Path) -> None:
     Without this, training would stop on the unfinished bag (or, after a manual recover,
     silently train on a cut round).
     """
-    from zeus_ros.offline.errors import BagError
-    from zeus_ros.offline.recover import needs_recovery, recover_bag
+    from zeus_ros.offline.data.bag_errors import BagError
+    from zeus_ros.offline.data.recover import needs_recovery, recover_bag
 
     for bag in sorted(p for p in bags.glob('bag_*') if p.is_dir()):
         if not needs_recovery(bag):
@@ -114,7 +114,7 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
              steps: int, updates: int, noise: float, schedule: dict[str, Any], seed: int,
              progress: bool = True, evaluate: bool = True, resume: bool = False) -> list[Any]:
     """Run the rounds; returns the TrainResult of each round trained. `updates` are per round."""
-    from zeus_ros.offline.train import checkpoint_step
+    from zeus_ros.offline.training.train import checkpoint_step
 
     out = Path(out)
     bags, run = out / 'bags', out / 'run'
@@ -256,7 +256,7 @@ def _store_flags(args: argparse.Namespace) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus loop`; returns the process exit code."""
     from zeus_ros.learning.errors import CheckpointError, ConfigError
-    from zeus_ros.offline.errors import BagError, IngestError
+    from zeus_ros.offline.data.bag_errors import BagError, IngestError
 
     args = _build_parser().parse_args(argv)
     try:

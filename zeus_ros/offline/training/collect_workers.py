@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.collect import CollectStats
+from zeus_ros.offline.training.collect import CollectStats
 
 __all__ = ['CollectJob', 'collect_bag', 'main_workers', 'portable_task', 'run_workers',
            'split_steps', 'worker_seeds']
@@ -69,8 +69,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.bag_writer import StepBagWriter
-    from zeus_ros.offline.collect import AgentPolicy, collect, random_policy
+    from zeus_ros.offline.data.bag_writer import StepBagWriter
+    from zeus_ros.offline.training.collect import AgentPolicy, collect, random_policy
 
     task = make_task(job.task, seed=job.seed)
     try:
@@ -112,7 +112,7 @@ def run_workers(template: CollectJob, workers: int, *, use_ray: bool = False,
     if use_ray:
         import ray
 
-        from zeus_ros.offline.ray_runtime import start_ray
+        from zeus_ros.offline.training.ray_runtime import start_ray
 
         started = start_ray()
         try:

@@ -4,8 +4,8 @@
 
 Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
 `experiments/run_one.sh` and of `zeus eval` on several checkpoints) of the evaluations that
-<method>_s<seed>/state.json (or an old .done marker) says finished (run_state.py), writes
-summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
+<method>_s<seed>/state.json (or an old .done marker) says finished (training/run_state.py),
+writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
 --out and prints the markdown table (as in docs/results.md).
 """
 
@@ -24,12 +24,24 @@ import numpy as np
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.diagnostics import DIAGNOSTICS
-from zeus_ros.offline.run_state import RunState, RunStateError, read_state
+from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
+from zeus_ros.offline.training.run_state import RunState, RunStateError, read_state
 
-__all__ = ['METRICS', 'RUN_NAME', 'aggregate', 'diagnostics_table', 'headroom_rows',
-           'headroom_table', 'markdown_table', 'mean_se', 'method_order_key',
-           'paired_difference', 'per_run', 'wall_time_table', 'write_report']
+__all__ = [
+    'METRICS',
+    'RUN_NAME',
+    'diagnostics_table',
+    'headroom_rows',
+    'headroom_table',
+    'markdown_table',
+    'mean_se',
+    'method_order_key',
+    'paired_difference',
+    'per_method',
+    'per_run',
+    'wall_time_table',
+    'write_report',
+]
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman', *DIAGNOSTICS)
 """Columns of an eval summary that are averaged over seeds."""
@@ -93,7 +105,7 @@ def per_run(folder: Path) -> list[dict[str, Any]]:
                                        _rank(r['split'], SPLIT_ORDER)))
 
 
-def aggregate(folder: Path) -> list[dict[str, Any]]:
+def per_method(folder: Path) -> list[dict[str, Any]]:
     """One row per (method, split): seeds, then mean and s.e. of every metric with data."""
     table: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     random_returns: dict[str, list[float]] = defaultdict(list)
@@ -172,48 +184,43 @@ def headroom_table(rows: list[dict[str, Any]]) -> str:
     lines = [f'| split | method | seeds | method - {REFERENCE} | headroom ({BOUND} - '
              f'{REFERENCE}) | share of headroom recovered |', '|---|---|---|---|---|---|']
     for row in rows:
-        headroom = (f'{row["headroom"]:.1f} ± {row["headroom_se"]:.1f}' if 'headroom' in row
-                    else '-')
         share = f'{row["recovered"]:.2f}' if 'recovered' in row else '-'
         lines.append(f'| {row["split"]} | {row["method"]} | {row["seeds"]} | '
-                     f'{row["gain"]:.1f} ± {row["gain_se"]:.1f} | {headroom} | {share} |')
+                     f'{_pm(row, "gain", 1)} | {_pm(row, "headroom", 1)} | {share} |')
     return '\n'.join(lines)
+
+
+def _pm(row: dict[str, Any], metric: str, digits: int) -> str:
+    """Table cell `mean ± s.e.` of `metric` (its `_se` beside it in the row); '-' without it."""
+    if metric not in row:
+        return '-'
+    return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
 
 
 def diagnostics_table(rows: list[dict[str, Any]]) -> str:
     """Markdown: the adaptation diagnostics per method and split (mean ± s.e. over seeds)."""
-    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
-        if metric not in row:
-            return '-'
-        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
-
     lines = ['| method | split | seeds | context sensitivity (mean abs. delta action) | '
              'context spread / noise | value of adaptation (frozen to other extreme) | '
              'value of adaptation (frozen to mean) |', '|---|---|---|---|---|---|---|']
     for row in rows:
         lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
-                     f'{cell(row, "sensitivity", 3)} | {cell(row, "spread_noise", 2)} | '
-                     f'{cell(row, "adaptation_value_other", 1)} | '
-                     f'{cell(row, "adaptation_value_mean", 1)} |')
+                     f'{_pm(row, "sensitivity", 3)} | {_pm(row, "spread_noise", 2)} | '
+                     f'{_pm(row, "adaptation_value_other", 1)} | '
+                     f'{_pm(row, "adaptation_value_mean", 1)} |')
     return '\n'.join(lines)
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The results table as markdown (returns to one decimal, Spearman to two)."""
-
-    def cell(row: dict[str, Any], metric: str, digits: int) -> str:
-        if metric not in row:
-            return '-'
-        return f'{row[metric]:.{digits}f} ± {row[metric + "_se"]:.{digits}f}'
-
     lines = ['| method | split | seeds | return | return, switching episode | '
              'adaptation latency (steps) | Spearman | random policy |',
              '|---|---|---|---|---|---|---|---|']
     for row in rows:
         random = f'{row["random_return"]:.1f}' if 'random_return' in row else '-'
         lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
-                     f'{cell(row, "mean_return", 1)} | {cell(row, "switching_return", 1)} | '
-                     f'{cell(row, "mean_latency", 1)} | {cell(row, "spearman", 2)} | '
+                     f'{_pm(row, "mean_return", 1)} | '
+                     f'{_pm(row, "switching_return", 1)} | '
+                     f'{_pm(row, "mean_latency", 1)} | {_pm(row, "spearman", 2)} | '
                      f'{random} |')
     return '\n'.join(lines)
 
@@ -268,7 +275,7 @@ def _plot(rows: list[dict[str, Any]], title: str, path: Path) -> None:
 
 def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict[str, Any]]:
     """Aggregate `folder`; write summary.csv, runs.csv, table.md, wall_times.md, returns.png."""
-    rows = aggregate(folder)
+    rows = per_method(folder)
     if not rows:
         raise FileNotFoundError(f'{folder}: no finished evaluations '
                                 '(<method>_s<seed>/eval_<split>/summary.csv, finished in '

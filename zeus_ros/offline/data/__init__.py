@@ -1,0 +1,1 @@
+"""Bags and the data in them: schema, writing, durable recording, recovery, ingest, replay."""

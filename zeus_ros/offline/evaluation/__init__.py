@@ -1,0 +1,1 @@
+"""What a checkpoint does: evaluation, diagnostics, probe, read-out, reports, export."""

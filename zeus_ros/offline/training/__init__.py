@@ -1,0 +1,1 @@
+"""Runs that make checkpoints: collection, training, the collect-train loop, sweeps."""
