@@ -11,9 +11,7 @@ probe subscriber measures observation-to-action latency; /proc gives each node's
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import tempfile
@@ -106,9 +104,10 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
     from zeus_msgs.msg import Action, StepFeedback
 
     from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.processes import ros_env
 
-    domain = random.SystemRandom().randint(1, 100)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(domain))
+    env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
+    domain = int(env['ROS_DOMAIN_ID'])
     values = '[' + ','.join(str(v) for v in SCHEDULE['values']) + ']'
     python = [sys.executable, '-m']
     argvs = {
