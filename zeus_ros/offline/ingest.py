@@ -34,6 +34,7 @@ import numpy as np
 from rosbags.rosbag2 import Reader
 
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
+from zeus_ros.offline.cdr_columns import decode_messages
 from zeus_ros.offline.errors import BagError, IngestError
 from zeus_ros.offline.schema import (
     MSGTYPES,
@@ -287,22 +288,19 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            f"type hash {conn.digest} != this checkout's "
                                            f'{ours} for {expected}: written with another '
                                            'definition; decoding may fail'))
+        # Step topics are decoded in batches after the read (cdr_columns), images one by one.
+        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _STEP_TOPICS}
         for conn, _, raw in reader.messages(connections=conns):
             count += 1
             read[conn.topic] += 1
-            msg = cdc.deserialize(raw, conn.msgtype)
-            stamp = ns_from_stamp(msg.header.stamp)
             topic = schema_topic[conn.topic]
-            if topic == TOPIC_IMAGE:
-                images[stamp].append(msg)
+            if topic != TOPIC_IMAGE:
+                raws[topic].append((count, raw))
                 continue
-            step = int(msg.step)
-            col = topics[topic].by_step
-            if step in col:
-                report.issues.append(Issue(str(path), conn.topic, step, 'duplicate',
-                                           'step seen again; keeping the first message'))
-            else:
-                col[step] = (stamp, msg)
+            msg = cdc.deserialize(raw, conn.msgtype)
+            images[ns_from_stamp(msg.header.stamp)].append(msg)
+        for topic, entries in raws.items():
+            _decode_topic(path, topic, entries, topics[topic].by_step, report, namespace)
     except BagError:
         raise
     except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
@@ -314,6 +312,29 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     report.messages += count
     _check_counts(path, conns, read, report)
     return {'topics': topics, 'images': images}
+
+
+def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
+                  col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
+    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
+    cdc = codec()
+
+    def one(i: int) -> Any:
+        try:
+            return cdc.deserialize(entries[i][1], MSGTYPES[topic])
+        except Exception as exc:  # bad CDR: named like a truncated read
+            raise BagError(path, f'corrupt or truncated after {entries[i][0] - 1} messages: '
+                                 f'{exc}') from exc
+
+    messages = decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
+    for msg in messages:
+        step = int(msg.step)
+        if step in col:
+            report.issues.append(Issue(str(path), bag_topic(topic, namespace), step,
+                                       'duplicate', 'step seen again; keeping the first '
+                                       'message'))
+        else:
+            col[step] = (msg.stamp_ns, msg)
 
 
 def _check_counts(path: Path, conns: list[Any], read: Counter[str],
