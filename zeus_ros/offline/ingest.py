@@ -268,10 +268,6 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     count = 0
     schema_topic = {bag_topic(t, namespace): t for t in _READ_TOPICS}
     read: Counter[str] = Counter()
-    # Every message read stays alive until the episodes are built, and none forms a cycle:
-    # the cycle collector would only re-walk them, ever more often (half the time at 20k steps).
-    collecting = gc.isenabled()
-    gc.disable()
     try:
         conns = [c for c in reader.connections if c.topic in schema_topic]
         if not conns:  # an empty filter would read every topic of the bag
@@ -307,8 +303,6 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         raise BagError(path, f'corrupt or truncated after {count} messages: {exc}') from exc
     finally:
         reader.close()
-        if collecting:
-            gc.enable()
     report.messages += count
     _check_counts(path, conns, read, report)
     return {'topics': topics, 'images': images}
@@ -560,6 +554,19 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
 
 def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any],
                 namespace: str = '') -> list[Episode]:
+    # Every message read stays alive until the episodes are built, and none forms a cycle:
+    # the cycle collector would only re-walk them, ever more often (half the time at 20k steps).
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _ingest_read(path, report, meta, namespace)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
+                 namespace: str = '') -> list[Episode]:
     read = _read_bag(path, report, namespace)
     topics: dict[str, _Topic] = read['topics']
     usable = _check_alignment(path, topics, report)
