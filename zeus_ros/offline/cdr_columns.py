@@ -12,9 +12,10 @@ result is always what rosbags would give.
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import defaultdict, namedtuple
 from collections.abc import Callable, Sequence
 from dataclasses import fields
+from functools import cache
 import struct
 from types import SimpleNamespace
 from typing import Any
@@ -173,6 +174,12 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
     return out
 
 
+@cache
+def _record_type(names: tuple[str, ...]) -> Any:
+    """A light read-only message: its fields and stamp_ns (one per message type)."""
+    return namedtuple('CdrRecord', [*names, 'stamp_ns'])
+
+
 def _with_stamp(message: Any, stamp_ns: int) -> Any:
     """The fallback's message as a namespace with the fast path's stamp_ns added."""
     return SimpleNamespace(**{f.name: getattr(message, f.name) for f in fields(message)},
@@ -197,12 +204,12 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
     columns = _columns(block[fits], items)
     sec, nanosec = columns.pop('sec'), columns.pop('nanosec')
     del columns['frame_id']
-    names = [name for name, _kind in spec]
+    record = _record_type(tuple(name for name, _kind in spec))
     members = [i for i, ok in zip(indices, fits.tolist(), strict=True) if ok]
-    values = zip(*(columns[name] for name in names), strict=True)
-    for k, (index, row) in enumerate(zip(members, values, strict=True)):
-        out[index] = SimpleNamespace(**dict(zip(names, row, strict=True)),
-                                     stamp_ns=sec[k] * 1_000_000_000 + nanosec[k])
+    stamps = (np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nanosec, np.int64)).tolist()
+    rows = zip(*(columns[name] for name in record._fields[:-1]), stamps, strict=True)
+    for index, row in zip(members, rows, strict=True):
+        out[index] = record._make(row)
     if not _agrees(out[members[0]], fallback(members[0]), spec):
         for index in members:
             out[index] = None

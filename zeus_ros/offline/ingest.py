@@ -409,16 +409,6 @@ def _match_images(
     return frames
 
 
-def _bad_value(value: Any, length: int | None) -> str | None:
-    """Why a numeric field is unusable ('length' / 'nonfinite'), or None when it is fine."""
-    arr = np.asarray(value, np.float64)
-    if length is not None and arr.size != length:
-        return 'length'
-    if not np.all(np.isfinite(arr)) or (arr.size and float(np.abs(arr).max()) > MAX_ABS):
-        return 'nonfinite'
-    return None
-
-
 def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
                ) -> dict[str, list[int]]:
     """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
@@ -523,9 +513,13 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
-    for i, s in enumerate(piece):
-        if s in acts and _bad_value(acts[s][1].data, action_dim) is None:
-            policy[i] = acts[s][1].data
+    present = [(i, acts[s][1].data) for i, s in enumerate(piece)
+               if s in acts and len(acts[s][1].data) == action_dim]
+    if present:  # a request of another length or with a bad value stays absent (NaN)
+        rows = np.stack([data for _, data in present]).astype(np.float64)
+        with np.errstate(invalid='ignore'):
+            usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
+        policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
     pix = None
     if frames is not None:
         first = frames[piece[0]]
