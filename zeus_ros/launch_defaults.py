@@ -39,11 +39,11 @@ STEP_SOURCES = frozenset({'sim_bridge', 'robot_bridge'})
 AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
+"""Nodes that stop last and whose exit does not end the launch."""
 CONTAINER = 'container'
 CONTAINER_MODULE = 'zeus_ros.nodes.container'
 CONTAINER_EXECUTABLE = 'loop_container'
 """single_process: every node but the recorder runs in this one process (nodes/container.py)."""
-"""Nodes that stop last and whose exit does not end the launch."""
 PATH_PARAMETERS = {'context_estimator': ('checkpoint',), 'policy': ('checkpoint',)}
 """Parameters holding a file to read: resolved to an absolute path before the node starts."""
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
