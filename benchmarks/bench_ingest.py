@@ -23,6 +23,8 @@ from zeus_ros.offline.data.ingest import find_bags, ingest_bags
 from zeus_ros.offline.data.schema import StepFeedbackFields
 
 EP_LEN = 500
+INGEST_TARGET = 0.5
+"""Issue 14: ingest at least half as fast as a plain read of the same files."""
 STATE_DIM = 17
 ACTION_DIM = 6
 
@@ -97,7 +99,9 @@ def main() -> None:
         print(f'plain read : {size_mb / plain_s:8.1f} MB/s  ({plain_s:.3f} s)')
         print(f'ingest     : {rep.mb_per_s:8.1f} MB/s  ({rep.seconds:.3f} s, '
               f'{rep.steps_per_s:.0f} steps/s)')
-        print(f'ratio ingest/plain: {rep.mb_per_s / (size_mb / plain_s):.2f}')
+        ratio = rep.mb_per_s / (size_mb / plain_s)
+        print(f'ratio ingest/plain: {ratio:.2f} [target {INGEST_TARGET}]'
+              + ('' if ratio >= INGEST_TARGET else ' (not met)'))
 
 
 if __name__ == '__main__':

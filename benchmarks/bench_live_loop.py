@@ -2,7 +2,8 @@
 
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
 deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
-live loop runs sim_bridge, context_estimator and policy as separate processes in lockstep. A
+live loop runs sim_bridge, context_estimator and policy in lockstep, as separate processes
+(multi) and as nodes of one process on one executor (single, zeus launch --single-process). A
 probe subscriber measures observation-to-action latency; /proc gives each node's resident memory.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
@@ -11,9 +12,7 @@ probe subscriber measures observation-to-action latency; /proc gives each node's
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import tempfile
@@ -98,30 +97,40 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
-def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
-    """Steps/s, latency percentiles and node memory of the three-node lockstep loop."""
+def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
+              ) -> dict[str, float]:
+    """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
+
+    `single`: the three nodes in one process on one executor (zeus launch --single-process).
+    """
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import Action, StepFeedback
 
+    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, NODES
     from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.processes import ros_env
 
-    domain = random.SystemRandom().randint(1, 100)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(domain))
+    env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
+    domain = int(env['ROS_DOMAIN_ID'])
     values = '[' + ','.join(str(v) for v in SCHEDULE['values']) + ']'
-    python = [sys.executable, '-m']
-    argvs = {
-        'context_estimator': [*python, 'zeus_ros.nodes.context_estimator_node', '--ros-args',
-                              '-p', f'checkpoint:={checkpoint}'],
-        'policy': [*python, 'zeus_ros.nodes.policy_node', '--ros-args',
-                   '-p', f'checkpoint:={checkpoint}'],
-        'sim_bridge': [*python, 'zeus_ros.nodes.sim_bridge_node', '--ros-args',
-                       '-p', f'task:={TASK}', '-p', f'max_steps:={steps}',
-                       '-p', f'pixels:={"true" if pixels else "false"}',
-                       '-p', 'schedule.kind:=switch', '-p', 'schedule.every:=100',
-                       '-p', f'schedule.values:={values}', '-p', 'min_observers:=3'],
+    params = {
+        'context_estimator': [f'checkpoint:={checkpoint}'],
+        'policy': [f'checkpoint:={checkpoint}'],
+        'sim_bridge': [f'task:={TASK}', f'max_steps:={steps}',
+                       f'pixels:={"true" if pixels else "false"}', 'schedule.kind:=switch',
+                       'schedule.every:=100', f'schedule.values:={values}', 'min_observers:=3'],
     }
+    ros_args = {name: ['--ros-args', *(a for v in values for a in ('-p', v))]
+                for name, values in params.items()}
+    if single:
+        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *(
+            a for name, args in ros_args.items() for a in ('--node', name, *args))]}
+    else:
+        argvs = {name: [sys.executable, '-m', NODES[name], *args]
+                 for name, args in ros_args.items()}
+    loop = CONTAINER if single else 'sim_bridge'
     log_dir = Path(tempfile.gettempdir()) / 'zeus_bench_logs'
     log_dir.mkdir(exist_ok=True)
     processes = {name: subprocess.Popen(argv, env=env, stdout=(log_dir / f'{name}.log').open('w'),
@@ -143,7 +152,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
     memory: dict[str, float] = {}
     try:
         deadline = time.monotonic() + 500
-        while processes['sim_bridge'].poll() is None and time.monotonic() < deadline:
+        while processes[loop].poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.02)
             if len(seen_obs) == steps // 2 and not memory:
                 memory = {name: rss_mb(p.pid) for name, p in processes.items()}
@@ -164,26 +173,45 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool) -> dict[str, float]:
             'p99': float(np.percentile(latency, 99)), **{f'rss_{k}': v for k, v in memory.items()}}
 
 
+RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8,
+                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9}
+"""Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
+P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
+"""Issue 14's observation -> action p99 targets."""
+
+
 def main() -> None:
-    """Measure state and pixel loops and print one table."""
+    """Measure state and pixel loops, multi- and single-process, and print one table."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
+    parser.add_argument('--modes', default='multi,single',
+                        help='multi: a process per node; single: one process, one executor')
     args = parser.parse_args()
-    print(f'three-node lockstep loop vs in-process loop, {TASK}')
-    header = (f'{"checkpoint":<10} {"in-proc/s":>9} {"live/s":>8} {"ratio":>6} {"p50 ms":>7} '
-              f'{"p99 ms":>7} {"RSS MiB sim/est/pol":>21}')
-    print(header)
+    modes = [m.strip() for m in args.modes.split(',') if m.strip()]
+    print(f'three-node lockstep loop vs in-process loop, {TASK} (targets in brackets; '
+          'in-process = ScheduledEnv + the deployment code, no ROS)')
+    print(f'{"obs":<7} {"mode":<7} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
+          f'{"p50 ms":>7} {"p99 ms [target]":>16}  RSS MiB per process')
     with tempfile.TemporaryDirectory() as tmp:
         for kind in ('state', 'pixels'):
             steps = args.steps if kind == 'state' else args.pixel_steps
             checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
             local = in_process_rate(checkpoint, steps)
-            live = live_rate(checkpoint, steps, pixels=kind == 'pixels')
-            memory = '/'.join(f'{live.get(f"rss_{n}", float("nan")):.0f}'
-                              for n in ('sim_bridge', 'context_estimator', 'policy'))
-            print(f'{kind:<10} {local:>9.1f} {live["rate"]:>8.1f} {live["rate"] / local:>6.3f} '
-                  f'{live["p50"]:>7.2f} {live["p99"]:>7.2f} {memory:>21}', flush=True)
+            for mode in modes:
+                live = live_rate(checkpoint, steps, pixels=kind == 'pixels',
+                                 single=mode == 'single')
+                ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
+                p99_target = P99_TARGETS_MS[kind]
+                memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
+                                  if k.startswith('rss_'))
+                ratio_text = f'{ratio:.3f} [{target}]' + ('' if ratio >= target else '!')
+                p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
+                    '' if live['p99'] <= p99_target else '!')
+                print(f'{kind:<7} {mode:<7} {local:>9.1f} {live["rate"]:>8.1f} '
+                      f'{ratio_text:>15} {live["p50"]:>7.2f} {p99_text:>16}  {memory}',
+                      flush=True)
+    print('! marks a target not met')
 
 
 if __name__ == '__main__':

@@ -10,9 +10,7 @@ with no ROS. Both run in this one process run, side by side, and the ratio is pr
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import time
@@ -54,9 +52,10 @@ def node_rate(task_name: str, steps: int, pixels: bool) -> float:
     from zeus_msgs.msg import Action, StateVector
 
     from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.processes import ros_env
 
-    domain = random.SystemRandom().randint(1, 100)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(domain))
+    env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
+    domain = int(env['ROS_DOMAIN_ID'])
     argv = [sys.executable, '-m', 'zeus_ros.nodes.sim_bridge_node', '--ros-args',
             '-p', f'task:={task_name}', '-p', f'max_steps:={steps}',
             '-p', f'pixels:={"true" if pixels else "false"}', '-p', 'peer_grace:=0.5',

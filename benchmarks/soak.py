@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
@@ -22,6 +21,8 @@ import threading
 import time
 
 import yaml
+
+from zeus_ros.processes import group_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = {'sim_bridge': 'sim_bridge_node', 'context_estimator': 'context_estimator_node',
@@ -108,7 +109,7 @@ def main() -> int:
     args = parser.parse_args()
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     stop = _watch_signals()  # before any import starts a thread
-    domain = int(os.environ.get('ROS_DOMAIN_ID') or random.SystemRandom().randint(1, 100))
+    domain = group_domain_id()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE
 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

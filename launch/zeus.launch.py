@@ -3,6 +3,7 @@ r"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder), se
     ros2 launch zeus_ros zeus.launch.py
     ros2 launch zeus_ros zeus.launch.py namespace:=robot1 use_sim_time:=true record:=true \
         checkpoint:=/path/to/ckpt.pt params_file:=/path/to/params.yaml log_level:=debug
+    ros2 launch zeus_ros zeus.launch.py single_process:=true   # the loop's nodes in one process
 
 Runs from any folder with only the installed files: the params file defaults to
 share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's
@@ -29,17 +30,28 @@ def launch_nodes(context: LaunchContext) -> list:
               for argument in launch_defaults.ARGUMENTS}
     plan = launch_defaults.plan_from_arguments(values)
     actions = []
-    for spec in plan.nodes:
+    if plan.contained:
+        # No name, namespace or parameters on the container itself: each node inside gets its
+        # own --ros-args (container_args), a process-wide remap would rename all of them.
+        container = Node(package=launch_defaults.PACKAGE,
+                         executable=launch_defaults.CONTAINER_EXECUTABLE,
+                         arguments=plan.container_args(), output='screen')
+        actions += [container, _shutdown_on_exit(container, launch_defaults.CONTAINER)]
+    for spec in plan.separate:
         node = Node(package=launch_defaults.PACKAGE, executable=spec.executable,
                     name=spec.name, namespace=plan.namespace or None,
                     parameters=[str(plan.params_file), spec.parameters],
                     ros_arguments=['--log-level', plan.log_level], output='screen')
         actions.append(node)
         if not spec.records_others:
-            actions.append(RegisterEventHandler(OnProcessExit(
-                target_action=node,
-                on_exit=[EmitEvent(event=Shutdown(reason=f'{spec.name} exited'))])))
+            actions.append(_shutdown_on_exit(node, spec.name))
     return actions
+
+
+def _shutdown_on_exit(node: Node, name: str) -> RegisterEventHandler:
+    """Any node of the control loop exiting ends the launch."""
+    return RegisterEventHandler(OnProcessExit(
+        target_action=node, on_exit=[EmitEvent(event=Shutdown(reason=f'{name} exited'))]))
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -182,28 +182,90 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     assert nodes[0].kwargs['parameters'][1]['min_observers'] == 3
 
 
+def _launch(cwd: Path, *flags: str) -> str:
+    """Run `zeus launch --record` with the installed files in `cwd`; its output (exit 0)."""
+    result = subprocess.run(
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--record', '--timeout', '25', *flags],
+        cwd=cwd, env=ros_environment(fresh_domain_id()), capture_output=True, text=True,
+        timeout=150, check=False)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-3000:]
+    return output
+
+
+def _recorded_steps(cwd: Path) -> list[int]:
+    """The step indices of the one Jazzy bag a launch recorded under ./bags."""
+    from rosbags.highlevel import AnyReader
+
+    [bag] = (cwd / 'bags').glob('zeus_*/zeus_*_000')
+    assert 'version: 9' in (bag / 'metadata.yaml').read_text()
+    with AnyReader([bag]) as reader:
+        return sorted(int(reader.deserialize(raw, conn.msgtype).step)
+                      for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
+
+
 def test_zeus_launch_without_params_runs_from_any_folder(tmp_path: Path) -> None:
     """`zeus launch --record` without --params, outside the repository, runs the installed files.
 
     The installed params and shipped checkpoint drive the loop; the recorder, counted in
     min_observers, has step 0 and every step after it in a Jazzy bag under ./bags.
     """
-    from rosbags.highlevel import AnyReader
-
-    result = subprocess.run(
-        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--record', '--timeout', '25',
-         '--log-level', 'warn'],
-        cwd=tmp_path, env=ros_environment(fresh_domain_id()), capture_output=True, text=True,
-        timeout=150, check=False)
-    output = result.stdout + result.stderr
-    assert result.returncode == 0, output[-3000:]
+    output = _launch(tmp_path, '--log-level', 'warn')
     assert 'share/zeus_ros/params/zeus.yaml' in output and 'min_observers' in output
-    [bag] = (tmp_path / 'bags').glob('zeus_*/zeus_*_000')
-    assert 'version: 9' in (bag / 'metadata.yaml').read_text()
-    with AnyReader([bag]) as reader:
-        steps = sorted(int(reader.deserialize(raw, conn.msgtype).step)
-                       for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
+    steps = _recorded_steps(tmp_path)
     assert len(steps) > 50 and steps == list(range(len(steps))), steps[:10]
+
+
+def test_single_process_runs_the_same_loop_in_one_process(tmp_path: Path) -> None:
+    """--single-process: one container child holds the three nodes under their own names.
+
+    The namespace and the installed params reach every node as in multi-process mode, the
+    time limit's SIGINT (Ctrl-C) stops the container with exit 0, and the recorder (its own
+    process) has every step from 0 on.
+    """
+    output = _launch(tmp_path, '--single-process', '--namespace', 'r1', '--no-progress')
+    assert 'exit codes: container 0, recorder 0' in output, output[-3000:]
+    for name in ('sim_bridge', 'context_estimator', 'policy'):
+        assert '[container] [INFO] [' in output and f'[r1.{name}]:' in output, name
+    assert 'paired with /r1/policy' in output and 'restarted' not in output
+    steps = _recorded_steps(tmp_path)
+    assert len(steps) > 50 and steps == list(range(len(steps))), steps[:10]
+
+
+def test_container_arguments_give_each_node_its_own(monkeypatch: Any) -> None:
+    """single_process:=true: the launch file starts the container `zeus launch` starts.
+
+    Inside, each node has the --ros-args its own process would get; bad arguments are refused.
+    """
+    from zeus_ros import launch_defaults as d
+    from zeus_ros.launcher import plan_processes
+    from zeus_ros.nodes.container import parse_container_args
+
+    _stub_launch_modules(monkeypatch)
+    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
+    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
+    assert spec is not None and spec.loader is not None
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    *declared, opaque = launch_file.generate_launch_description()
+    context = {**{a.args[0]: a.kwargs['default_value'] for a in declared},
+               'record': 'true', 'namespace': 'r1', 'single_process': 'true'}
+    nodes = [a for a in opaque.kwargs['function'](context) if type(a).__name__ == 'Node']
+    plan = d.plan(record=True, namespace='r1', single_process=True)
+    [loop, recorder] = plan_processes(plan)
+    assert [n.kwargs['executable'] for n in nodes] == ['loop_container', 'recorder_node']
+    assert 'name' not in nodes[0].kwargs and 'namespace' not in nodes[0].kwargs
+    assert loop.argv[-len(plan.container_args()):] == nodes[0].kwargs['arguments']
+    process, inside = parse_container_args(nodes[0].kwargs['arguments'])
+    assert process == ['--ros-args', '--log-level', 'info']
+    assert [name for name, _args in inside] == ['sim_bridge', 'context_estimator', 'policy']
+    for (name, args), planned in zip(inside, plan.contained, strict=True):
+        assert args == ['--ros-args', *plan.ros_args(planned)], name
+    assert 'min_observers:=3' in inside[0][1] and recorder.name == 'recorder'
+    for bad, match in ((['--node', 'nope'], 'unknown node'), ([], 'no node to run'),
+                       (['--node', 'policy', '--node', 'policy'], 'given twice')):
+        with pytest.raises(ValueError, match=match):
+            parse_container_args(bad)
 
 
 def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,

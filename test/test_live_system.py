@@ -8,29 +8,27 @@ import time
 import numpy as np
 import pytest
 
-from live_fixtures import TASK, node, tiny_checkpoint
+from live_fixtures import TASK, check_lockstep_bag, container, node, tiny_checkpoint
 from ros_harness import ProcessGroup, driver_node, spin_until
 
 pytestmark = pytest.mark.ros
 STEPS = 320
 
 
+def bridge_params(steps: int, *extra: str) -> tuple[str, ...]:
+    """sim_bridge's parameters: the task with a mid-episode switching schedule."""
+    return (f'task:={TASK}', f'max_steps:={steps}', 'schedule.kind:=switch',
+            'schedule.every:=100', 'schedule.values:=[0.6,1.0,1.4]', *extra)
+
+
 def bridge(steps: int, *extra: str) -> list[str]:
-    """sim_bridge on the task with a mid-episode switching schedule."""
-    return node('sim_bridge', f'task:={TASK}', f'max_steps:={steps}', 'schedule.kind:=switch',
-                'schedule.every:=100', 'schedule.values:=[0.6,1.0,1.4]', *extra)
+    """sim_bridge on the task with a mid-episode switching schedule, as its own process."""
+    return node('sim_bridge', *bridge_params(steps, *extra))
 
 
 def test_three_nodes_act_on_every_step_and_the_bag_trains(
         ros_processes: ProcessGroup, tmp_path) -> None:
     """300+ lockstep steps: an action per step, stamps match, the recorded bag trains."""
-    from rosbags.highlevel import AnyReader
-
-    from zeus_ros.learning.agent import make_agent
-    from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.data.replay import ReplayBuffer
-
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
     recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
@@ -41,32 +39,24 @@ def test_three_nodes_act_on_every_step_and_the_bag_trains(
     assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
+    check_lockstep_bag(bag_dir, checkpoint, STEPS)
 
-    stamps: dict[str, dict[int, int]] = {}
-    bags = sorted(path.parent for path in bag_dir.rglob('metadata.yaml'))
-    with AnyReader(bags) as reader:
-        for connection, _t, raw in reader.messages():
-            if connection.topic in ('/zeus/action', '/zeus/context', '/zeus/step'):
-                msg = reader.deserialize(raw, connection.msgtype)
-                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-                stamps.setdefault(connection.topic, {})[msg.step] = stamp
-    steps = sorted(stamps['/zeus/step'])
-    assert steps == list(range(STEPS + 1))
-    assert sorted(stamps['/zeus/context']) == steps, 'an estimate is missing for some step'
-    assert set(range(STEPS)) <= set(stamps['/zeus/action']), 'an action is missing'
-    for step in range(STEPS):
-        assert stamps['/zeus/action'][step] == stamps['/zeus/step'][step]
-        assert stamps['/zeus/context'][step] == stamps['/zeus/step'][step]
 
-    dataset = ingest_bags([bag_dir], strict=True)
-    assert sum(len(e.action) for e in dataset.episodes) == STEPS
-    statuses = np.concatenate([e.action_status[1:] for e in dataset.episodes])
-    assert set(statuses.tolist()) == {1}, 'every applied action came from the policy in time'
-    loaded = load_checkpoint(checkpoint)
-    replay = ReplayBuffer(dataset, history=loaded.config.k, seed=0)
-    agent = make_agent(loaded.config, loaded.spec)
-    metrics = [agent.update(*replay.sample_pair(16), step=i) for i in range(4)]
-    assert all(np.isfinite(v) for m in metrics for v in m.values())
+def test_one_process_acts_on_every_step_and_the_bag_trains(
+        ros_processes: ProcessGroup, tmp_path) -> None:
+    """The same loop as nodes of one process on one executor (zeus launch --single-process)."""
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    bag_dir = tmp_path / 'bag'
+    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
+    ros_processes.wait_for_log('recorder', 'recording ')
+    loop = ros_processes.start('container', container({
+        'sim_bridge': bridge_params(STEPS, 'min_observers:=3'),
+        'context_estimator': (f'checkpoint:={checkpoint}',),
+        'policy': (f'checkpoint:={checkpoint}',)}))
+    assert loop.wait(timeout=180) == 0, ros_processes.log_text('container')[-3000:]
+    time.sleep(1.5)
+    assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
+    check_lockstep_bag(bag_dir, checkpoint, STEPS)
 
 
 def diagnostics_value(messages: list, node_name: str, key: str) -> int:

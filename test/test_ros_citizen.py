@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from live_fixtures import TASK, tiny_checkpoint
+from live_fixtures import TASK, container, node, tiny_checkpoint
 from ros_harness import (
     REPO,
     ProcessGroup,
@@ -133,12 +133,14 @@ def call(node: Any, future: Any, timeout: float = 20.0) -> Any:
     return future.result()
 
 
+@pytest.mark.parametrize('single_process', [False, True], ids=['processes', 'one_process'])
 def test_live_parameters_apply_or_are_refused_with_the_reason(
-        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+        ros_processes: ProcessGroup, tmp_path: Path, single_process: bool) -> None:
     """Through rclpy's parameter services: describe, refuse bad values, apply good ones live.
 
     The policy's `noise` is measured on the next actions (they leave the deterministic action),
-    sim_bridge's `max_steps` on where the loop stops.
+    sim_bridge's `max_steps` on where the loop stops. The same holds with both nodes in one
+    process (the container of `zeus launch --single-process`).
     """
     import numpy as np
     from rcl_interfaces.msg import ParameterType
@@ -151,9 +153,13 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
     from zeus_ros.nodes.common import step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt', method='no_context')
-    bridge = ros_processes.start('live-sim_bridge', ros_node(
-        'sim_bridge', '-p', f'task:={TASK}', '-p', 'action_timeout:=5.0'))
-    ros_processes.start('live-policy', ros_node('policy', '-p', f'checkpoint:={checkpoint}'))
+    params = {'sim_bridge': (f'task:={TASK}', 'action_timeout:=5.0'),
+              'policy': (f'checkpoint:={checkpoint}',)}
+    if single_process:  # the log of both nodes is the container's: read as sim_bridge's
+        bridge = ros_processes.start('live-sim_bridge', container(params))
+    else:
+        bridge = ros_processes.start('live-sim_bridge', node('sim_bridge', *params['sim_bridge']))
+        ros_processes.start('live-policy', node('policy', *params['policy']))
     torch.set_num_threads(1)
     agent = InferenceAgent.from_checkpoint(checkpoint)
     states: dict[int, Any] = {}

@@ -19,7 +19,8 @@ import yaml
 
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
-__all__ = ['AGENT_NODES', 'ARGUMENTS', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
+__all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
+           'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'share_dir']
 
@@ -39,6 +40,10 @@ AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
 """Nodes that stop last and whose exit does not end the launch."""
+CONTAINER = 'container'
+CONTAINER_MODULE = 'zeus_ros.nodes.container'
+CONTAINER_EXECUTABLE = 'loop_container'
+"""single_process: every node but the recorder runs in this one process (nodes/container.py)."""
 PATH_PARAMETERS = {'context_estimator': ('checkpoint',), 'policy': ('checkpoint',)}
 """Parameters holding a file to read: resolved to an absolute path before the node starts."""
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
@@ -68,6 +73,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
     LaunchArgument('log_level', 'info', 'log level of every node: ' + ', '.join(LOG_LEVELS)),
     LaunchArgument('robot', 'false', "robot_bridge in sim_bridge's place (params_file: the "
                    "robot's, e.g. params/robot_bridge.yaml)"),
+    LaunchArgument('single_process', 'false', 'run the nodes of the control loop as nodes of '
+                   'one process on one executor (the recorder stays separate)'),
 )
 
 
@@ -102,6 +109,26 @@ class LaunchPlan:
     params_file: Path
     log_level: str
     nodes: tuple[NodePlan, ...]
+    single_process: bool = False
+
+    @property
+    def contained(self) -> tuple[NodePlan, ...]:
+        """The nodes that share the container process (none unless single_process)."""
+        if not self.single_process:
+            return ()
+        return tuple(node for node in self.nodes if not node.records_others)
+
+    @property
+    def separate(self) -> tuple[NodePlan, ...]:
+        """The nodes that run as processes of their own."""
+        return tuple(node for node in self.nodes if node not in self.contained)
+
+    def container_args(self) -> list[str]:
+        """Arguments of the container: each contained node with its own `--ros-args`."""
+        args = ['--ros-args', '--log-level', self.log_level]
+        for node in self.contained:
+            args += ['--node', node.name, '--ros-args', *self.ros_args(node)]
+        return args
 
     def ros_args(self, node: NodePlan) -> list[str]:
         """`--ros-args` arguments of one node as `zeus launch` passes them on its command line."""
@@ -233,6 +260,7 @@ def plan(
     log_level: str = 'info',
     nodes: Sequence[str] = DEFAULT_NODES,
     robot: bool = False,
+    single_process: bool = False,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -240,7 +268,8 @@ def plan(
     so none of them misses step 0; a relative checkpoint becomes an absolute path. With
     `robot`, robot_bridge takes sim_bridge's place; without any checkpoint the robot's first
     recording is made by the random policy alone (no estimator), which reads the robot's shape
-    from the params file.
+    from the params file. `single_process` changes only how the nodes are hosted (one process,
+    see LaunchPlan.container_args), never their parameters.
     """
     names = list(dict.fromkeys(nodes))
     if robot:  # a robot steps the loop: robot_bridge takes sim_bridge's place
@@ -280,7 +309,8 @@ def plan(
             overrides['use_sim_time'] = True
         planned.append(NodePlan(name, overrides))
     return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
-                      log_level=log_level.lower(), nodes=tuple(planned))
+                      log_level=log_level.lower(), nodes=tuple(planned),
+                      single_process=single_process)
 
 
 def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
@@ -294,4 +324,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                                                                     get['use_sim_time']),
                 params_file=get['params_file'], checkpoint=get['checkpoint'],
                 record=parse_bool('record', get['record']), log_level=get['log_level'],
-                robot=parse_bool('robot', get['robot']))
+                robot=parse_bool('robot', get['robot']),
+                single_process=parse_bool('single_process', get['single_process']))

@@ -27,7 +27,13 @@ from typing import IO
 
 from zeus_ros import launch_defaults
 from zeus_ros.cli_args import ZeusArgumentParser
-from zeus_ros.launch_defaults import NODES, RECORDS_OTHERS, LaunchPlan
+from zeus_ros.launch_defaults import (
+    CONTAINER,
+    CONTAINER_MODULE,
+    NODES,
+    RECORDS_OTHERS,
+    LaunchPlan,
+)
 from zeus_ros.processes import ros_env, start_node, stop_nodes
 
 RECORDER_RESPAWNS = 3
@@ -63,9 +69,16 @@ def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) ->
 
 
 def plan_processes(launch: LaunchPlan) -> list[NodeProcess]:
-    """One child per planned node: `python -m <module> --ros-args <the plan's arguments>`."""
-    return [NodeProcess(node.name, [sys.executable, '-m', node.module, '--ros-args',
-                                    *launch.ros_args(node)]) for node in launch.nodes]
+    """One child per planned node: `python -m <module> --ros-args <the plan's arguments>`.
+
+    With single_process, the nodes of the control loop share one child, the container.
+    """
+    children = [NodeProcess(node.name, [sys.executable, '-m', node.module, '--ros-args',
+                                        *launch.ros_args(node)]) for node in launch.separate]
+    if launch.contained:  # first: sim_bridge in it waits for every other node
+        children.insert(0, NodeProcess(CONTAINER, [sys.executable, '-m', CONTAINER_MODULE,
+                                                   *launch.container_args()]))
+    return children
 
 
 def _pump(node: NodeProcess, stream: IO[bytes], out: IO[str], keep: int = 200) -> None:
@@ -260,6 +273,9 @@ def main(argv: list[str] | None = None) -> int:
                         '/clock and /diagnostics stay global)')
     parser.add_argument('--sim-time', action='store_true',
                         help='every node sets use_sim_time (sim_bridge publishes /clock)')
+    parser.add_argument('--single-process', action='store_true',
+                        help='sim_bridge, context_estimator and policy as nodes of one process '
+                        'on one executor (default: a process each, so one crash is contained)')
     parser.add_argument('--no-progress', action='store_true',
                         help='no status line (steps, rate, episode, segment return; rewritten '
                         'in place on a terminal, a line every 10 s otherwise)')
@@ -269,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         launch = launch_defaults.plan(
             namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
             checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
-            nodes=names, robot=args.robot)
+            nodes=names, robot=args.robot, single_process=args.single_process)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2

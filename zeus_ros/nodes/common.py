@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (
     HistoryPolicy,
     QoSProfile,
@@ -42,6 +42,7 @@ __all__ = [
     'image_qos',
     'missing_peers',
     'run_node',
+    'run_nodes',
     'seconds_from_stamp',
     'stamp_from_seconds',
     'stamp_ns',
@@ -278,17 +279,35 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> NoRe
     and gives exit code 2, instead of a traceback. A signal ends the spin, `close()` runs to its
     end, and the process exits 0 (or the node's `exit_code`).
     """
+    run_nodes([factory], args)
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None
+              ) -> NoReturn:
+    """`run_node` for several nodes in one process on one executor (a component container).
+
+    The nodes are built in order (a ValueError from any stops them all: exit code 2), spin
+    together until a signal, an external shutdown or one of them finishes (NodeFinished), are
+    destroyed and closed in order, and the exit code is the first non-zero `exit_code`.
+    """
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
         signal.signal(stop_signal, _stop_quietly)
     rclpy.init(args=args)
+    nodes: list[Node] = []
     try:
-        node = factory()
+        for factory in factories:
+            nodes.append(factory())
     except ValueError as error:
         print(f'error: {error}', file=sys.stderr)
+        for node in nodes:
+            node.destroy_node()
         rclpy.try_shutdown()
         _exit_now(2)
+    executor = SingleThreadedExecutor()
+    for node in nodes:
+        executor.add_node(node)
     try:
-        rclpy.spin(node)
+        executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
         pass
     except Exception:
@@ -297,11 +316,16 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> NoRe
         if rclpy.ok():
             raise
     finally:
+        for node in nodes:  # as rclpy.spin leaves its executor
+            executor.remove_node(node)
         # Destroyed first: a signal has already shut the context down, and the node's logger
         # would then fail to publish close()'s last lines on /rosout (the console gets them).
-        node.destroy_node()
-        close = getattr(node, 'close', None)
-        if close is not None:
-            close()
+        for node in nodes:
+            node.destroy_node()
+        for node in nodes:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
         rclpy.try_shutdown()  # also finalizes ROS logging (log files flushed)
-    _exit_now(int(getattr(node, 'exit_code', 0)))
+    codes = [int(getattr(node, 'exit_code', 0)) for node in nodes]
+    _exit_now(next((code for code in codes if code), 0))

@@ -50,8 +50,9 @@ SPECS: dict[str, Spec] = {
 class ContextEstimatorNode(Node):
     """Keeps the rolling history and publishes the learned context for every step."""
 
-    def __init__(self) -> None:
-        super().__init__('context_estimator')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
+        super().__init__('context_estimator', **node_options)
         self.params = declare_specs(self, SPECS)
         self.loaded = load_inference_agent('context_estimator', self.params)
         self._pending: LoadedAgent | None = None

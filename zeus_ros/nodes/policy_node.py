@@ -65,8 +65,9 @@ SPECS: dict[str, Spec] = {
 class PolicyNode(Node):
     """Publishes Action k for observation k, conditioned on the context of step k."""
 
-    def __init__(self) -> None:
-        super().__init__('policy')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
+        super().__init__('policy', **node_options)
         self.params = declare_specs(self, SPECS)
         self.rng = np.random.default_rng(self.params['seed'])
         self.agent: InferenceAgent | None = None

@@ -105,8 +105,9 @@ class _Closing:
 class RecorderNode(Node):
     """Records the zeus topics to split, crash-safe bags and reports drops live."""
 
-    def __init__(self) -> None:
-        super().__init__('recorder')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
+        super().__init__('recorder', **node_options)
         self.params = self._read_parameters()
         self.output = Path(self.params['output']).expanduser().resolve()
         if not self.params['output']:  # like rosbag2: a new timestamped directory

@@ -106,8 +106,9 @@ ACTION_BACKLOG = 1000  # reader history of zeus/action, as sim_bridge: room for 
 class RobotBridgeNode(Node):
     """Turns robot topics into the step protocol and actions into robot commands."""
 
-    def __init__(self) -> None:
-        super().__init__('robot_bridge')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
+        super().__init__('robot_bridge', **node_options)
         self.params = declare_specs(self, SPECS)
         self.spec = RobotSpec.from_params(self.params)
         self.reward_fn = load_reward(self.params['reward'], self.spec.joints, self.spec.observe)

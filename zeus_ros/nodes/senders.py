@@ -264,8 +264,9 @@ class SenderPairing:
         if gid not in graph:
             graph = self.publishers(max_age=0.02)  # a newcomer: the graph may just be late
         sender = graph.get(gid)
+        old = self.paired  # before _may_take_over: its pair() sets self.paired on first contact
         if sender is not None and self._may_take_over(sender, graph):
-            old, self.paired = self.paired, sender
+            self.paired = sender
             self._heard = time.monotonic()
             if old is not None:
                 self._retired.add(old.gid)

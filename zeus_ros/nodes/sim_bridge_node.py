@@ -71,8 +71,9 @@ SPECS: dict[str, Spec] = {
 class SimBridgeNode(Node):
     """Steps a ScheduledEnv and speaks the step protocol of DESIGN.md."""
 
-    def __init__(self) -> None:
-        super().__init__('sim_bridge')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
+        super().__init__('sim_bridge', **node_options)
         self.params = declare_specs(self, SPECS, open_prefixes=[SCHEDULE_PREFIX])
         try:
             task = make_task(self.params['task'], seed=self.params['seed'])

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
+import gc
 from pathlib import Path
 import re
 import sys
@@ -34,6 +35,7 @@ from rosbags.rosbag2 import Reader
 
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
+from zeus_ros.offline.data.cdr_columns import decode_messages
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -282,22 +284,19 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            f"type hash {conn.digest} != this checkout's "
                                            f'{ours} for {expected}: written with another '
                                            'definition; decoding may fail'))
+        # Step topics are decoded in batches after the read (cdr_columns), images one by one.
+        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _STEP_TOPICS}
         for conn, _, raw in reader.messages(connections=conns):
             count += 1
             read[conn.topic] += 1
-            msg = cdc.deserialize(raw, conn.msgtype)
-            stamp = ns_from_stamp(msg.header.stamp)
             topic = schema_topic[conn.topic]
-            if topic == TOPIC_IMAGE:
-                images[stamp].append(msg)
+            if topic != TOPIC_IMAGE:
+                raws[topic].append((count, raw))
                 continue
-            step = int(msg.step)
-            col = topics[topic].by_step
-            if step in col:
-                report.issues.append(Issue(str(path), conn.topic, step, 'duplicate',
-                                           'step seen again; keeping the first message'))
-            else:
-                col[step] = (stamp, msg)
+            msg = cdc.deserialize(raw, conn.msgtype)
+            images[ns_from_stamp(msg.header.stamp)].append(msg)
+        for topic, entries in raws.items():
+            _decode_topic(path, topic, entries, topics[topic].by_step, report, namespace)
     except BagError:
         raise
     except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
@@ -307,6 +306,29 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     report.messages += count
     _check_counts(path, conns, read, report)
     return {'topics': topics, 'images': images}
+
+
+def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
+                  col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
+    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
+    cdc = codec()
+
+    def one(i: int) -> Any:
+        try:
+            return cdc.deserialize(entries[i][1], MSGTYPES[topic])
+        except Exception as exc:  # bad CDR: named like a truncated read
+            raise BagError(path, f'corrupt or truncated after {entries[i][0] - 1} messages: '
+                                 f'{exc}') from exc
+
+    messages = decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
+    for msg in messages:
+        step = int(msg.step)
+        if step in col:
+            report.issues.append(Issue(str(path), bag_topic(topic, namespace), step,
+                                       'duplicate', 'step seen again; keeping the first '
+                                       'message'))
+        else:
+            col[step] = (msg.stamp_ns, msg)
 
 
 def _check_counts(path: Path, conns: list[Any], read: Counter[str],
@@ -385,16 +407,6 @@ def _match_images(
             report.issues.append(Issue(str(path), TOPIC_IMAGE, stamp_steps[0], 'duplicate',
                                        f'{len(msgs)} images with stamp {stamp} ns'))
     return frames
-
-
-def _bad_value(value: Any, length: int | None) -> str | None:
-    """Why a numeric field is unusable ('length' / 'nonfinite'), or None when it is fine."""
-    arr = np.asarray(value, np.float64)
-    if length is not None and arr.size != length:
-        return 'length'
-    if not np.all(np.isfinite(arr)) or (arr.size and float(np.abs(arr).max()) > MAX_ABS):
-        return 'nonfinite'
-    return None
 
 
 def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
@@ -501,9 +513,13 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
-    for i, s in enumerate(piece):
-        if s in acts and _bad_value(acts[s][1].data, action_dim) is None:
-            policy[i] = acts[s][1].data
+    present = [(i, acts[s][1].data) for i, s in enumerate(piece)
+               if s in acts and len(acts[s][1].data) == action_dim]
+    if present:  # a request of another length or with a bad value stays absent (NaN)
+        rows = np.stack([data for _, data in present]).astype(np.float64)
+        with np.errstate(invalid='ignore'):
+            usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
+        policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
     pix = None
     if frames is not None:
         first = frames[piece[0]]
@@ -532,6 +548,19 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
 
 def _ingest_one(path: Path, report: IngestReport, meta: dict[str, Any],
                 namespace: str = '') -> list[Episode]:
+    # Every message read stays alive until the episodes are built, and none forms a cycle:
+    # the cycle collector would only re-walk them, ever more often (half the time at 20k steps).
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        return _ingest_read(path, report, meta, namespace)
+    finally:
+        if collecting:
+            gc.enable()
+
+
+def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
+                 namespace: str = '') -> list[Episode]:
     read = _read_bag(path, report, namespace)
     topics: dict[str, _Topic] = read['topics']
     usable = _check_alignment(path, topics, report)
