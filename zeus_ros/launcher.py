@@ -210,10 +210,13 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
     """Start, supervise and stop a group; the exit code tells whether a node failed.
 
     SIGTERM (systemd, `timeout`, a supervisor) stops the group like Ctrl-C: the children run in
-    their own sessions, so without this they would outlive the launcher and keep driving.
+    their own sessions, so without this they would outlive the launcher and keep driving. SIGINT
+    is taken explicitly too (as `ros2 launch` does): a launcher started as a background job of a
+    script inherits SIGINT ignored and would otherwise never stop on `kill -INT`.
     """
     supervisor = Supervisor(nodes, env, out)
-    signal.signal(signal.SIGTERM, _interrupt)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _interrupt)
     try:
         supervisor.start()
         name, code = supervisor.wait(timeout)

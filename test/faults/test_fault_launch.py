@@ -20,31 +20,15 @@ import time
 import pytest
 
 from live_fixtures import TASK, tiny_checkpoint
-from ros_harness import REPO, fresh_domain_id, ros_environment
+from ros_harness import REPO, child_pids, fresh_domain_id, ros_environment, stop_launch
 
 pytestmark = pytest.mark.ros
 
 
 
-def _children(parent: int) -> dict[int, list[bytes]]:
-    """Pid -> argv of every child of `parent` (our own launch's nodes)."""
-    found = {}
-    for entry in Path('/proc').iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / 'stat').read_text()
-            argv = (entry / 'cmdline').read_bytes().split(b'\0')
-        except OSError:
-            continue
-        if int(stat.rsplit(')', 1)[1].split()[1]) == parent:
-            found[int(entry.name)] = argv
-    return found
-
-
 def _child(parent: int, module: str) -> int:
     """The pid of the child of `parent` running `module`."""
-    for pid, argv in _children(parent).items():
+    for pid, argv in child_pids(parent).items():
         if module.encode() in argv:
             return pid
     raise AssertionError(f'no child of {parent} runs {module}')
@@ -123,9 +107,7 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
         launch.send_signal(signal.SIGINT)  # the launcher alone, as Ctrl-C would
         rest = launch.communicate(timeout=60)[0]
     finally:
-        if launch.poll() is None:
-            os.killpg(launch.pid, signal.SIGKILL)
-            launch.wait(timeout=10)
+        stop_launch(launch)
     output = ''.join(lines) + rest
     assert launch.returncode == 3, output[-3000:]
     last = re.search(r'stopped after step (\d+)', output)
@@ -157,14 +139,12 @@ def test_sigterm_to_zeus_launch_stops_every_node_it_started(tmp_path: Path) -> N
     lines: list[str] = []
     try:
         _read_until(launch, 'step 100 ', lines)
-        nodes = _children(launch.pid)
+        nodes = child_pids(launch.pid)
         assert len(nodes) == 4, nodes
         launch.send_signal(signal.SIGTERM)
         rest = launch.communicate(timeout=60)[0]
     finally:
-        if launch.poll() is None:
-            os.killpg(launch.pid, signal.SIGKILL)
-            launch.wait(timeout=10)
+        stop_launch(launch)
     output = ''.join(lines) + rest
     alive = [pid for pid in nodes if Path(f'/proc/{pid}').exists()]
     for pid in alive:  # never leave them running, even when the assertion below fails
