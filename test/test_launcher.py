@@ -147,6 +147,19 @@ def _stub_launch_modules(monkeypatch: Any) -> None:
         monkeypatch.setitem(sys.modules, name, module)
 
 
+def _installed_launch_description(monkeypatch: Any) -> list[Any]:
+    """The actions of the installed zeus.launch.py (launch modules stubbed: not on PyPI)."""
+    from zeus_ros import launch_defaults as d
+
+    _stub_launch_modules(monkeypatch)
+    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
+    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
+    assert spec is not None and spec.loader is not None
+    launch_file = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(launch_file)
+    return list(launch_file.generate_launch_description())
+
+
 def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     """The installed zeus.launch.py starts the nodes `zeus launch` starts, with the same args.
 
@@ -156,13 +169,7 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     from zeus_ros import launch_defaults as d
     from zeus_ros.launcher import plan_processes
 
-    _stub_launch_modules(monkeypatch)
-    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
-    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
-    assert spec is not None and spec.loader is not None
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    *declared, opaque = launch_file.generate_launch_description()
+    *declared, opaque = _installed_launch_description(monkeypatch)
     defaults = {a.args[0]: a.kwargs['default_value'] for a in declared}
     assert list(defaults) == [a.name for a in d.ARGUMENTS]
     assert defaults['params_file'] == str(d.default_params_file())
@@ -241,13 +248,7 @@ def test_container_arguments_give_each_node_its_own(monkeypatch: Any) -> None:
     from zeus_ros.launcher import plan_processes
     from zeus_ros.nodes.container import parse_container_args
 
-    _stub_launch_modules(monkeypatch)
-    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
-    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
-    assert spec is not None and spec.loader is not None
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    *declared, opaque = launch_file.generate_launch_description()
+    *declared, opaque = _installed_launch_description(monkeypatch)
     context = {**{a.args[0]: a.kwargs['default_value'] for a in declared},
                'record': 'true', 'namespace': 'r1', 'single_process': 'true'}
     nodes = [a for a in opaque.kwargs['function'](context) if type(a).__name__ == 'Node']
