@@ -2,7 +2,7 @@
 
     python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
-        [--splits train extrapolation] [--episodes 3] [--jobs 1]
+        [--splits train extrapolation] [--episodes 3] [--jobs 1] [--updates 20000]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -10,7 +10,9 @@ evaluates every finished run on every split with `zeus eval` (resumable; evaluat
 3 episodes per value, diagnostics), then writes one table per split: return, the paired gain
 over `no_context` of the default protocol (same seeds), the share of the oracle's headroom it
 recovers, and the adaptation diagnostics. With --export, each finished run is also shipped as a
-deployment checkpoint with its card under <export>/<variant>/<group>/.
+deployment checkpoint with its card under <export>/<variant>/<group>/. --updates picks the budget:
+10,000 (runs in <task>/), or a longer one (runs in <task>_<N>k/, as run_one.sh lays them out with
+ROUNDS > 5); the tables of a longer budget are named <task>_<N>k.
 """
 
 from __future__ import annotations
@@ -39,14 +41,20 @@ REFERENCE_VARIANT = 'default'
 """The variant whose no_context and oracle runs define the headroom."""
 
 
-def _task_folder(task: str) -> str:
-    return task.lower().replace('-', '_')
+BASE_UPDATES = 10_000
+"""The budget of the runs in <task>/ (run_one.sh's 5 rounds); longer ones live in <task>_<N>k/."""
+
+
+def _task_folder(task: str, updates: int = BASE_UPDATES) -> str:
+    name = task.lower().replace('-', '_')
+    return name if updates == BASE_UPDATES else group_name(task, updates)
 
 
 def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
-                     splits: list[str] | None, episodes: int, jobs: int) -> Path | None:
-    """Evaluate the finished runs of one variant; returns the folder of its tables."""
-    runs = root / variant / _task_folder(task)
+                     splits: list[str] | None, episodes: int, jobs: int,
+                     updates: int = BASE_UPDATES) -> Path | None:
+    """Evaluate the finished runs of one variant at one budget; returns its tables' folder."""
+    runs = root / variant / _task_folder(task, updates)
     finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*/'))
               if read_state(p).trained]
     if not finals:
@@ -54,8 +62,8 @@ def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
     evaluate_many(find_checkpoints(finals), evals / variant, splits=splits, jobs=jobs,
                   progress=True, expect_task=task, probe_steps=0, seed=100,
                   episodes=episodes)
-    groups = sorted((evals / variant).glob(f'{_task_folder(task)}_*'))
-    return groups[0] if groups else None
+    group = evals / variant / group_name(task, updates)
+    return group if group.is_dir() else None
 
 
 def _cell(values: list[float], digits: int = 1) -> str:
@@ -166,12 +174,13 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path) -> None:
+def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path,
+                updates: int = BASE_UPDATES) -> None:
     """Ship each finished run of the variant as a deployment checkpoint with its card."""
     from zeus_ros.learning.checkpoint import load_checkpoint
     from zeus_ros.offline.evaluation.export import export
 
-    for run in sorted((root / variant / _task_folder(task)).glob('*_s*/')):
+    for run in sorted((root / variant / _task_folder(task, updates)).glob('*_s*/')):
         final = run / 'run' / 'final.pt'
         if not read_state(run).trained or not final.is_file():
             continue
@@ -202,30 +211,35 @@ def main() -> None:
                         help="default: every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
     parser.add_argument('--jobs', type=int, default=1, help='evaluations in parallel')
+    parser.add_argument('--updates', type=int, default=BASE_UPDATES,
+                        help='budget of the runs compared (default 10000: run_one.sh 5 rounds)')
     args = parser.parse_args()
     variants = sorted((p.name for p in args.root.iterdir() if p.is_dir()),
                       key=lambda v: (v != REFERENCE_VARIANT, v != 'paper', v))
     tables = {}
     for variant in variants:
         folder = evaluate_variant(args.root, variant, args.task, args.evals,
-                                  splits=args.splits, episodes=args.episodes, jobs=args.jobs)
+                                  splits=args.splits, episodes=args.episodes, jobs=args.jobs,
+                                  updates=args.updates)
         if folder is not None:
             tables[variant] = folder
             if args.export:
-                export_runs(args.root, variant, args.task, args.export, args.evals)
+                export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / _task_folder(args.task)
+    stem = args.out / _task_folder(args.task, args.updates)
     walls = []
     for variant, folder in tables.items():
-        runs = _with_train_seconds(per_run(folder), args.root / variant / _task_folder(args.task))
+        runs = _with_train_seconds(per_run(folder),
+                                   args.root / variant / _task_folder(args.task, args.updates))
         walls.append(f'**{variant}**\n\n{wall_time_table(runs)}')
     Path(f'{stem}_wall_times.md').write_text(
         'Seconds of training (`zeus loop`: collection + updates) + evaluation (all splits), '
         'two runs sharing the two cores:\n\n' + '\n\n'.join(walls) + '\n')
     write_csv(stem.with_suffix('.csv'), rows)
     stem.with_suffix('.md').write_text(markdown(rows))
-    plot(rows, stem.with_suffix('.png'), f'{args.task}: configs and methods')
+    plot(rows, stem.with_suffix('.png'),
+         f'{args.task}, {args.updates:,} updates: configs and methods')
     print(markdown(rows))
     print(f'wrote {stem}.csv, .md, .png and {stem.name}_wall_times.md')
 

@@ -3,8 +3,9 @@
 # then in-process evaluation on every split the task's preset defines. Same data and update
 # budget for every method: 1,500 random steps, then ROUNDS-1 rounds of 2,000 policy steps with
 # exploration noise 0.2, 2,000 updates per round (ROUNDS=5: 10,000 updates). A longer run
-# (ROUNDS > 5, folder <task>_<updates>k) starts from a copy of the finished 5-round run and
-# continues it with `zeus loop --resume`, which is the same as running all rounds at once.
+# (ROUNDS > 5, folder <task>_<updates>k) starts from a copy of the longest finished shorter run
+# of the same (task, method, seed) and continues it with `zeus loop --resume`, which is the same
+# as running all rounds at once (a 30k run continues the 20k one, which continued the 10k one).
 # Finished parts are skipped, so rerunning resumes; a lock folder stops two copies of a run.
 # What is finished is recorded in <run>/state.json (zeus_ros/offline/training/run_state.py);
 # runs finished before it, marked by .done_train / eval_<split>/.done files, count as finished.
@@ -35,10 +36,16 @@ if [ "$TASK" = Cheetah-Run-v1 ]; then collect_every=20; fi
 mkdir -p "$OUT"
 if ! mkdir "$run.lock" 2>/dev/null; then echo "skip: $run is running elsewhere"; exit 0; fi
 trap 'rmdir "$run.lock"' EXIT
-base_run="$BASE/${METHOD}_s${SEED}"
+# the longest finished run of this (task, method, seed) with fewer rounds, if any
+base_run=""
+for ((r = ROUNDS - 1; r >= 5; r--)); do
+  if [ "$r" = 5 ]; then candidate="$BASE/${METHOD}_s${SEED}"
+  else candidate="${BASE}_$((r * 2))k/${METHOD}_s${SEED}"; fi
+  if [ -f "$candidate/run/final.pt" ] && finished "$candidate"; then base_run=$candidate; break; fi
+done
 if [ ! -f "$run/run/final.pt" ] || ! finished "$run"; then
   resume=()
-  if [ "$OUT" != "$BASE" ] && [ ! -d "$run/run" ] && finished "$base_run"; then
+  if [ -n "$base_run" ] && [ ! -d "$run/run" ]; then
     mkdir -p "$run" && cp -r "$base_run/bags" "$base_run/run" "$run/"
     earlier=$(state seconds "$base_run")
     if [ -n "$earlier" ]; then state mark-continued "$run" "$earlier"; fi
