@@ -83,6 +83,70 @@ def test_context_normalizer_standardises_in_training_only() -> None:
     torch.testing.assert_close(norm.state_dict()['mean'], before)
 
 
+def _history_contexts(k: int, noise: float, episodes: int = 256, steps: int = 40,
+                      seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
+    """psi(H_t), psi(H_{t+1}) pairs of a mean-over-k encoder with per-episode signal.
+
+    Dimension 0 is noise only; dimension 1 adds a per-episode signal of unit variance.
+    """
+    gen = torch.Generator().manual_seed(seed)
+    codes = torch.randn(episodes, steps + k, 2, generator=gen) * noise
+    signal = torch.randn(episodes, 1, generator=gen)
+    psi = codes.unfold(1, k, 1).mean(-1)  # (episodes, steps + 1, 2): mean of the last k codes
+    psi[..., 1] += signal
+    return psi[:, :-1].reshape(-1, 2), psi[:, 1:].reshape(-1, 2)
+
+
+def test_reliability_normaliser_fades_noise_and_keeps_signal() -> None:
+    """Without labels: a noise-only dimension is weighted ~0, a signal dimension by its share."""
+    k, noise = 10, 1.0
+    context, next_context = _history_contexts(k, noise)
+    norm = ContextNormalizer(2, momentum=1.0, noise_scale=k / 2)
+    norm.update(context, next_context)
+    reliability = norm.reliability()
+    expected = 1.0 / (1.0 + noise ** 2 / k)  # signal variance / (signal + noise variance)
+    assert float(reliability[0]) < 0.1
+    assert abs(float(reliability[1]) - expected) < 0.05
+    out = norm(context)
+    assert float(out[:, 0].std()) < 0.1  # the noise no longer enters at unit size
+    assert abs(float(out[:, 1].std()) - expected) < 0.06
+    plain = ContextNormalizer(2, momentum=1.0)  # 'running' amplifies the noise to unit size
+    plain.update(context)
+    assert abs(float(plain(context)[:, 0].std()) - 1.0) < 0.01
+    # rows whose next step is another episode are left out of the noise estimate
+    jumbled = next_context[torch.randperm(len(next_context), generator=torch.Generator()
+                                          .manual_seed(1))]
+    masked = ContextNormalizer(2, momentum=1.0, noise_scale=k / 2)
+    masked.update(context, jumbled, torch.zeros(len(context), 1))
+    torch.testing.assert_close(masked.noise_var, (k / 2) * (jumbled - context).pow(2).mean(0))
+    kept = ContextNormalizer(2, momentum=1.0, noise_scale=k / 2)
+    same = torch.ones(len(context), 1)
+    same[::2] = 0
+    kept.update(context, next_context, same)
+    assert abs(float(kept.reliability()[1]) - expected) < 0.06
+
+
+def test_reliability_normaliser_in_the_agent(tmp_path) -> None:
+    """Psi methods estimate noise, the oracle's true context is fully reliable; both round-trip."""
+    from zeus_ros.learning.checkpoint import load_checkpoint, save_checkpoint
+
+    system = SyntheticSystem(k=3)
+    zeus = make_agent(_config('zeus', context_norm='reliability'), system.spec())
+    assert zeus.modules['context_norm'].noise_scale == 3 / 2
+    metrics = {}
+    for step in range(3):
+        metrics = zeus.update(system.sample(8), system.sample(8), step)
+    assert 0.0 <= metrics['train/context_reliability'] <= 1.0
+    oracle = make_agent(_config('oracle', context_norm='reliability'), system.spec())
+    oracle.update(system.sample(8), None, 0)
+    assert bool((oracle.modules['context_norm'].reliability() == 1).all())
+    path = save_checkpoint(tmp_path / 'zeus.pt', zeus, step=3)
+    loaded = load_checkpoint(path).agent.modules['context_norm']
+    torch.testing.assert_close(loaded.noise_var, zeus.modules['context_norm'].noise_var)
+    with pytest.raises(ConfigError, match='aggregation'):
+        _config('zeus', context_norm='reliability', aggregation='max')
+
+
 def test_scale_free_context_loss_ignores_the_size_of_psi() -> None:
     """Shrinking psi 1000x lowers eq. 1 as written but leaves the scale-free form unchanged."""
     torch.manual_seed(0)

@@ -9,7 +9,7 @@ trains what (one place to read it):
   beta * backward dynamics; UP-OSI: regression on the true context) and, with
   `critic_context_grad`, also by the critic's TD loss. The actor always sees psi detached.
 - the context (psi, or the true one for the oracles) is standardised at the actor/critic input
-  by one ContextNormalizer when `context_norm: running`.
+  by one ContextNormalizer unless `context_norm: none`.
 - the actor sees [phi(o), c] detached (SAC-AE/drqv2: the encoder is trained via the critic).
 - T and R get no gradient from the context loss: d(c1, c2) is computed under no_grad.
 - psi(H_{t+1}) for the TD target comes from psi, or from its slow copy `psi_target` when
@@ -131,9 +131,12 @@ class ZeusAgent:
                         self.modules['critic'].q2):
                 with torch.no_grad():
                     net[0].weight[:, context_inputs] = 0.0
-        if cfg.context_norm == 'running' and self.context_dim > 0:
-            self.modules['context_norm'] = ContextNormalizer(self.context_dim,
-                                                             cfg.context_norm_momentum)
+        if cfg.context_norm != 'none' and self.context_dim > 0:
+            noise_scale = None
+            if cfg.context_norm == 'reliability':  # the true context has no estimation noise
+                noise_scale = 0.0 if self.method_spec.context_source == 'true' else cfg.k / 2
+            self.modules['context_norm'] = ContextNormalizer(
+                self.context_dim, cfg.context_norm_momentum, noise_scale=noise_scale)
         self.modules['encoder_target'] = copy.deepcopy(self.modules['encoder'])
         self.modules['critic_target'] = copy.deepcopy(self.modules['critic'])
         if 'psi' in self.modules and cfg.context_target_tau > 0:
@@ -199,7 +202,7 @@ class ZeusAgent:
             self.method == 'up_osi' and step < self.up_osi_warmup_updates)
 
     def policy_context(self, context: torch.Tensor) -> torch.Tensor:
-        """The context as actor and critic see it: standardised when `context_norm: running`."""
+        """The context as actor and critic see it: as given, or through the context normaliser."""
         norm = self.modules.get('context_norm')
         return context if norm is None else norm(context)
 
@@ -282,8 +285,11 @@ class ZeusAgent:
         metrics: dict[str, torch.Tensor] = {}
         context, next_context = self._representation_step(
             batch, pair if needs_pair else None, step, metrics)
-        if 'context_norm' in self.modules:
-            self.modules['context_norm'].update(context)
+        norm = self.modules.get('context_norm')
+        if norm is not None:
+            norm.update(context, next_context, batch.not_done)
+            if norm.noise_scale is not None:
+                metrics['train/context_reliability'] = norm.reliability().mean()
         self._update_critic(batch, context, next_context, step, metrics)
         if step % self.config.actor_update_freq == 0:
             self._update_actor_and_alpha(batch, context, metrics)

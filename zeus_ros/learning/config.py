@@ -33,7 +33,7 @@ __all__ = [
     'upgrade_stored_config',
 ]
 
-CONTEXT_NORMS = ('none', 'running')
+CONTEXT_NORMS = ('none', 'running', 'reliability')
 """How the context is scaled at the actor/critic input (one normaliser for every method)."""
 CONTEXT_INPUT_INITS = ('orthogonal', 'zero')
 """How the actor's and critic's first-layer weights on the context inputs start."""
@@ -98,7 +98,9 @@ class ZeusConfig:
     """'running': standardise the context (psi or the true one) at the actor/critic input with
     running statistics of the training batches; 'none': feed it raw (the paper, and the default:
     where psi carries no signal the normaliser turns its noise into unit-size inputs, which broke
-    learning on Cheetah-Run-v0, docs/results.md)."""
+    learning on Cheetah-Run-v0, docs/results.md); 'reliability': standardised as 'running', then
+    each dimension weighted by the share of its variance that is not within-episode noise
+    (context.ContextNormalizer), so a psi without signal fades to 0 instead of being amplified."""
     context_norm_momentum: float = 0.01
     """Update rate of the running context statistics."""
     context_input_init: str = 'orthogonal'
@@ -199,6 +201,11 @@ class ZeusConfig:
         _check_choice('context_loss', self.context_loss, CONTEXT_LOSSES)
         _check_choice('context_norm', self.context_norm, CONTEXT_NORMS)
         _check_choice('context_input_init', self.context_input_init, CONTEXT_INPUT_INITS)
+        if self.context_norm == 'reliability' and self.aggregation not in ('mean', 'sum'):
+            raise ConfigError(f"context_norm 'reliability' estimates psi's noise from one step "
+                              f'of a mean or sum over k transitions; aggregation is '
+                              f"{self.aggregation!r}: use aggregation mean or sum, or "
+                              f"context_norm 'running'")
         _check_choice('exploration', self.exploration, EXPLORATIONS)
         if not isinstance(self.critic_context_grad, bool):
             raise ConfigError(f'critic_context_grad must be true or false, '

@@ -121,25 +121,59 @@ class ContextNormalizer(nn.Module):
     is 1e-3 next to features of order 1 is invisible to the policy, whatever method made it.
     Statistics move only in training (`update`), are saved with the weights and frozen at
     deployment; gradients pass through the (fixed) affine map.
+
+    With `noise_scale` (context_norm 'reliability') each standardised dimension is also
+    multiplied by its reliability, max(0, 1 - noise variance / total variance): the share of
+    its variance that is not estimation noise. Standardising alone turns a psi that carries no
+    signal into unit-size noise (it broke learning on the torso-length family); weighted by its
+    reliability such a psi fades to 0 while a psi that does separate contexts is still fed at
+    full scale. The noise is estimated without context labels, from psi(H_t) and
+    psi(H_{t+1}) of the same episode: with a mean (or sum) over k transition codes one step
+    changes psi by (c_new - c_old) / k, whose variance is 2/k times psi's own noise variance,
+    so noise variance = k/2 * E[(psi(H_{t+1}) - psi(H_t))^2] (`noise_scale` = k/2). The few
+    steps where the context itself switches add a small upward bias. The true context has
+    no estimation noise (`noise_scale` 0: reliability 1).
     """
 
-    def __init__(self, dim: int, momentum: float = 0.01, eps: float = 1e-10) -> None:
+    def __init__(self, dim: int, momentum: float = 0.01, eps: float = 1e-10,
+                 noise_scale: float | None = None) -> None:
         super().__init__()
         self.momentum = momentum
         self.eps = eps
+        self.noise_scale = noise_scale
         self.register_buffer('mean', torch.zeros(dim))
         self.register_buffer('var', torch.ones(dim))
         self.register_buffer('count', torch.zeros((), dtype=torch.long))
+        if noise_scale is not None:
+            self.register_buffer('noise_var', torch.zeros(dim))
 
     @torch.no_grad()
-    def update(self, context: torch.Tensor) -> None:
-        """Move the statistics towards those of a (B, dim) batch (the first batch sets them)."""
+    def update(self, context: torch.Tensor, next_context: torch.Tensor | None = None,
+               same_episode: torch.Tensor | None = None) -> None:
+        """Move the statistics towards those of a (B, dim) batch (the first batch sets them).
+
+        `next_context` (B, dim): the context one step later in the same episode, rows where
+        `same_episode` (B, 1) is 0 left out; used only with `noise_scale`.
+        """
         mean, var = context.mean(0), context.var(0, unbiased=False)
         rate = 1.0 if int(self.count) == 0 else self.momentum
         self.mean.lerp_(mean, rate)
         self.var.lerp_(var, rate)
+        if self.noise_scale is not None and next_context is not None:
+            step = next_context - context
+            if same_episode is not None:
+                keep = same_episode.reshape(-1).bool()
+                step = step[keep] if bool(keep.any()) else step
+            self.noise_var.lerp_(self.noise_scale * step.pow(2).mean(0), rate)
         self.count += 1
 
+    def reliability(self) -> torch.Tensor:
+        """(dim,) share of each dimension's variance that is not noise (1 without noise_scale)."""
+        if self.noise_scale is None:
+            return torch.ones_like(self.var)
+        return (1.0 - self.noise_var / (self.var + self.eps)).clamp(0.0, 1.0)
+
     def forward(self, context: torch.Tensor) -> torch.Tensor:
-        """(B, dim) standardised context."""
-        return (context - self.mean) / torch.sqrt(self.var + self.eps)
+        """(B, dim) standardised context (weighted by its reliability with noise_scale)."""
+        standard = (context - self.mean) / torch.sqrt(self.var + self.eps)
+        return standard if self.noise_scale is None else standard * self.reliability()
