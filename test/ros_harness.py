@@ -123,6 +123,23 @@ def stop_launch(launch: subprocess.Popen[str], grace: float = 30.0) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
+@contextlib.contextmanager
+def cpu_burners(count: int | None = None) -> Iterator[None]:
+    """Busy-loop processes (one per core by default) for the block: start-up under load.
+
+    Discovery and matching are slowest on a loaded machine; a test that must hold there runs
+    its system inside this block. The burners are killed on leaving it, whatever happened.
+    """
+    burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+               for _ in range(count or os.cpu_count() or 1)]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait(timeout=10)
+
+
 def python_module(module: str, *args: str) -> list[str]:
     """Build the argv running `python -m module args` with this interpreter."""
     return [sys.executable, '-m', module, *args]

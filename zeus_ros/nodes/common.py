@@ -110,21 +110,24 @@ class WaitReport:
                 f'still waiting after {now - self._start:.0f} s: {what}')
 
 
-def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int
-                  ) -> list[str]:
+def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int,
+                  others: Sequence[Any] = ()) -> list[str]:
     """What a step producer still waits for before step 0 (empty: start).
 
-    `outputs` are its publishers, the StepFeedback one first, then the observations. Graph
-    counts say who was discovered; the matched counts of our own endpoints say whose data path
-    is ready. Starting before they agree would drop step 0 for a late peer (the estimator would
-    miss it and the policy would act on no context). `min_observers` names how many step
-    subscribers a launch expects (estimator, policy, recorder, ...), so a peer that is still
-    starting up is waited for rather than missed. Counted on the names as the node resolved
-    them: namespace and remaps applied.
+    `outputs` are its publishers, the StepFeedback one first, then the observations; `others`
+    its further per-step publishers (true context, /clock), which only need every discovered
+    subscriber matched. Graph counts say who was discovered; the matched counts of our own
+    endpoints say whose data path is ready. Starting before they agree would drop step 0 for a
+    late peer (the estimator would miss it and the policy would act on no context; a recorder
+    would miss it in the bag). `min_observers` names how many step subscribers a launch
+    expects (estimator, policy, recorder, ...), so a peer that is still starting up is waited
+    for rather than missed; a recorder subscribes to the steps last, so once it counts here its
+    other subscriptions are known too. Counted on the names as the node resolved them:
+    namespace and remaps applied.
     """
     step_pub, observations = outputs[0], outputs[1:]
     observers = sum(node.count_subscribers(pub.topic_name) for pub in observations)
-    unmatched = [pub.topic_name for pub in outputs
+    unmatched = [pub.topic_name for pub in (*outputs, *others)
                  if pub.get_subscription_count() < node.count_subscribers(pub.topic_name)]
     action_topic = action_sub.topic_name
     actions = node.count_publishers(action_topic)

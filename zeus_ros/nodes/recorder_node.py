@@ -40,7 +40,7 @@ from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.durable import DurableBagWriter
 from zeus_ros.offline.data.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
-from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE
+from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE, TOPIC_STEP
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration
@@ -131,7 +131,9 @@ class RecorderNode(Node):
         self._sources: dict[str, str] = {}
         """bag topic -> the name subscribed (relative: follows namespace and remaps)."""
 
-        for topic in self.topics:
+        # zeus/step last: a step producer that sees this subscription (min_observers) knows the
+        # others exist, and it waits until its own publishers have matched them (step 0 kept).
+        for topic in sorted(self.topics, key=lambda name: name == TOPIC_STEP):
             qos = step_qos(RECORD_DEPTH)
             if topic == TOPIC_IMAGE and self.params['image_best_effort']:
                 qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing

@@ -156,7 +156,8 @@ class SimBridgeNode(Node):
         outputs = [self._pub_step, self._pub_state]
         if self._pub_image is not None:
             outputs.append(self._pub_image)
-        missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'])
+        missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'],
+                                others=[self._pub_truth, self._pub_clock])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
