@@ -280,13 +280,15 @@ class SimBridgeNode(Node):
         feedback.action_status = int(result.status)
         feedback.task = task_name
         self._pub_step.publish(feedback)
+        # Counted once its StepFeedback is out: a Ctrl-C that stops the publishing below still
+        # leaves `close()` naming the last step a recording holds.
+        self.counts['steps'] += 1
         state = StateVector()
         state.header.stamp = stamp
         state.step = result.step
         state.data = result.observation.state.astype(np.float64).tolist()
         # The state goes last: a consumer that acts on o_k has c_k, r_k and the frame already.
         self._pub_state.publish(state)
-        self.counts['steps'] += 1
         self._rate.tick()
         every = self.params['log_every']
         if every and result.step % every == 0:
