@@ -67,6 +67,8 @@ RECORD_DEPTH = 100
 SPLIT_GRACE_S = 1.0
 """After a split the previous bag stays open this long for late messages of its own steps."""
 RECENT_STAMPS = 256
+DRAIN_QUIET_S = 0.3
+"""After Ctrl-C / SIGTERM: record on until no message came for this long (what was in flight)."""
 
 
 def _message_class(msgtype: str) -> type:
@@ -256,6 +258,11 @@ class RecorderNode(Node):
         if limit and writer is self._writer and writer.bytes_written >= limit:
             self._split()
 
+    @property
+    def received(self) -> int:
+        """Messages written so far (run_node's drain watches it)."""
+        return sum(self.counts.values())
+
     def _track_step(self, topic: str, step: int) -> None:
         last = self.last_step.get(topic)
         if last is None:  # says when recording really starts (discovery takes a while)
@@ -316,7 +323,7 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of `ros2 run zeus_ros recorder_node`."""
-    return run_node(RecorderNode, args)
+    return run_node(RecorderNode, args, drain=DRAIN_QUIET_S)
 
 
 if __name__ == '__main__':
