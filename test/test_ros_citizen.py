@@ -217,13 +217,14 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
         # an action already at its bound can be clipped back onto it in every dimension
         assert np.mean(noisy > 1e-3) > 0.8, f'actions after the change not noisy: {noisy}'
 
+        refused_type = call(probe, bridge_params.set_parameters(
+            [Parameter('action_timeout', value='soon')])).results[0]
+        assert not refused_type.successful and refused_type.reason
+        # Last call to sim_bridge: a probe lagging the loop by 30 steps would see it gone.
         stop_at = max(states) + 30
         result = call(probe, bridge_params.set_parameters(
             [Parameter('max_steps', value=stop_at)])).results[0]
         assert result.successful, result.reason
-        refused_type = call(probe, bridge_params.set_parameters(
-            [Parameter('action_timeout', value='soon')])).results[0]
-        assert not refused_type.successful and refused_type.reason
         assert spin_until(probe, lambda: bridge.poll() is not None, timeout=60)
     assert bridge.returncode == 0
     assert f'max_steps={stop_at} reached' in ros_processes.log_text('live-sim_bridge')
