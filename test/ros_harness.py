@@ -123,6 +123,36 @@ def stop_launch(launch: subprocess.Popen[str], grace: float = 30.0) -> None:
                 os.kill(pid, signal.SIGKILL)
 
 
+def read_until(launch: subprocess.Popen[str], text: str, lines: list[str],
+               timeout: float = 120.0) -> None:
+    """Read a launcher's output into `lines` until a line holds `text` (fail at timeout, EOF)."""
+    assert launch.stdout is not None
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = launch.stdout.readline()
+        lines.append(line)
+        if text in line or not line:
+            break
+    assert text in lines[-1], ''.join(lines[-30:])
+
+
+@contextlib.contextmanager
+def cpu_burners(count: int | None = None) -> Iterator[None]:
+    """Busy-loop processes (one per core by default) for the block: start-up under load.
+
+    Discovery and matching are slowest on a loaded machine; a test that must hold there runs
+    its system inside this block. The burners are killed on leaving it, whatever happened.
+    """
+    burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+               for _ in range(count or os.cpu_count() or 1)]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait(timeout=10)
+
+
 def python_module(module: str, *args: str) -> list[str]:
     """Build the argv running `python -m module args` with this interpreter."""
     return [sys.executable, '-m', module, *args]

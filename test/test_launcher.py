@@ -62,6 +62,8 @@ def test_defaults_are_the_installed_params_and_checkpoint() -> None:
     assert [n.name for n in plan.nodes] == ['sim_bridge', 'context_estimator', 'policy']
     nodes = {n.name: n.parameters for n in plan.nodes}
     assert nodes['sim_bridge'] == {'min_observers': 2}
+    assert nodes['context_estimator']['expected_subscribers'] == 1  # the policy
+    assert nodes['policy']['expected_subscribers'] == 1  # sim_bridge
     for name in d.AGENT_NODES:
         checkpoint = Path(nodes[name]['checkpoint'])
         assert checkpoint.is_absolute() and checkpoint.is_file()
@@ -70,7 +72,7 @@ def test_defaults_are_the_installed_params_and_checkpoint() -> None:
 
 
 def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: Path) -> None:
-    """record:=true adds the recorder, counted in sim_bridge's min_observers.
+    """record:=true adds the recorder, counted in min_observers and expected_subscribers.
 
     namespace, use_sim_time, checkpoint and log_level reach every node they concern.
     """
@@ -84,6 +86,10 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
     nodes = {n.name: n.parameters for n in plan.nodes}
     assert list(nodes) == ['sim_bridge', 'context_estimator', 'policy', 'recorder']
     assert nodes['sim_bridge']['min_observers'] == 3
+    # context: policy + recorder; actions: sim_bridge + recorder (so the bag has step 0)
+    assert nodes['context_estimator']['expected_subscribers'] == 2
+    assert nodes['policy']['expected_subscribers'] == 2
+    assert 'expected_subscribers' not in nodes['recorder']
     assert all(p['use_sim_time'] is True for p in nodes.values())
     assert nodes['policy']['checkpoint'] == nodes['context_estimator']['checkpoint'] == str(ckpt)
     assert (plan.namespace, plan.log_level) == ('/robot1', 'debug')
@@ -112,7 +118,8 @@ def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
     monkeypatch.chdir(tmp_path)
     plan = d.plan(params_file='cfg/p.yaml', nodes=['sim_bridge', 'policy'])
     assert plan.params_file == params
-    assert plan.nodes[1].parameters == {'checkpoint': str(tmp_path / 'cfg' / 'mine.pt')}
+    assert plan.nodes[1].parameters == {'checkpoint': str(tmp_path / 'cfg' / 'mine.pt'),
+                                        'expected_subscribers': 1}
     params.write_text('policy:\n  ros__parameters:\n    checkpoint: typo.pt\n')
     with pytest.raises(ValueError, match=r"policy checkpoint .*'typo.pt' not found; looked "
                        rf'in: {tmp_path}/cfg/typo.pt, .*share.*'):

@@ -182,3 +182,44 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
         a, b = getattr(live[0], field), getattr(local[0], field)
         assert a.shape == b.shape, field
         np.testing.assert_array_equal(a, b, err_msg=field)
+
+
+def test_the_loop_waits_until_a_late_reader_hears_context_and_action(
+        ros_processes: ProcessGroup, tmp_path) -> None:
+    """expected_subscribers: no step before the estimator's and policy's readers match.
+
+    A reader (a recorder's place) subscribes to zeus/step at once but to zeus/context and
+    zeus/action only once the estimator says it is still waiting for them: it still gets
+    every step's context and action from step 0. The estimator expects one reader more than
+    comes: after subscriber_timeout it names the topic short of subscribers and starts anyway.
+    """
+    from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    got: dict[str, list[int]] = {'step': [], 'context': [], 'action': []}
+    with driver_node(ros_processes.domain_id) as reader:
+        reader.create_subscription(StepFeedback, TOPICS.STEP,
+                                   lambda m: got['step'].append(m.step), step_qos(100))
+        ros_processes.start('estimator', node(
+            'context_estimator', f'checkpoint:={checkpoint}', 'expected_subscribers:=3',
+            'subscriber_timeout:=8.0'))
+        ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
+                                           'expected_subscribers:=2'))
+        sim = ros_processes.start('sim_bridge', bridge(40, 'min_observers:=3'))
+        waiting = 'still waiting after 3 s: 3 subscribers of /zeus/context'
+        assert spin_until(reader, lambda: waiting in ros_processes.log_text('estimator'), 90), \
+            ros_processes.log_text('estimator')[-2000:]
+        assert not got['step'], f'the loop started before its readers matched: {got}'
+        reader.create_subscription(ContextEstimate, TOPICS.CONTEXT,
+                                   lambda m: got['context'].append(m.step), step_qos(100))
+        reader.create_subscription(Action, TOPICS.ACTION,
+                                   lambda m: got['action'].append(m.step), step_qos(100))
+        assert spin_until(reader, lambda: sim.poll() is not None and len(got['action']) > 40,
+                          timeout=120), (got, ros_processes.log_text('sim_bridge')[-2000:])
+    assert sim.returncode == 0
+    for topic, steps in got.items():
+        assert steps == list(range(41)), (topic, steps[:10])
+    assert 'subscriber_timeout: 8 s passed waiting for 3 subscribers of /zeus/context ' \
+        '(expected_subscribers; 2 matched so far)' in ros_processes.log_text('estimator')

@@ -174,4 +174,5 @@ def test_both_launchers_put_robot_bridge_in_sim_bridges_place(tmp_path: Path) ->
     first = plan(robot=True, params_file=PARAMS, record=True)
     assert [n.name for n in first.nodes] == ['robot_bridge', 'policy', 'recorder']
     assert first.nodes[0].parameters['min_observers'] == 2
+    assert first.nodes[1].parameters['expected_subscribers'] == 2  # robot_bridge + recorder
     assert first.nodes[1].parameters['task'] == str(PARAMS)

@@ -20,7 +20,6 @@ from typing import Any
 
 import pytest
 import torch
-import yaml
 
 from zeus_ros.cli import main as zeus_main
 from zeus_ros.learning.config import config_from_dict
@@ -29,14 +28,10 @@ from zeus_ros.offline.training.sweep import main as sweep_main
 from zeus_ros.offline.training.sweep import parse_seeds, parse_sets, plan, run_sweep
 from zeus_ros.offline.training.trial import LoopProtocol, trial_steps
 
+from tiny_config import TINY, config_fixture
+
 torch.set_num_threads(1)  # as the trials' OMP_NUM_THREADS=1
 TASK = 'Cheetah-Run-v1'
-TINY = {
-    'method': 'zeus', 'obs_kind': 'state', 'k': 5, 'context_dim': 4, 'transition_dim': 16,
-    'context_hidden_dim': 32, 'feature_dim': 16, 'encoder_hidden_dim': 64, 'hidden_dim': 64,
-    'model_hidden_dim': 64, 'batch_size': 32, 'num_updates': 40, 'eval_interval': 1000,
-    'eval_episodes': 1, 'checkpoint_interval': 1000, 'log_interval': 10, 'device': 'cpu',
-}
 PROTOCOL = LoopProtocol(rounds=1, random_steps=100, updates=30, eval_episodes=1)
 FLAGS = ['--rounds', '1', '--random-steps', '100', '--updates', '30', '--eval-episodes', '1',
          '--eval-splits', 'extrapolation']
@@ -55,11 +50,7 @@ def ray_session() -> Iterator[None]:
         ray.shutdown()
 
 
-@pytest.fixture(scope='module')
-def tiny_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp('config') / 'tiny.yaml'
-    path.write_text(yaml.safe_dump(TINY))
-    return path
+tiny_config = config_fixture(TINY)
 
 
 def _trials(out: Path, methods: list[str], seeds: list[int],

@@ -19,13 +19,11 @@ from zeus_ros.offline.training import collect
 from zeus_ros.offline.training.run_state import read_state
 from zeus_ros.offline.training.train import TrainError, train
 
+from tiny_config import TINY, config_fixture
+
 TASK = 'Cheetah-Run-v0'
-TINY = {
-    'method': 'zeus', 'obs_kind': 'state', 'k': 5, 'context_dim': 4, 'transition_dim': 16,
-    'context_hidden_dim': 32, 'feature_dim': 16, 'encoder_hidden_dim': 64, 'hidden_dim': 64,
-    'model_hidden_dim': 64, 'batch_size': 64, 'num_updates': 240, 'eval_interval': 240,
-    'eval_episodes': 2, 'checkpoint_interval': 100, 'log_interval': 20, 'device': 'cpu',
-}
+CONFIG = TINY | {'batch_size': 64, 'num_updates': 240, 'eval_interval': 240, 'eval_episodes': 2,
+                 'checkpoint_interval': 100, 'log_interval': 20}
 
 torch.set_num_threads(1)
 
@@ -40,12 +38,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-@pytest.fixture(scope='module')
-def tiny_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A small network config so a few hundred updates take seconds."""
-    path = tmp_path_factory.mktemp('config') / 'tiny.yaml'
-    path.write_text(yaml.safe_dump(TINY))
-    return path
+tiny_config = config_fixture(CONFIG)
 
 
 @pytest.fixture(scope='module')
@@ -119,7 +112,7 @@ def test_resume_with_another_config_fails_clearly(trained: Any, bags: Path,
     """A resumed run whose network config differs names the differing field."""
     run = tmp_path / 'run'
     shutil.copytree(trained.out, run)
-    other = load_config_from(TINY | {'k': 3, 'num_updates': 300})
+    other = load_config_from(CONFIG | {'k': 3, 'num_updates': 300})
     with pytest.raises(TrainError, match=r'k: checkpoint 5, now 3'):
         train([bags], other, run, resume=True, progress=False, log=lambda _m: None)
     with pytest.raises(TrainError, match='--resume'):
@@ -314,7 +307,7 @@ def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path
                  '--no-eval', '--no-progress']) == 0
     recorded = yaml.safe_load((out / 'config.yaml').read_text())
     assert (recorded['k'], recorded['batch_size'], recorded['actor_lr']) == (3, 32, 3e-4)
-    assert recorded['num_updates'] == 2 and recorded['hidden_dim'] == TINY['hidden_dim']
+    assert recorded['num_updates'] == 2 and recorded['hidden_dim'] == CONFIG['hidden_dim']
     assert load_checkpoint(out / 'final.pt').config.k == 3
 
 

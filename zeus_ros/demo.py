@@ -26,6 +26,7 @@ import numpy as np
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspector import Inspector
+from zeus_ros.launch_defaults import start_counts
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
@@ -79,6 +80,14 @@ def schedule_values(task: str) -> list[float]:
     return values
 
 
+def _start_args(name: str, group: Sequence[str]) -> list[str]:
+    """`-p` overrides of launch_defaults.start_counts; the inspector also reads zeus/step."""
+    counts = start_counts(name, group)
+    if 'min_observers' in counts:
+        counts['min_observers'] += 1  # this process's inspector: wait for it too
+    return [arg for key, value in counts.items() for arg in ('-p', f'{key}:={value}')]
+
+
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
                 frozen: str = '') -> list[NodeProcess]:
     """The node processes of the demo with their parameters (`frozen`: policy frozen_context)."""
@@ -86,19 +95,21 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
     bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
-    # Every other node and this process's inspector listen to /zeus/step: wait for all of them.
-    observers = 1 + (2 if checkpoint is not None else 1) + (1 if args.record else 0)
-    bridge += ['-p', f'min_observers:={observers}']
-    nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None, bridge))]
+    group = ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
+             'policy', *(['recorder'] if args.record else [])]
+    nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None,
+                                                 bridge + _start_args('sim_bridge', group)))]
     if checkpoint is not None:
         ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', f'task:={args.task}']
-        nodes.append(NodeProcess('context_estimator',
-                                 node_argv('context_estimator', None, ckpt)))
+        nodes.append(NodeProcess('context_estimator', node_argv(
+            'context_estimator', None, ckpt + _start_args('context_estimator', group))))
         frozen_param = ['-p', f'frozen_context:={frozen}'] if frozen else []
-        nodes.append(NodeProcess('policy', node_argv('policy', None, ckpt + frozen_param)))
+        nodes.append(NodeProcess('policy', node_argv(
+            'policy', None, ckpt + frozen_param + _start_args('policy', group))))
     else:
         nodes.append(NodeProcess('policy', node_argv(
-            'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}'])))
+            'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}',
+                             *_start_args('policy', group)])))
     if args.record:
         nodes.append(NodeProcess('recorder', node_argv(
             'recorder', None, ['-p', f'output:={args.out / "bag"}'])))

@@ -22,7 +22,7 @@ from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
            'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
-           'plan_from_arguments', 'resolve_path', 'share_dir']
+           'plan_from_arguments', 'resolve_path', 'share_dir', 'start_counts']
 
 PACKAGE = 'zeus_ros'
 NODES: dict[str, str] = {
@@ -36,6 +36,11 @@ NODES: dict[str, str] = {
 DEFAULT_NODES = ('sim_bridge', 'context_estimator', 'policy')
 STEP_SOURCES = frozenset({'sim_bridge', 'robot_bridge'})
 """Nodes that publish the steps (a launch runs one): they wait for every other node."""
+ANSWER_READERS: dict[str, frozenset[str]] = {
+    'context_estimator': frozenset({'policy', 'recorder'}),  # zeus/context
+    'policy': STEP_SOURCES | {'recorder'},  # zeus/action
+}
+"""Who in a group subscribes to a node's answer to a step: its `expected_subscribers`."""
 AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
@@ -250,6 +255,22 @@ def _check_values(params: Mapping[str, Any], where: str, prefix: str = '') -> No
                              'string or list')
 
 
+def start_counts(name: str, group: Sequence[str]) -> dict[str, int]:
+    """How many subscribers node `name` waits for before step 0 in `group` (its parameters).
+
+    The step source waits for every other node on zeus/step (`min_observers`); the estimator
+    and the policy subscribe to the steps only once their answer (context, action) is matched
+    by its readers in the group (`expected_subscribers`), so the step source waits for them
+    too and a recorder's bag holds every topic from step 0.
+    """
+    if name in STEP_SOURCES:
+        return {'min_observers': len(group) - 1}
+    if name in ANSWER_READERS:
+        readers = sum(1 for other in group if other in ANSWER_READERS[name])
+        return {'expected_subscribers': readers} if readers else {}
+    return {}
+
+
 def plan(
     *,
     namespace: str = '',
@@ -265,7 +286,8 @@ def plan(
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
     sim_bridge waits for every other node of the group (the recorder included) on zeus/step,
-    so none of them misses step 0; a relative checkpoint becomes an absolute path. With
+    and estimator and policy for the readers of their answers (`start_counts`), so none of
+    them misses step 0; a relative checkpoint becomes an absolute path. With
     `robot`, robot_bridge takes sim_bridge's place; without any checkpoint the robot's first
     recording is made by the random policy alone (no estimator), which reads the robot's shape
     from the params file. `single_process` changes only how the nodes are hosted (one process,
@@ -293,8 +315,7 @@ def plan(
     planned = []
     for name in names:
         overrides: dict[str, Any] = {}
-        if name in STEP_SOURCES:
-            overrides['min_observers'] = len(names) - 1
+        overrides.update(start_counts(name, names))
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:
                 overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))

@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 import torch
-import yaml
 
 from zeus_ros.learning.checkpoint import load_checkpoint, nonfinite_tensors, save_checkpoint
 from zeus_ros.learning.errors import CheckpointError
@@ -29,14 +28,9 @@ from zeus_ros.offline.evaluation import export
 from zeus_ros.offline.training import collect, train
 
 from ros_harness import REPO, fresh_domain_id, ros_environment
+from tiny_config import MINIMAL, config_fixture, write_config
 
 TASK = 'Cheetah-Run-v0'
-TINY = {
-    'method': 'zeus', 'obs_kind': 'state', 'k': 3, 'context_dim': 4, 'transition_dim': 8,
-    'context_hidden_dim': 16, 'feature_dim': 8, 'encoder_hidden_dim': 32, 'hidden_dim': 32,
-    'model_hidden_dim': 32, 'batch_size': 32, 'num_updates': 6, 'eval_interval': 1000,
-    'eval_episodes': 1, 'checkpoint_interval': 2, 'log_interval': 2, 'device': 'cpu',
-}
 
 torch.set_num_threads(1)
 
@@ -92,12 +86,7 @@ def poisoned_bag(clean_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> P
     return _rewrite(clean_bag, tmp_path_factory.mktemp('poisoned') / 'bag_000', _issue_poison)
 
 
-@pytest.fixture(scope='module')
-def tiny_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A config small enough that six updates take a second."""
-    path = tmp_path_factory.mktemp('config') / 'tiny.yaml'
-    path.write_text(yaml.safe_dump(TINY))
-    return path
+tiny_config = config_fixture(MINIMAL)
 
 
 def test_ingest_drops_bad_values_and_reports_each_topic_and_field(poisoned_bag: Path,
@@ -208,7 +197,7 @@ def test_a_diverging_learning_rate_stops_at_update_one(clean_bag: Path, tiny_con
                                                        tmp_path: Path) -> None:
     """A real divergence (critic_lr 1e30) through the CLI: one line, exit 1, no checkpoint."""
     config = tmp_path / 'boom.yaml'
-    config.write_text(yaml.safe_dump(TINY | {'critic_lr': 1e30}))
+    write_config(config, MINIMAL | {'critic_lr': 1e30})
     result = subprocess.run(
         [sys.executable, '-m', 'zeus_ros.cli', 'train', '--bags', str(clean_bag), '--config',
          str(config), '--out', str(tmp_path / 'run'), '--no-eval', '--no-progress',

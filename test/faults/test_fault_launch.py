@@ -15,12 +15,18 @@ import re
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
 from live_fixtures import TASK, tiny_checkpoint
-from ros_harness import REPO, child_pids, fresh_domain_id, ros_environment, stop_launch
+from ros_harness import (
+    REPO,
+    child_pids,
+    fresh_domain_id,
+    read_until,
+    ros_environment,
+    stop_launch,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -54,18 +60,6 @@ def _launch(params: Path) -> subprocess.Popen[str]:
         stderr=subprocess.STDOUT, text=True, start_new_session=True)
 
 
-def _read_until(launch: subprocess.Popen[str], text: str, lines: list[str]) -> None:
-    """Read the launcher's output until a line holds `text` (fail after 120 s or at EOF)."""
-    assert launch.stdout is not None
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        line = launch.stdout.readline()
-        lines.append(line)
-        if text in line or not line:
-            break
-    assert text in lines[-1], ''.join(lines[-30:])
-
-
 def _recorded_steps(output: Path) -> list[int]:
     """Step indices of /zeus/step in every bag of a recorder output directory."""
     from rosbags.highlevel import AnyReader
@@ -91,19 +85,19 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
     launch = _launch(_params(tmp_path, 0))
     lines: list[str] = []
     try:
-        _read_until(launch, 'step 200 ', lines)
+        read_until(launch, 'step 200 ', lines)
         os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGKILL)
-        _read_until(launch, f'topics to {out}_respawn1 ', lines)
+        read_until(launch, f'topics to {out}_respawn1 ', lines)
         # the new recorder needs discovery time before its subscriptions match (the loop does
         # not wait for it): wait until it logs its first step, then let it record a while
-        _read_until(launch, '/zeus/step: first message at step', lines)
+        read_until(launch, '/zeus/step: first message at step', lines)
         for _ in range(3):
-            _read_until(launch, 'sim_bridge]: step ', lines)
+            read_until(launch, 'sim_bridge]: step ', lines)
         os.kill(_child(launch.pid, 'zeus_ros.nodes.recorder_node'), signal.SIGTERM)
-        _read_until(launch, f'topics to {out}_respawn2 ', lines)
-        _read_until(launch, '/zeus/step: first message at step', lines)
+        read_until(launch, f'topics to {out}_respawn2 ', lines)
+        read_until(launch, '/zeus/step: first message at step', lines)
         for _ in range(3):
-            _read_until(launch, 'sim_bridge]: step ', lines)
+            read_until(launch, 'sim_bridge]: step ', lines)
         launch.send_signal(signal.SIGINT)  # the launcher alone, as Ctrl-C would
         rest = launch.communicate(timeout=60)[0]
     finally:
@@ -138,7 +132,7 @@ def test_sigterm_to_zeus_launch_stops_every_node_it_started(tmp_path: Path) -> N
     launch = _launch(_params(tmp_path, 0))
     lines: list[str] = []
     try:
-        _read_until(launch, 'step 100 ', lines)
+        read_until(launch, 'step 100 ', lines)
         nodes = child_pids(launch.pid)
         assert len(nodes) == 4, nodes
         launch.send_signal(signal.SIGTERM)

@@ -10,23 +10,18 @@ import sys
 import time
 
 import pytest
-import yaml
 
 from zeus_ros.offline.data.ingest import ingest_bags
 
 from ros_harness import REPO
+from tiny_config import MINIMAL, write_config
 
 # kill -9 at each phase of a round: ~2.5 min, so `make faults` runs them, `make test` does not
 # (issue 15: the fault matrix in make test where it takes a few minutes, the rest in make faults).
 pytestmark = pytest.mark.faults_only
 
 TASK = 'Cheetah-Run-v0'
-TINY = {
-    'method': 'zeus', 'obs_kind': 'state', 'k': 3, 'context_dim': 4, 'transition_dim': 8,
-    'context_hidden_dim': 16, 'feature_dim': 8, 'encoder_hidden_dim': 32, 'hidden_dim': 32,
-    'model_hidden_dim': 32, 'batch_size': 32, 'num_updates': 4, 'eval_interval': 1000,
-    'eval_episodes': 1, 'checkpoint_interval': 2, 'log_interval': 2, 'device': 'cpu',
-}
+CONFIG = MINIMAL | {'num_updates': 4}
 STEPS = 12000
 
 
@@ -43,8 +38,7 @@ def test_loop_resume_after_kill_during_collection_recovers_and_completes_the_rou
     The missing steps go to bag_000_rest1 and training sees the full round; a rerun without
     --resume is refused.
     """
-    config = tmp_path / 'tiny.yaml'
-    config.write_text(yaml.safe_dump(TINY))
+    config = write_config(tmp_path / 'tiny.yaml', CONFIG)
     out = tmp_path / 'loop'
     mcap = out / 'bags' / 'bag_000' / 'bag_000.mcap'
     with subprocess.Popen(_loop(out, config), cwd=REPO, stdout=subprocess.DEVNULL,
@@ -83,8 +77,7 @@ def test_loop_resume_after_kill_during_training_continues_from_the_last_checkpoi
     """Kill -9 once checkpoint.pt exists; --resume trains from its update to the round's total."""
     from zeus_ros.learning.checkpoint import load_checkpoint
 
-    config = tmp_path / 'tiny.yaml'
-    config.write_text(yaml.safe_dump(TINY | {'checkpoint_interval': 5}))
+    config = write_config(tmp_path / 'tiny.yaml', CONFIG | {'checkpoint_interval': 5})
     out = tmp_path / 'loop'
     argv = [sys.executable, '-m', 'zeus_ros.cli', 'loop', '--task', TASK, '--config',
             str(config), '--out', str(out), '--rounds', '1', '--random-steps', '400',
@@ -117,8 +110,7 @@ def test_train_on_a_collection_cut_by_kill_names_recover_then_says_the_round_is_
     After the recover, train and train --resume run but say the bag was cut short (never a
     silent exit 0 on a cut round).
     """
-    config = tmp_path / 'tiny.yaml'
-    config.write_text(yaml.safe_dump(TINY))
+    config = write_config(tmp_path / 'tiny.yaml', CONFIG)
     out = tmp_path / 'collect'
     bag = out / 'bag_000'
     collect = [sys.executable, '-m', 'zeus_ros.cli', 'collect', '--task', TASK, '--steps',
@@ -159,8 +151,7 @@ def test_loop_resume_after_kill_between_checkpoint_and_final_writes_the_final(
     """
     from zeus_ros.learning.checkpoint import load_checkpoint
 
-    config = tmp_path / 'tiny.yaml'
-    config.write_text(yaml.safe_dump(TINY))
+    config = write_config(tmp_path / 'tiny.yaml', CONFIG)
     out = tmp_path / 'loop'
     argv = [sys.executable, '-m', 'zeus_ros.cli', 'loop', '--task', TASK, '--config',
             str(config), '--out', str(out), '--rounds', '1', '--random-steps', '400',

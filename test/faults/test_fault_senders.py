@@ -9,6 +9,8 @@ names it, and the log names it once. The same holds for contexts flooded at the 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+import contextlib
 from pathlib import Path
 import signal
 import sys
@@ -43,6 +45,23 @@ def _watch(probe: Any, steps: list[tuple[float, Any]], diagnostics: list[Any]) -
     probe.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, diagnostics.append, 50)
 
 
+@contextlib.contextmanager
+def _stepping(group: ProcessGroup, min_steps: int, log_of: str
+              ) -> Iterator[tuple[Any, list[tuple[float, Any]], list[Any]]]:
+    """A probe watching the loop the test started, once it has made `min_steps` steps.
+
+    Yields the probe, the (receipt time, StepFeedback) list and the /diagnostics list; the
+    loop not getting there fails with the end of `log_of`'s log.
+    """
+    steps: list[tuple[float, Any]] = []
+    diagnostics: list[Any] = []
+    with driver_node(group.domain_id) as probe:
+        _watch(probe, steps, diagnostics)
+        assert spin_until(probe, lambda: len(steps) > min_steps, timeout=90), \
+            group.log_text(log_of)[-2000:]
+        yield probe, steps, diagnostics
+
+
 def test_a_flooding_second_publisher_never_drives_the_robot(
         ros_processes: ProcessGroup) -> None:
     """Its actions are never applied, the loop keeps stepping, ERROR on /diagnostics, one log."""
@@ -52,12 +71,7 @@ def test_a_flooding_second_publisher_never_drives_the_robot(
 
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}'))
     ros_processes.start('policy', node('policy', f'task:={TASK}'))
-    steps: list[tuple[float, Any]] = []
-    diagnostics: list[Any] = []
-    with driver_node(ros_processes.domain_id) as probe:
-        _watch(probe, steps, diagnostics)
-        assert spin_until(probe, lambda: len(steps) > 150, timeout=90), \
-            ros_processes.log_text('sim_bridge')[-2000:]
+    with _stepping(ros_processes, 150, 'sim_bridge') as (probe, steps, diagnostics):
         calm = [t for t, _ in steps[50:]]
         calm_rate = (len(calm) - 1) / (calm[-1] - calm[0])
         flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER),
@@ -107,11 +121,7 @@ def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}',
                                            'action_timeout:=0.2'))
     policy = ros_processes.start('policy', node('policy', f'task:={TASK}'))
-    steps: list[tuple[float, Any]] = []
-    diagnostics: list[Any] = []
-    with driver_node(ros_processes.domain_id) as probe:
-        _watch(probe, steps, diagnostics)
-        assert spin_until(probe, lambda: len(steps) > 50, timeout=90)
+    with _stepping(ros_processes, 50, 'sim_bridge') as (probe, steps, _diagnostics):
         ros_processes.stop(policy, signal.SIGKILL)
         killed = len(steps)
         assert spin_until(probe, lambda: len(steps) > killed + 10, timeout=30)
@@ -144,12 +154,7 @@ def test_a_second_context_publisher_never_reaches_the_policy(
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}', 'min_observers:=2'))
     ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
-    steps: list[tuple[float, Any]] = []
-    diagnostics: list[Any] = []
-    with driver_node(ros_processes.domain_id) as probe:
-        _watch(probe, steps, diagnostics)
-        assert spin_until(probe, lambda: len(steps) > 100, timeout=90), \
-            ros_processes.log_text('policy')[-2000:]
+    with _stepping(ros_processes, 100, 'policy') as (probe, steps, diagnostics):
         flooder = ros_processes.start('intruder', [sys.executable, str(FLOODER), '6', '4',
                                                    'context'])
         assert spin_until(probe, lambda: flooder.poll() is not None, 90)

@@ -22,6 +22,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 
 if TYPE_CHECKING:
@@ -110,21 +111,24 @@ class WaitReport:
                 f'still waiting after {now - self._start:.0f} s: {what}')
 
 
-def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int
-                  ) -> list[str]:
+def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int,
+                  others: Sequence[Any] = ()) -> list[str]:
     """What a step producer still waits for before step 0 (empty: start).
 
-    `outputs` are its publishers, the StepFeedback one first, then the observations. Graph
-    counts say who was discovered; the matched counts of our own endpoints say whose data path
-    is ready. Starting before they agree would drop step 0 for a late peer (the estimator would
-    miss it and the policy would act on no context). `min_observers` names how many step
-    subscribers a launch expects (estimator, policy, recorder, ...), so a peer that is still
-    starting up is waited for rather than missed. Counted on the names as the node resolved
-    them: namespace and remaps applied.
+    `outputs` are its publishers, the StepFeedback one first, then the observations; `others`
+    its further per-step publishers (true context, /clock), which only need every discovered
+    subscriber matched. Graph counts say who was discovered; the matched counts of our own
+    endpoints say whose data path is ready. Starting before they agree would drop step 0 for a
+    late peer (the estimator would miss it and the policy would act on no context; a recorder
+    would miss it in the bag). `min_observers` names how many step subscribers a launch
+    expects (estimator, policy, recorder, ...), so a peer that is still starting up is waited
+    for rather than missed; a recorder subscribes to the steps last, so once it counts here its
+    other subscriptions are known too. Counted on the names as the node resolved them:
+    namespace and remaps applied.
     """
     step_pub, observations = outputs[0], outputs[1:]
     observers = sum(node.count_subscribers(pub.topic_name) for pub in observations)
-    unmatched = [pub.topic_name for pub in outputs
+    unmatched = [pub.topic_name for pub in (*outputs, *others)
                  if pub.get_subscription_count() < node.count_subscribers(pub.topic_name)]
     action_topic = action_sub.topic_name
     actions = node.count_publishers(action_topic)
@@ -272,27 +276,58 @@ def _exit_now(code: int) -> NoReturn:
     os._exit(code)
 
 
-def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> NoReturn:
+DRAIN_LIMIT_S = 2.0
+"""The longest a draining node goes on taking messages after a stop signal."""
+
+
+def run_node(factory: Callable[[], Node], args: list[str] | None = None, drain: float = 0.0
+             ) -> NoReturn:
     """Jazzy shutdown pattern: spin until Ctrl-C / SIGTERM / external shutdown, then clean up.
 
     A `ValueError` raised while building the node (bad parameters) is printed as one clear line
     and gives exit code 2, instead of a traceback. A signal ends the spin, `close()` runs to its
-    end, and the process exits 0 (or the node's `exit_code`).
+    end, and the process exits 0 (or the node's `exit_code`). With `drain` (a recorder) the
+    node first takes what is still queued for it (see `_spin_then_drain`).
     """
-    run_nodes([factory], args)
+    run_nodes([factory], args, drain)
 
 
-def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None
-              ) -> NoReturn:
+def _spin_then_drain(executor: SingleThreadedExecutor, nodes: Sequence[Node],
+                     signals: list[int], quiet: float) -> None:
+    """Spin until a stop signal, then on until no message came for `quiet` s (DRAIN_LIMIT_S).
+
+    `zeus launch` stops a recorder after the nodes it records: what they published last may
+    still wait in this process's DDS queues (a recorder behind a fast loop, ~20 steps), and the
+    bag must hold it. Messages are counted by the nodes' `received` attribute.
+    """
+    while not signals and rclpy.ok():
+        executor.spin_once(timeout_sec=0.1)
+
+    def received() -> int:
+        return sum(int(getattr(node, 'received', 0)) for node in nodes)
+
+    limit = time.monotonic() + DRAIN_LIMIT_S
+    seen, quiet_since = received(), time.monotonic()
+    while rclpy.ok() and time.monotonic() < min(limit, quiet_since + quiet):
+        executor.spin_once(timeout_sec=0.05)
+        if received() != seen:
+            seen, quiet_since = received(), time.monotonic()
+
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None,
+              drain: float = 0.0) -> NoReturn:
     """`run_node` for several nodes in one process on one executor (a component container).
 
     The nodes are built in order (a ValueError from any stops them all: exit code 2), spin
     together until a signal, an external shutdown or one of them finishes (NodeFinished), are
     destroyed and closed in order, and the exit code is the first non-zero `exit_code`.
     """
+    signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(stop_signal, _stop_quietly)
-    rclpy.init(args=args)
+        signal.signal(stop_signal, (lambda signum, _frame: signals.append(signum)) if drain
+                      else _stop_quietly)
+    # Draining, the signals are ours: rclpy's handlers would shut the context down at once.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO if drain else None)
     nodes: list[Node] = []
     try:
         for factory in factories:
@@ -307,7 +342,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     for node in nodes:
         executor.add_node(node)
     try:
-        executor.spin()
+        if drain:
+            _spin_then_drain(executor, nodes, signals, drain)
+        else:
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
         pass
     except Exception:

@@ -30,7 +30,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
+from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.evaluation.readout import NoveltyTracker
 
@@ -44,6 +44,7 @@ SPECS: dict[str, Spec] = {
     'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
     'device': Spec('cpu', 'torch device'),
     'torch_threads': Spec(1, 'torch intra-op threads', low=1),
+    **HEARD_SPECS,
 }
 
 
@@ -66,15 +67,21 @@ class ContextEstimatorNode(Node):
         self._rate = RateMeter()
         self._latency_ms: list[float] = []
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        expected = self.params['expected_subscribers']
         self.inputs = StepInputs(
             self, self.decoder, self._on_step, self._reject, mode=self.params['mode'],
-            extra_parts=['truth'] if self.agent.needs_true_context else [])
+            extra_parts=['truth'] if self.agent.needs_true_context else [],
+            subscribe=not expected)
         self.assembler = self.inputs.assembler
         if self.agent.needs_true_context:
             self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
-        # Publisher last: a peer that sees it knows the subscriptions above already exist.
+        # Publisher last: a peer that sees it knows the subscriptions above already exist;
+        # with expected_subscribers the steps are subscribed once the readers hear the context.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
+        if expected:
+            self.inputs.subscribe_when_heard(self._pub, expected,
+                                             self.params['subscriber_timeout'])
         # The estimate in the context's units, for people and plotting tools (the policy never
         # reads it): published whenever the checkpoint holds a read-out; the publisher exists
         # only then, so a viewer can tell "no read-out" from "not arrived yet".

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sensor_msgs.msg import Image
@@ -14,16 +14,28 @@ from zeus_ros.learning.frames import FrameStack
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
+    WaitReport,
     array_from_image,
     image_qos,
     stamp_ns,
+    steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.params import Spec
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['ObservationDecoder', 'StepInputs']
+__all__ = ['HEARD_SPECS', 'ObservationDecoder', 'StepInputs']
+
+HEARD_SPECS: dict[str, Spec] = {
+    'expected_subscribers': Spec(0, "subscribe to the steps only once this node's output has "
+                                 'matched this many subscribers (launchers set it: readers + '
+                                 'recorder), so none misses step 0; 0: do not wait', low=0),
+    'subscriber_timeout': Spec(20.0, 'seconds to wait for expected_subscribers; then log the '
+                               'topic still short of them and subscribe anyway', low=0.0),
+}
+"""Start-up parameters of the nodes whose output answers a step (context_estimator, policy)."""
 
 
 class ObservationDecoder:
@@ -61,21 +73,65 @@ class StepInputs:
     `on_step` receives StepParts with 'feedback' (the StepFeedback) and 'obs' (receipt time,
     validated raw array), plus any `extra_parts` the node adds itself through `assembler.add`.
     A message that fails validation goes to `on_reject(step, topic, error)` and is dropped.
+    With `subscribe=False` the subscriptions wait for `subscribe()` or `subscribe_when_heard()`.
     """
 
     def __init__(self, node: Node, decoder: ObservationDecoder,
                  on_step: Callable[[StepParts], None],
                  on_reject: Callable[[int, str, ValueError], None], *, mode: str,
-                 extra_parts: Sequence[str] = ()) -> None:
+                 extra_parts: Sequence[str] = (), subscribe: bool = True) -> None:
+        self.node = node
         self.decoder = decoder
         self.on_reject = on_reject
+        self.mode = mode
         self.assembler = StepAssembler(['feedback', 'obs', *extra_parts], on_step)
         self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
+        self.subscribed = False
+        if subscribe:
+            self.subscribe()
+
+    def subscribe(self) -> None:
+        """Subscribe to StepFeedback and the observation topic (once)."""
+        if self.subscribed:
+            return
+        self.subscribed = True
+        node = self.node
         node.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
-        if decoder.obs_kind == 'pixels':
-            node.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(mode))
+        if self.decoder.obs_kind == 'pixels':
+            node.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(self.mode))
         else:
             node.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+
+    def subscribe_when_heard(self, output: Any, expected: int, timeout: float) -> None:
+        """Subscribe once publisher `output` has matched `expected` subscribers (or `timeout`).
+
+        The step producer waits for its step subscribers (min_observers) before step 0, so a
+        node that subscribes only once its readers and the recorder can hear its answer makes
+        the whole group wait for them: a bag then holds this node's output from step 0. After
+        `timeout` seconds it says which topic is short of how many and subscribes anyway.
+        """
+        if output.get_subscription_count() >= expected:
+            self.subscribe()
+            return
+        deadline = time.monotonic() + timeout
+        report = WaitReport(self.node)
+
+        def poll() -> None:
+            matched = output.get_subscription_count()
+            short = f'{expected} subscribers of {output.topic_name} (expected_subscribers; ' \
+                    f'{matched} matched so far)'
+            if matched < expected and time.monotonic() < deadline:
+                report.waiting(short)
+                return
+            if matched < expected:
+                self.node.get_logger().warning(
+                    f'subscriber_timeout: {timeout:g} s passed waiting for {short}; subscribing '
+                    'to the steps anyway: a late subscriber misses the first steps')
+            timer.cancel()
+            self.node.destroy_timer(timer)
+            self.subscribe()
+
+        timer = steady_timer(self.node, 0.05, poll)
 
     def _on_feedback(self, msg: StepFeedback) -> None:
         self.assembler.add(msg.step, 'feedback', msg)

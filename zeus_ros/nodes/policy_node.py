@@ -34,7 +34,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.observation import ObservationDecoder, StepInputs
+from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
@@ -59,6 +59,7 @@ SPECS: dict[str, Spec] = {
     'frozen_context': Spec('', 'comma-separated context values used at every step instead of '
                            'the live estimate (value of adaptation); empty: live context',
                            live=True),
+    **HEARD_SPECS,
 }
 
 
@@ -106,7 +107,7 @@ class PolicyNode(Node):
         self._pub: Any = None
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
-                                 mode=mode)
+                                 mode=mode, subscribe=not self.params['expected_subscribers'])
         self.assembler = self.inputs.assembler
         # Contexts come from one estimator only (the only publisher, by GID; followed when it
         # restarts): another publisher on zeus/context is refused, counted and an ERROR.
@@ -192,6 +193,10 @@ class PolicyNode(Node):
                                           action_qos(self.params['mode']))
         self._ready_timer.cancel()
         self.destroy_timer(self._ready_timer)
+        # With expected_subscribers: observations only once sim_bridge and the recorder hear
+        # the actions (sim_bridge then waits for this node as one of its step subscribers).
+        self.inputs.subscribe_when_heard(self._pub, self.params['expected_subscribers'],
+                                         self.params['subscriber_timeout'])
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_context(self, msg: ContextEstimate) -> None:

@@ -40,7 +40,7 @@ from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.durable import DurableBagWriter
 from zeus_ros.offline.data.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
-from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE
+from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE, TOPIC_STEP
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration
@@ -67,6 +67,8 @@ RECORD_DEPTH = 100
 SPLIT_GRACE_S = 1.0
 """After a split the previous bag stays open this long for late messages of its own steps."""
 RECENT_STAMPS = 256
+DRAIN_QUIET_S = 0.3
+"""After Ctrl-C / SIGTERM: record on until no message came for this long (what was in flight)."""
 
 
 def _message_class(msgtype: str) -> type:
@@ -131,7 +133,9 @@ class RecorderNode(Node):
         self._sources: dict[str, str] = {}
         """bag topic -> the name subscribed (relative: follows namespace and remaps)."""
 
-        for topic in self.topics:
+        # zeus/step last: a step producer that sees this subscription (min_observers) knows the
+        # others exist, and it waits until its own publishers have matched them (step 0 kept).
+        for topic in sorted(self.topics, key=lambda name: name == TOPIC_STEP):
             qos = step_qos(RECORD_DEPTH)
             if topic == TOPIC_IMAGE and self.params['image_best_effort']:
                 qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing
@@ -254,6 +258,11 @@ class RecorderNode(Node):
         if limit and writer is self._writer and writer.bytes_written >= limit:
             self._split()
 
+    @property
+    def received(self) -> int:
+        """Messages written so far (run_node's drain watches it)."""
+        return sum(self.counts.values())
+
     def _track_step(self, topic: str, step: int) -> None:
         last = self.last_step.get(topic)
         if last is None:  # says when recording really starts (discovery takes a while)
@@ -314,7 +323,7 @@ class RecorderNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of `ros2 run zeus_ros recorder_node`."""
-    return run_node(RecorderNode, args)
+    return run_node(RecorderNode, args, drain=DRAIN_QUIET_S)
 
 
 if __name__ == '__main__':

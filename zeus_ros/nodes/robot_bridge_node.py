@@ -255,7 +255,7 @@ class RobotBridgeNode(Node):
             if self._pub_image is not None:
                 outputs.append(self._pub_image)
             missing += missing_peers(self, outputs, self._sub_action,
-                                     self.params['min_observers'])
+                                     self.params['min_observers'], others=[self._pub_truth])
             if not missing and self._senders.paired is None:
                 problem = self._senders.pair()
                 missing += [problem] if problem else []

@@ -156,7 +156,8 @@ class SimBridgeNode(Node):
         outputs = [self._pub_step, self._pub_state]
         if self._pub_image is not None:
             outputs.append(self._pub_image)
-        missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'])
+        missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'],
+                                others=[self._pub_truth, self._pub_clock])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
@@ -279,13 +280,15 @@ class SimBridgeNode(Node):
         feedback.action_status = int(result.status)
         feedback.task = task_name
         self._pub_step.publish(feedback)
+        # Counted once its StepFeedback is out: a Ctrl-C that stops the publishing below still
+        # leaves `close()` naming the last step a recording holds.
+        self.counts['steps'] += 1
         state = StateVector()
         state.header.stamp = stamp
         state.step = result.step
         state.data = result.observation.state.astype(np.float64).tolist()
         # The state goes last: a consumer that acts on o_k has c_k, r_k and the frame already.
         self._pub_state.publish(state)
-        self.counts['steps'] += 1
         self._rate.tick()
         every = self.params['log_every']
         if every and result.step % every == 0:
