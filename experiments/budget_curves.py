@@ -5,7 +5,8 @@
         [--out docs/results/issue10]
 
 Reads the evaluations compare_variants.py wrote (out/i10/<variant>/<task>_<N>k/) and writes
-<task>_budget.csv/.md/.png: per budget, split and run: return (mean ± s.e. over seeds), the gain
+<task>_budget.csv/.md/.png, on the seeds every budget has: per budget, split and run: return
+(mean ± s.e. over seeds), the gain
 over no_context of the same budget (paired by seed), the value of adaptation (psi frozen at its
 mean), and the change from the smallest budget on the same seeds (a run continued to a larger
 budget is the same run trained longer, so that change is paired too).
@@ -37,7 +38,11 @@ def _label(variant: str, method: str) -> str:
 
 def load_runs(evals: Path, task: str, budgets: list[int],
               runs: list[tuple[str, str]]) -> dict[int, list[dict[str, Any]]]:
-    """Per budget: the per-seed rows of every (variant, method), method renamed to its label."""
+    """Per budget: the per-seed rows of every (variant, method), method renamed to its label.
+
+    Only the seeds that every budget has are kept (per run), so each line and each row joins
+    the same runs trained longer.
+    """
     out: dict[int, list[dict[str, Any]]] = {}
     for budget in budgets:
         rows = []
@@ -47,6 +52,13 @@ def load_runs(evals: Path, task: str, budgets: list[int],
                 rows += [{**r, 'method': _label(variant, method)} for r in per_run(folder)
                          if r['method'] == method]
         out[budget] = rows
+    # only the seeds every budget has, so that a line joins the same runs trained longer
+    for variant, method in runs:
+        label = _label(variant, method)
+        seeds = set.intersection(*({r['seed'] for r in rows if r['method'] == label}
+                                   for rows in out.values()))
+        for budget, rows in out.items():
+            out[budget] = [r for r in rows if r['method'] != label or r['seed'] in seeds]
     return out
 
 
@@ -127,7 +139,7 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
                     and r['method'] == method]
             if not mine:
                 continue
-            style = overlap_style(i, len(labels))
+            style = {**overlap_style(i, len(labels)), 'color': f'C{i}'}
             x = [r['updates'] for r in mine]
             axes[0][col].errorbar(x, [r['return'] for r in mine],
                                   yerr=[r['return_se'] for r in mine], capsize=3,
