@@ -3,8 +3,9 @@
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
 deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
 live loop runs sim_bridge, context_estimator and policy in lockstep, as separate processes
-(multi) and as nodes of one process on one executor (single, zeus launch --single-process). A
-probe subscriber measures observation-to-action latency; /proc gives each node's resident memory.
+(multi) and as nodes of one process on one executor (single, zeus launch --single-process, with
+intra-process delivery; single-dds: the same without it, every message through DDS). A probe
+subscriber measures observation-to-action latency; /proc gives each node's resident memory.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
 """
@@ -97,11 +98,12 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
-def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
+def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
               ) -> dict[str, float]:
     """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
 
-    `single`: the three nodes in one process on one executor (zeus launch --single-process).
+    `mode` (MODES): a process per node, or the three nodes in one process on one executor
+    (zeus launch --single-process) with or without intra-process delivery.
     """
     import rclpy
     from rclpy.context import Context
@@ -124,8 +126,10 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
     }
     ros_args = {name: ['--ros-args', *(a for v in values for a in ('-p', v))]
                 for name, values in params.items()}
+    single = mode != 'multi'
     if single:
-        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *(
+        switch = ['--no-intra-process'] if mode == 'single-dds' else []
+        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *switch, *(
             a for name, args in ros_args.items() for a in ('--node', name, *args))]}
     else:
         argvs = {name: [sys.executable, '-m', NODES[name], *args]
@@ -173,8 +177,10 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
             'p99': float(np.percentile(latency, 99)), **{f'rss_{k}': v for k, v in memory.items()}}
 
 
-RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8,
-                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9}
+MODES = ('multi', 'single', 'single-dds')
+RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8, ('state', 'single-dds'): 0.8,
+                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9,
+                 ('pixels', 'single-dds'): 0.9}
 """Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
 P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
 """Issue 14's observation -> action p99 targets."""
@@ -185,22 +191,28 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
-    parser.add_argument('--modes', default='multi,single',
-                        help='multi: a process per node; single: one process, one executor')
+    parser.add_argument('--modes', default='multi,single,single-dds',
+                        help='multi: a process per node; single: one process, one executor, '
+                        'intra-process delivery; single-dds: the same through DDS')
+    parser.add_argument('--kinds', default='state,pixels', help='observation kinds to run')
     args = parser.parse_args()
     modes = [m.strip() for m in args.modes.split(',') if m.strip()]
+    kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
+    unknown = [m for m in modes if m not in MODES] + [k for k in kinds if k not in P99_TARGETS_MS]
+    if unknown:
+        parser.error(f'unknown mode or kind {", ".join(unknown)}: modes are {", ".join(MODES)}, '
+                     f'kinds {", ".join(P99_TARGETS_MS)}')
     print(f'three-node lockstep loop vs in-process loop, {TASK} (targets in brackets; '
           'in-process = ScheduledEnv + the deployment code, no ROS)')
-    print(f'{"obs":<7} {"mode":<7} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
+    print(f'{"obs":<7} {"mode":<10} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
           f'{"p50 ms":>7} {"p99 ms [target]":>16}  RSS MiB per process')
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in ('state', 'pixels'):
+        for kind in kinds:
             steps = args.steps if kind == 'state' else args.pixel_steps
             checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
             local = in_process_rate(checkpoint, steps)
             for mode in modes:
-                live = live_rate(checkpoint, steps, pixels=kind == 'pixels',
-                                 single=mode == 'single')
+                live = live_rate(checkpoint, steps, pixels=kind == 'pixels', mode=mode)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
@@ -208,7 +220,7 @@ def main() -> None:
                 ratio_text = f'{ratio:.3f} [{target}]' + ('' if ratio >= target else '!')
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
                     '' if live['p99'] <= p99_target else '!')
-                print(f'{kind:<7} {mode:<7} {local:>9.1f} {live["rate"]:>8.1f} '
+                print(f'{kind:<7} {mode:<10} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {live["p50"]:>7.2f} {p99_text:>16}  {memory}',
                       flush=True)
     print('! marks a target not met')
