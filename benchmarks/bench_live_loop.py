@@ -110,7 +110,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import Action, StepFeedback
 
-    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, NODES
+    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
     from zeus_ros.nodes.common import TOPICS, step_qos
     from zeus_ros.processes import ros_env
 
@@ -128,7 +128,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
                 for name, values in params.items()}
     single = mode != 'multi'
     if single:
-        switch = ['--no-intra-process'] if mode == 'single-dds' else []
+        switch = [CONTAINER_NO_INTRA] if mode == 'single-dds' else []
         argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *switch, *(
             a for name, args in ros_args.items() for a in ('--node', name, *args))]}
     else:

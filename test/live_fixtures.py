@@ -51,9 +51,12 @@ def node(name: str, *params: str) -> list[str]:
     return python_module(f'zeus_ros.nodes.{MODULES[name]}', '--ros-args', *_param_args(params))
 
 
-def container(nodes: dict[str, tuple[str, ...]]) -> list[str]:
-    """The argv of one process holding `nodes` (name -> 'key:=value' parameters), one executor."""
-    args: list[str] = []
+def container(nodes: dict[str, tuple[str, ...]], *process_args: str) -> list[str]:
+    """The argv of one process holding `nodes` (name -> 'key:=value' parameters), one executor.
+
+    `process_args` are the container's own (--no-intra-process).
+    """
+    args: list[str] = [*process_args]
     for name, params in nodes.items():
         args += ['--node', name, '--ros-args', *_param_args(params)]
     return python_module('zeus_ros.nodes.container', *args)

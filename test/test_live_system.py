@@ -42,9 +42,15 @@ def test_three_nodes_act_on_every_step_and_the_bag_trains(
     check_lockstep_bag(bag_dir, checkpoint, STEPS)
 
 
+@pytest.mark.parametrize('switch', [(), ('--no-intra-process',)], ids=['intra', 'dds'])
 def test_one_process_acts_on_every_step_and_the_bag_trains(
-        ros_processes: ProcessGroup, tmp_path) -> None:
-    """The same loop as nodes of one process on one executor (zeus launch --single-process)."""
+        ros_processes: ProcessGroup, tmp_path, switch: tuple[str, ...]) -> None:
+    """The same loop as nodes of one process on one executor (zeus launch --single-process).
+
+    With intra-process delivery (the default) the nodes hand each other the messages in
+    process; the recorder outside still gets every one, and no node gets one twice (a second
+    action for a step would be counted as unexpected by sim_bridge).
+    """
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
     recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
@@ -52,11 +58,13 @@ def test_one_process_acts_on_every_step_and_the_bag_trains(
     loop = ros_processes.start('container', container({
         'sim_bridge': bridge_params(STEPS, 'min_observers:=3'),
         'context_estimator': (f'checkpoint:={checkpoint}',),
-        'policy': (f'checkpoint:={checkpoint}',)}))
+        'policy': (f'checkpoint:={checkpoint}',)}, *switch))
     assert loop.wait(timeout=180) == 0, ros_processes.log_text('container')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
     check_lockstep_bag(bag_dir, checkpoint, STEPS)
+    log = ros_processes.log_text('container')
+    assert "'unexpected': 0" in log and 'gap before step' not in log, log[-3000:]
 
 
 def diagnostics_value(messages: list, node_name: str, key: str) -> int:

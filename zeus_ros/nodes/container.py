@@ -25,7 +25,7 @@ import importlib
 import sys
 from typing import TYPE_CHECKING
 
-from zeus_ros.launch_defaults import NODES
+from zeus_ros.launch_defaults import CONTAINER_NO_INTRA, NODES
 from zeus_ros.nodes.common import run_nodes
 from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
 
@@ -33,7 +33,6 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
 NODE_FLAG = '--node'
-NO_INTRA_FLAG = '--no-intra-process'
 NODE_CLASSES = {
     'sim_bridge': 'SimBridgeNode',
     'context_estimator': 'ContextEstimatorNode',
@@ -93,8 +92,8 @@ def main(args: list[str] | None = None) -> int:
     except ValueError as error:
         print(f'loop_container: {error}', file=sys.stderr)
         return 2
-    bus = None if NO_INTRA_FLAG in process else IntraProcessBus()
-    process = [arg for arg in process if arg != NO_INTRA_FLAG]
+    bus = None if CONTAINER_NO_INTRA in process else IntraProcessBus()
+    process = [arg for arg in process if arg != CONTAINER_NO_INTRA]
     factories = [node_factory(name, node_args, bus) for name, node_args in nodes]
     return run_nodes(factories, [sys.argv[0], *process])
 
