@@ -220,3 +220,21 @@ def test_best_effort_publisher_does_not_reach_a_reliable_subscriber() -> None:
         assert spin(lambda: best_effort == [7], 20)
         settle(spin, 0.5)
         assert reliable == []
+
+
+def test_sim_time_nodes_follow_clock_in_process_and_can_turn_it_off() -> None:
+    """use_sim_time: rclpy's /clock subscription joins the bus; turning it off destroys it."""
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    from zeus_ros.nodes.common import TOPICS, stamp_from_seconds, step_qos
+
+    with two_contexts() as (inside, _outside, spin):
+        clock = inside('sim_bridge').create_publisher(Clock, TOPICS.CLOCK, step_qos())
+        follower = inside('policy', parameter_overrides=[
+            Parameter('use_sim_time', Parameter.Type.BOOL, True)])
+        assert spin(lambda: clock.get_subscription_count() == 1, 20), 'no DDS match'
+        clock.publish(Clock(clock=stamp_from_seconds(12.5)))
+        assert spin(lambda: follower.get_clock().now().nanoseconds == 12_500_000_000, 20)
+        follower.set_parameters([Parameter('use_sim_time', Parameter.Type.BOOL, False)])
+        assert spin(lambda: clock.get_subscription_count() == 0, 20), 'still subscribed'
