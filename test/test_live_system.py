@@ -8,7 +8,14 @@ import time
 import numpy as np
 import pytest
 
-from live_fixtures import TASK, check_lockstep_bag, container, node, tiny_checkpoint
+from live_fixtures import (
+    TASK,
+    assert_ingests_as_one_by_one,
+    check_lockstep_bag,
+    container,
+    node,
+    tiny_checkpoint,
+)
 from ros_harness import ProcessGroup, driver_node, spin_until
 
 pytestmark = pytest.mark.ros
@@ -158,8 +165,11 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
 
 
 def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
-        ros_processes: ProcessGroup, tmp_path) -> None:
-    """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays."""
+        ros_processes: ProcessGroup, tmp_path, monkeypatch) -> None:
+    """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays.
+
+    The recorded bag also ingests in batches exactly as decoded one message at a time.
+    """
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.training import collect
 
@@ -182,6 +192,7 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
                          'switch:train:every=100', '--checkpoint', str(checkpoint),
                          '--noise', '0', '--out', str(tmp_path / 'collect'),
                          '--no-progress']) == 0
+    assert_ingests_as_one_by_one([bag_dir], monkeypatch)
     live = ingest_bags([bag_dir], strict=True).episodes
     local = ingest_bags([tmp_path / 'collect'], strict=True).episodes
     assert len(live) == len(local) == 1
