@@ -215,13 +215,15 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
         # an action already at its bound can be clipped back onto it in every dimension
         assert np.mean(noisy > 1e-3) > 0.8, f'actions after the change not noisy: {noisy}'
 
+        refused_type = call(probe, bridge_params.set_parameters(
+            [Parameter('action_timeout', value='soon')])).results[0]
+        assert not refused_type.successful and refused_type.reason
+        # Last: the loop may be more than 30 steps ahead of the probe (in one process it
+        # runs hundreds of steps per second) and stop at once, services and all.
         stop_at = max(states) + 30
         result = call(probe, bridge_params.set_parameters(
             [Parameter('max_steps', value=stop_at)])).results[0]
         assert result.successful, result.reason
-        refused_type = call(probe, bridge_params.set_parameters(
-            [Parameter('action_timeout', value='soon')])).results[0]
-        assert not refused_type.successful and refused_type.reason
         assert spin_until(probe, lambda: bridge.poll() is not None, timeout=60)
     assert bridge.returncode == 0
     assert f'max_steps={stop_at} reached' in ros_processes.log_text('live-sim_bridge')

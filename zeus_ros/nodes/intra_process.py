@@ -145,7 +145,7 @@ class IntraProcessBus:
         for endpoint in endpoints:
             endpoint.queue.append((gid, msg))  # a full keep-last queue drops its oldest
             self._order.append(endpoint)
-        if self._order and self._guard is not None:
+        if endpoints and self._guard is not None:
             self._guard.trigger()
 
     def _drain(self) -> None:
