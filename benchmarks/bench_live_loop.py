@@ -3,8 +3,9 @@
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
 deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
 live loop runs sim_bridge, context_estimator and policy in lockstep, as separate processes
-(multi) and as nodes of one process on one executor (single, zeus launch --single-process). A
-probe subscriber measures observation-to-action latency; /proc gives each node's resident memory.
+(multi) and as nodes of one process on one executor (single, zeus launch --single-process, with
+intra-process delivery; single-dds: the same without it, every message through DDS). A probe
+subscriber measures observation-to-action latency; /proc gives each node's resident memory.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
 """
@@ -12,6 +13,7 @@ probe subscriber measures observation-to-action latency; /proc gives each node's
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 import subprocess
 import sys
@@ -49,8 +51,8 @@ def make_checkpoint(path: Path, obs_kind: str) -> Path:
     return path
 
 
-def in_process_rate(checkpoint: Path, steps: int) -> float:
-    """Steps/s of ScheduledEnv + the deployment code in one process (what the nodes do)."""
+def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float]:
+    """Steps/s and CPU ms per step of ScheduledEnv + the deployment code in one process."""
     import torch
 
     from sim_bridge.env import ScheduledEnv
@@ -74,7 +76,7 @@ def in_process_rate(checkpoint: Path, steps: int) -> float:
 
     result = env.reset()
     obs = observe(result, True)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         action = agent.act(obs, agent.context(history))
         result = env.step(action)
@@ -84,9 +86,15 @@ def in_process_rate(checkpoint: Path, steps: int) -> float:
         else:
             history.push(obs, result.applied_action, result.observation.reward, new_obs)
         obs = new_obs
-    elapsed = time.perf_counter() - start
+    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
     task.close()
-    return steps / elapsed
+    return steps / elapsed, cpu / steps * 1e3
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (from /proc; all its threads)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def rss_mb(pid: int) -> float:
@@ -97,18 +105,19 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
-def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
+def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
               ) -> dict[str, float]:
     """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
 
-    `single`: the three nodes in one process on one executor (zeus launch --single-process).
+    `mode` (MODES): a process per node, or the three nodes in one process on one executor
+    (zeus launch --single-process) with or without intra-process delivery.
     """
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import Action, StepFeedback
 
-    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, NODES
+    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
     from zeus_ros.nodes.common import TOPICS, step_qos
     from zeus_ros.processes import ros_env
 
@@ -124,8 +133,10 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
     }
     ros_args = {name: ['--ros-args', *(a for v in values for a in ('-p', v))]
                 for name, values in params.items()}
+    single = mode != 'multi'
     if single:
-        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *(
+        switch = [CONTAINER_NO_INTRA] if mode == 'single-dds' else []
+        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *switch, *(
             a for name, args in ros_args.items() for a in ('--node', name, *args))]}
     else:
         argvs = {name: [sys.executable, '-m', NODES[name], *args]
@@ -150,12 +161,17 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     memory: dict[str, float] = {}
+    cpu: list[tuple[int, float]] = []  # (steps seen, CPU seconds of the loop's processes)
     try:
         deadline = time.monotonic() + 500
         while processes[loop].poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.02)
             if len(seen_obs) == steps // 2 and not memory:
                 memory = {name: rss_mb(p.pid) for name, p in processes.items()}
+            # CPU per step between 10 % and 90 % of the run: load on the machine stretches
+            # the wall clock, not the work a step costs.
+            if len(cpu) < 2 and len(seen_obs) >= steps * (1 + 8 * len(cpu)) // 10:
+                cpu.append((len(seen_obs), sum(cpu_seconds(p.pid) for p in processes.values())))
     finally:
         for process in processes.values():
             process.terminate()
@@ -169,12 +185,17 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, single: bool = False
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
     latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
     span = seen_obs[done[-1]] - seen_obs[done[0]]
-    return {'rate': (len(done) - 1) / span, 'p50': float(np.percentile(latency, 50)),
+    cpu_ms = (cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]) * 1e3 if len(cpu) == 2 \
+        else float('nan')
+    return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
+            'p50': float(np.percentile(latency, 50)),
             'p99': float(np.percentile(latency, 99)), **{f'rss_{k}': v for k, v in memory.items()}}
 
 
-RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8,
-                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9}
+MODES = ('multi', 'single', 'single-dds')
+RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8, ('state', 'single-dds'): 0.8,
+                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9,
+                 ('pixels', 'single-dds'): 0.9}
 """Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
 P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
 """Issue 14's observation -> action p99 targets."""
@@ -185,22 +206,33 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
-    parser.add_argument('--modes', default='multi,single',
-                        help='multi: a process per node; single: one process, one executor')
+    parser.add_argument('--modes', default='multi,single,single-dds',
+                        help='multi: a process per node; single: one process, one executor, '
+                        'intra-process delivery; single-dds: the same through DDS')
+    parser.add_argument('--kinds', default='state,pixels', help='observation kinds to run')
+    parser.add_argument('--repeat', type=int, default=1,
+                        help='rounds of in-process + every mode (A/B on a loaded machine)')
     args = parser.parse_args()
     modes = [m.strip() for m in args.modes.split(',') if m.strip()]
+    kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
+    unknown = [m for m in modes if m not in MODES] + [k for k in kinds if k not in P99_TARGETS_MS]
+    if unknown:
+        parser.error(f'unknown mode or kind {", ".join(unknown)}: modes are {", ".join(MODES)}, '
+                     f'kinds {", ".join(P99_TARGETS_MS)}')
     print(f'three-node lockstep loop vs in-process loop, {TASK} (targets in brackets; '
           'in-process = ScheduledEnv + the deployment code, no ROS)')
-    print(f'{"obs":<7} {"mode":<7} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
-          f'{"p50 ms":>7} {"p99 ms [target]":>16}  RSS MiB per process')
+    print(f'{"obs":<7} {"mode":<10} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
+          f'{"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} {"p99 ms [target]":>16}  '
+          'RSS MiB per process')
     with tempfile.TemporaryDirectory() as tmp:
-        for kind in ('state', 'pixels'):
+        for kind in kinds:
             steps = args.steps if kind == 'state' else args.pixel_steps
             checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
-            local = in_process_rate(checkpoint, steps)
-            for mode in modes:
-                live = live_rate(checkpoint, steps, pixels=kind == 'pixels',
-                                 single=mode == 'single')
+            for mode in [mode for _round in range(args.repeat) for mode in [None, *modes]]:
+                if mode is None:  # each round against its own in-process rate
+                    local, local_cpu = in_process_rate(checkpoint, steps)
+                    continue
+                live = live_rate(checkpoint, steps, pixels=kind == 'pixels', mode=mode)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
@@ -208,10 +240,14 @@ def main() -> None:
                 ratio_text = f'{ratio:.3f} [{target}]' + ('' if ratio >= target else '!')
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
                     '' if live['p99'] <= p99_target else '!')
-                print(f'{kind:<7} {mode:<7} {local:>9.1f} {live["rate"]:>8.1f} '
-                      f'{ratio_text:>15} {live["p50"]:>7.2f} {p99_text:>16}  {memory}',
-                      flush=True)
-    print('! marks a target not met')
+                cpu_text = f'{local_cpu:.2f}/{live["cpu_ms"]:.2f}'
+                print(f'{kind:<7} {mode:<10} {local:>9.1f} {live["rate"]:>8.1f} '
+                      f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
+                      f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}', flush=True)
+    print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
+          'DDS threads included, 10-90 % of the run); CPU ratio = in-process / live: the rate '
+          'ratio an idle machine would show, as far as the loop is CPU-bound; steadier than '
+          'the wall-clock ratio on a loaded machine')
 
 
 if __name__ == '__main__':

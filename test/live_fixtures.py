@@ -1,8 +1,9 @@
-"""Checkpoints and node commands shared by the live-system tests."""
+"""Checkpoints, node commands and bag checks shared by the live-system and bag tests."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from ros_harness import python_module
 
@@ -51,9 +52,12 @@ def node(name: str, *params: str) -> list[str]:
     return python_module(f'zeus_ros.nodes.{MODULES[name]}', '--ros-args', *_param_args(params))
 
 
-def container(nodes: dict[str, tuple[str, ...]]) -> list[str]:
-    """The argv of one process holding `nodes` (name -> 'key:=value' parameters), one executor."""
-    args: list[str] = []
+def container(nodes: dict[str, tuple[str, ...]], *process_args: str) -> list[str]:
+    """The argv of one process holding `nodes` (name -> 'key:=value' parameters), one executor.
+
+    `process_args` are the container's own (--no-intra-process).
+    """
+    args: list[str] = [*process_args]
     for name, params in nodes.items():
         args += ['--node', name, '--ros-args', *_param_args(params)]
     return python_module('zeus_ros.nodes.container', *args)
@@ -98,3 +102,44 @@ def check_lockstep_bag(bag_dir: Path, checkpoint: Path, steps: int, ns: str = ''
     agent = make_agent(loaded.config, loaded.spec)
     metrics = [agent.update(*replay.sample_pair(16), step=i) for i in range(4)]
     assert all(np.isfinite(v) for m in metrics for v in m.values())
+
+
+def assert_ingests_as_one_by_one(paths: list[Path], monkeypatch: Any) -> None:
+    """Ingest's batches (cdr_columns: decoding, stacking) give what one-by-one decoding gives.
+
+    The reference is ingest with rosbags decoding every message alone (as before issue 14):
+    the same episodes, array for array (dtype, shape, NaN where NaN), and the same issues.
+    """
+    import dataclasses
+    import warnings
+
+    import numpy as np
+
+    from zeus_ros.offline.data import cdr_columns, ingest
+
+    def one_by_one(raws: list[bytes], _msgtype: str, one: Any) -> list[Any]:
+        out = []
+        for index in range(len(raws)):
+            message = one(index)
+            stamp = message.header.stamp
+            out.append(cdr_columns._with_stamp(message, stamp.sec * 10**9 + stamp.nanosec))
+        return out
+
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', ingest.IngestWarning)
+        batched = ingest.ingest_bags(paths)
+        monkeypatch.setattr(ingest, 'decode_messages', one_by_one)
+        alone = ingest.ingest_bags(paths)
+        monkeypatch.undo()
+    assert batched.report.issues == alone.report.issues
+    assert (batched.report.steps, batched.report.dropped) == (alone.report.steps,
+                                                            alone.report.dropped)
+    assert len(batched.episodes) == len(alone.episodes) > 0
+    for ours, theirs in zip(batched.episodes, alone.episodes, strict=True):
+        for item in dataclasses.fields(ours):
+            a, b = getattr(ours, item.name), getattr(theirs, item.name)
+            if isinstance(b, np.ndarray):
+                assert a.dtype == b.dtype and a.shape == b.shape, item.name
+                np.testing.assert_array_equal(a, b, err_msg=item.name)
+            else:
+                assert a == b, item.name

@@ -32,6 +32,14 @@ class Faults:
     drop: set[tuple[str, int]] = field(default_factory=set)
     dup: set[tuple[str, int]] = field(default_factory=set)
     shift: set[tuple[str, int]] = field(default_factory=set)
+    nan: set[tuple[str, int]] = field(default_factory=set)
+    """The message's vector holds a NaN."""
+    short: set[tuple[str, int]] = field(default_factory=set)
+    """The message's vector has one value fewer."""
+
+
+VECTORS = {TOPIC_STATE: 'data', TOPIC_STEP: 'applied_action', TOPIC_CONTEXT_TRUTH: 'values',
+           TOPIC_ACTION: 'data'}
 
 
 def _write_synthetic(path: Path, steps: int, faults: Faults | None = None,
@@ -57,6 +65,11 @@ def _write_synthetic(path: Path, steps: int, faults: Faults | None = None,
             for topic, msg in msgs.items():
                 if (topic, k) in faults.drop:
                     continue
+                vector = getattr(msg, VECTORS[topic])
+                if (topic, k) in faults.nan:
+                    vector[0] = np.nan
+                if (topic, k) in faults.short:
+                    setattr(msg, VECTORS[topic], vector[:-1])
                 if (topic, k) in faults.shift:
                     msg.header.stamp.nanosec += 7
                 for _ in range(2 if (topic, k) in faults.dup else 1):
@@ -377,6 +390,26 @@ def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:
     ds = ingest_bags(tmp_path / 'bag')
     assert ds.has_frames and len(frames) == 12
     _check_against_env(ds, env, actions, frames, 12)
+
+
+def test_batched_ingest_equals_one_by_one_decoding(tmp_path: Path, monkeypatch: Any) -> None:
+    """Batches give the episodes and issues of one-by-one decoding: faulty, state, pixel bags.
+
+    (A recorded bag: test_live_system's recording test.)
+    """
+    from live_fixtures import assert_ingests_as_one_by_one
+
+    faults = Faults(drop={(TOPIC_STATE, 3)}, dup={(TOPIC_STEP, 9)},
+                    shift={(TOPIC_ACTION, 12)},
+                    nan={(TOPIC_STATE, 15), (TOPIC_STEP, 20), (TOPIC_ACTION, 22),
+                         (TOPIC_CONTEXT_TRUTH, 30)},
+                    short={(TOPIC_STEP, 25), (TOPIC_ACTION, 27), (TOPIC_STATE, 33)})
+    assert_ingests_as_one_by_one([_write_synthetic(tmp_path / 'faults', 60, faults)],
+                                 monkeypatch)
+    _run_collect(tmp_path / 'state', storage='mcap', pixels=False, steps=300)
+    _run_collect(tmp_path / 'pixels', storage='mcap', pixels=True, steps=30)
+    assert_ingests_as_one_by_one([tmp_path / 'state'], monkeypatch)
+    assert_ingests_as_one_by_one([tmp_path / 'pixels'], monkeypatch)
 
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:

@@ -274,6 +274,12 @@ def test_container_arguments_give_each_node_its_own(monkeypatch: Any) -> None:
                        (['--node', 'policy', '--node', 'policy'], 'given twice')):
         with pytest.raises(ValueError, match=match):
             parse_container_args(bad)
+    # intra_process:=false: the same container, its nodes' messages through DDS
+    off = d.plan_from_arguments({'single_process': 'true', 'intra_process': 'false'})
+    assert off.container_args()[0] == d.CONTAINER_NO_INTRA
+    assert d.CONTAINER_NO_INTRA not in plan.container_args()
+    with pytest.raises(ValueError, match='applies to single_process only'):
+        d.plan_from_arguments({'intra_process': 'false'})
 
 
 def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,

@@ -8,7 +8,14 @@ import time
 import numpy as np
 import pytest
 
-from live_fixtures import TASK, check_lockstep_bag, container, node, tiny_checkpoint
+from live_fixtures import (
+    TASK,
+    assert_ingests_as_one_by_one,
+    check_lockstep_bag,
+    container,
+    node,
+    tiny_checkpoint,
+)
 from ros_harness import ProcessGroup, driver_node, spin_until
 
 pytestmark = pytest.mark.ros
@@ -42,9 +49,15 @@ def test_three_nodes_act_on_every_step_and_the_bag_trains(
     check_lockstep_bag(bag_dir, checkpoint, STEPS)
 
 
+@pytest.mark.parametrize('switch', [(), ('--no-intra-process',)], ids=['intra', 'dds'])
 def test_one_process_acts_on_every_step_and_the_bag_trains(
-        ros_processes: ProcessGroup, tmp_path) -> None:
-    """The same loop as nodes of one process on one executor (zeus launch --single-process)."""
+        ros_processes: ProcessGroup, tmp_path, switch: tuple[str, ...]) -> None:
+    """The same loop as nodes of one process on one executor (zeus launch --single-process).
+
+    With intra-process delivery (the default) the nodes hand each other the messages in
+    process; the recorder outside still gets every one, and no node gets one twice (a second
+    action for a step would be counted as unexpected by sim_bridge).
+    """
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
     recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
@@ -52,11 +65,13 @@ def test_one_process_acts_on_every_step_and_the_bag_trains(
     loop = ros_processes.start('container', container({
         'sim_bridge': bridge_params(STEPS, 'min_observers:=3'),
         'context_estimator': (f'checkpoint:={checkpoint}',),
-        'policy': (f'checkpoint:={checkpoint}',)}))
+        'policy': (f'checkpoint:={checkpoint}',)}, *switch))
     assert loop.wait(timeout=180) == 0, ros_processes.log_text('container')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
     check_lockstep_bag(bag_dir, checkpoint, STEPS)
+    log = ros_processes.log_text('container')
+    assert "'unexpected': 0" in log and 'gap before step' not in log, log[-3000:]
 
 
 def diagnostics_value(messages: list, node_name: str, key: str) -> int:
@@ -150,8 +165,11 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
 
 
 def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
-        ros_processes: ProcessGroup, tmp_path) -> None:
-    """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays."""
+        ros_processes: ProcessGroup, tmp_path, monkeypatch) -> None:
+    """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays.
+
+    The recorded bag also ingests in batches exactly as decoded one message at a time.
+    """
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.training import collect
 
@@ -174,6 +192,7 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
                          'switch:train:every=100', '--checkpoint', str(checkpoint),
                          '--noise', '0', '--out', str(tmp_path / 'collect'),
                          '--no-progress']) == 0
+    assert_ingests_as_one_by_one([bag_dir], monkeypatch)
     live = ingest_bags([bag_dir], strict=True).episodes
     local = ingest_bags([tmp_path / 'collect'], strict=True).episodes
     assert len(live) == len(local) == 1

@@ -220,7 +220,8 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
         refused_type = call(probe, bridge_params.set_parameters(
             [Parameter('action_timeout', value='soon')])).results[0]
         assert not refused_type.successful and refused_type.reason
-        # Last call to sim_bridge: a probe lagging the loop by 30 steps would see it gone.
+        # Last call to sim_bridge: the loop may be more than 30 steps ahead of the probe (in
+        # one process it runs hundreds of steps per second) and stop at once, services and all.
         stop_at = max(states) + 30
         result = call(probe, bridge_params.set_parameters(
             [Parameter('max_steps', value=stop_at)])).results[0]

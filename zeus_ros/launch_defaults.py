@@ -20,7 +20,7 @@ import yaml
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
-           'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
+           'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'share_dir', 'start_counts']
 
@@ -49,6 +49,8 @@ CONTAINER = 'container'
 CONTAINER_MODULE = 'zeus_ros.nodes.container'
 CONTAINER_EXECUTABLE = 'loop_container'
 """single_process: every node but the recorder runs in this one process (nodes/container.py)."""
+CONTAINER_NO_INTRA = '--no-intra-process'
+"""The container's switch: messages between its nodes through DDS (nodes/intra_process.py)."""
 PATH_PARAMETERS = {'context_estimator': ('checkpoint',), 'policy': ('checkpoint',)}
 """Parameters holding a file to read: resolved to an absolute path before the node starts."""
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
@@ -80,6 +82,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    "robot's, e.g. params/robot_bridge.yaml)"),
     LaunchArgument('single_process', 'false', 'run the nodes of the control loop as nodes of '
                    'one process on one executor (the recorder stays separate)'),
+    LaunchArgument('intra_process', 'true', 'single_process: its nodes hand each other '
+                   'messages as Python objects (false: through DDS, as between processes)'),
 )
 
 
@@ -115,6 +119,7 @@ class LaunchPlan:
     log_level: str
     nodes: tuple[NodePlan, ...]
     single_process: bool = False
+    intra_process: bool = True
 
     @property
     def contained(self) -> tuple[NodePlan, ...]:
@@ -130,7 +135,8 @@ class LaunchPlan:
 
     def container_args(self) -> list[str]:
         """Arguments of the container: each contained node with its own `--ros-args`."""
-        args = ['--ros-args', '--log-level', self.log_level]
+        args = [] if self.intra_process else [CONTAINER_NO_INTRA]
+        args += ['--ros-args', '--log-level', self.log_level]
         for node in self.contained:
             args += ['--node', node.name, '--ros-args', *self.ros_args(node)]
         return args
@@ -282,6 +288,7 @@ def plan(
     nodes: Sequence[str] = DEFAULT_NODES,
     robot: bool = False,
     single_process: bool = False,
+    intra_process: bool = True,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -291,8 +298,12 @@ def plan(
     `robot`, robot_bridge takes sim_bridge's place; without any checkpoint the robot's first
     recording is made by the random policy alone (no estimator), which reads the robot's shape
     from the params file. `single_process` changes only how the nodes are hosted (one process,
-    see LaunchPlan.container_args), never their parameters.
+    see LaunchPlan.container_args), never their parameters; `intra_process` (single_process
+    only) whether the container's nodes hand each other messages in process.
     """
+    if not intra_process and not single_process:
+        raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
+                         'only: add single_process:=true (--single-process) or drop it')
     names = list(dict.fromkeys(nodes))
     if robot:  # a robot steps the loop: robot_bridge takes sim_bridge's place
         names = [('robot_bridge' if name == 'sim_bridge' else name) for name in names]
@@ -331,7 +342,7 @@ def plan(
         planned.append(NodePlan(name, overrides))
     return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
                       log_level=log_level.lower(), nodes=tuple(planned),
-                      single_process=single_process)
+                      single_process=single_process, intra_process=intra_process)
 
 
 def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
@@ -346,4 +357,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                 params_file=get['params_file'], checkpoint=get['checkpoint'],
                 record=parse_bool('record', get['record']), log_level=get['log_level'],
                 robot=parse_bool('robot', get['robot']),
-                single_process=parse_bool('single_process', get['single_process']))
+                single_process=parse_bool('single_process', get['single_process']),
+                intra_process=parse_bool('intra_process', get['intra_process']))

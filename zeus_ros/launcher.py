@@ -279,6 +279,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--single-process', action='store_true',
                         help='sim_bridge, context_estimator and policy as nodes of one process '
                         'on one executor (default: a process each, so one crash is contained)')
+    parser.add_argument('--no-intra-process', action='store_true',
+                        help='with --single-process: messages between its nodes through DDS, '
+                        'not handed over in process')
     parser.add_argument('--no-progress', action='store_true',
                         help='no status line (steps, rate, episode, segment return; rewritten '
                         'in place on a terminal, a line every 10 s otherwise)')
@@ -288,7 +291,8 @@ def main(argv: list[str] | None = None) -> int:
         launch = launch_defaults.plan(
             namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
             checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
-            nodes=names, robot=args.robot, single_process=args.single_process)
+            nodes=names, robot=args.robot, single_process=args.single_process,
+            intra_process=not args.no_intra_process)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2

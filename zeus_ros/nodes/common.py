@@ -42,6 +42,7 @@ __all__ = [
     'image_from_array',
     'image_qos',
     'missing_peers',
+    'publisher_qos',
     'run_node',
     'run_nodes',
     'seconds_from_stamp',
@@ -153,6 +154,19 @@ def step_qos(depth: int = 10) -> QoSProfile:
     )
 
 
+STEP_BACKLOG = 1000
+"""History depth of a lockstep publisher. A reliable reader that misses messages (a recorder
+starved of CPU on a busy machine: its transport queue overflows) gets them resent when DDS
+notices the loss, which can take a good part of a second; at a few hundred steps/s a history
+of 10 was overwritten by then and the bag had gaps. The recorder's reader history is as deep
+(RECORD_DEPTH). Small messages: a few hundred KiB per topic at most."""
+
+
+def publisher_qos(mode: str) -> QoSProfile:
+    """Step-protocol publishers: reliable, with a STEP_BACKLOG-deep history in lockstep."""
+    return step_qos(STEP_BACKLOG) if mode == 'lockstep' else step_qos()
+
+
 def image_qos(mode: str) -> QoSProfile:
     """Frames: reliable in lockstep (every step counts); sensor-data (best effort) in realtime."""
     return step_qos() if mode == 'lockstep' else qos_profile_sensor_data
@@ -160,7 +174,7 @@ def image_qos(mode: str) -> QoSProfile:
 
 def action_qos(mode: str) -> QoSProfile:
     """Actions: reliable; in realtime only the newest matters (depth 1, zero-order hold)."""
-    return step_qos() if mode == 'lockstep' else step_qos(depth=1)
+    return publisher_qos(mode) if mode == 'lockstep' else step_qos(depth=1)
 
 
 def stamp_from_seconds(seconds: float) -> Time:
@@ -276,6 +290,24 @@ def _exit_now(code: int) -> NoReturn:
     os._exit(code)
 
 
+def _deliver_published(nodes: Sequence[Node], timeout: float = 2.0) -> None:
+    """A node finished its job: let reliable readers (a recorder) take what it last published.
+
+    Destroying a publisher drops what its readers have not acknowledged yet; a recorder that
+    runs a little behind would lose the last steps of a run. Waits `timeout` seconds at most.
+    """
+    from rclpy.duration import Duration
+
+    deadline = time.monotonic() + timeout
+    for node in nodes:
+        for publisher in node.publishers:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            if publisher.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+                publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+
+
 DRAIN_LIMIT_S = 2.0
 """The longest a draining node goes on taking messages after a stop signal."""
 
@@ -346,7 +378,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             _spin_then_drain(executor, nodes, signals, drain)
         else:
             executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
+    except NodeFinished:
+        _deliver_published(nodes)
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
         # A signal that shuts the context down while a callback publishes surfaces as an

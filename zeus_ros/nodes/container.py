@@ -1,6 +1,6 @@
 r"""Several zeus_ros nodes in one process on one executor: the Python component container.
 
-    python -m zeus_ros.nodes.container --ros-args --log-level info \\
+    python -m zeus_ros.nodes.container [--no-intra-process] --ros-args --log-level info \\
         --node sim_bridge --ros-args --params-file F -r __ns:=/r1 -p min_observers:=2 \\
         --node context_estimator --ros-args --params-file F -r __ns:=/r1 \\
         --node policy --ros-args --params-file F -r __ns:=/r1
@@ -11,6 +11,10 @@ the three nodes share one executor (`zeus launch --single-process`). Each node g
 its Node's `cli_args`, and is built by its own class, so names, parameters and behaviour are the
 same in both modes. The arguments before the first `--node` are the process's (log level).
 A node that stops (sim_bridge's max_steps) or a Ctrl-C stops them all (common.run_nodes).
+
+Messages between the nodes are handed over as Python objects (intra-process delivery,
+nodes/intra_process.py) and still published on DDS for everyone outside; `--no-intra-process`
+sends them through DDS only, as between processes.
 """
 
 from __future__ import annotations
@@ -21,8 +25,9 @@ import importlib
 import sys
 from typing import TYPE_CHECKING
 
-from zeus_ros.launch_defaults import NODES
+from zeus_ros.launch_defaults import CONTAINER_NO_INTRA, NODES
 from zeus_ros.nodes.common import run_nodes
+from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -66,10 +71,17 @@ def parse_container_args(argv: Sequence[str]) -> tuple[list[str], list[tuple[str
     return process, nodes
 
 
-def node_factory(name: str, cli_args: Sequence[str]) -> Callable[[], Node]:
-    """Build node `name` with its own class and its own command-line arguments."""
+def node_factory(name: str, cli_args: Sequence[str], bus: IntraProcessBus | None = None
+                 ) -> Callable[[], Node]:
+    """Build node `name` with its own class and its own command-line arguments.
+
+    With `bus`, the node delivers to and receives from the other nodes on it in process.
+    """
     module = importlib.import_module(NODES[name])
-    return functools.partial(getattr(module, NODE_CLASSES[name]), cli_args=list(cli_args))
+    node_class = getattr(module, NODE_CLASSES[name])
+    if bus is not None:
+        node_class = with_intra_process(node_class, bus)
+    return functools.partial(node_class, cli_args=list(cli_args))
 
 
 def main(args: list[str] | None = None) -> int:
@@ -80,7 +92,9 @@ def main(args: list[str] | None = None) -> int:
     except ValueError as error:
         print(f'loop_container: {error}', file=sys.stderr)
         return 2
-    factories = [node_factory(name, node_args) for name, node_args in nodes]
+    bus = None if CONTAINER_NO_INTRA in process else IntraProcessBus()
+    process = [arg for arg in process if arg != CONTAINER_NO_INTRA]
+    factories = [node_factory(name, node_args, bus) for name, node_args in nodes]
     return run_nodes(factories, [sys.argv[0], *process])
 
 

@@ -26,6 +26,7 @@ from zeus_ros.nodes.common import (
     TOPICS,
     RateMeter,
     diagnostics_message,
+    publisher_qos,
     run_node,
     steady_timer,
     step_qos,
@@ -78,7 +79,8 @@ class ContextEstimatorNode(Node):
                                      lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
         # Publisher last: a peer that sees it knows the subscriptions above already exist;
         # with expected_subscribers the steps are subscribed once the readers hear the context.
-        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT, step_qos())
+        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT,
+                                          publisher_qos(self.params['mode']))
         if expected:
             self.inputs.subscribe_when_heard(self._pub, expected,
                                              self.params['subscriber_timeout'])
@@ -104,16 +106,16 @@ class ContextEstimatorNode(Node):
         self._novelty = None if novelty is None else NoveltyTracker(novelty, self.agent.k)
         if novelty is not None:
             if self._pub_novelty is None:
-                self._pub_novelty = self.create_publisher(ContextTruth, TOPICS.CONTEXT_NOVELTY,
-                                                          step_qos())
+                self._pub_novelty = self.create_publisher(
+                    ContextTruth, TOPICS.CONTEXT_NOVELTY, publisher_qos(self.params['mode']))
             self.get_logger().info(f'{self._pub_novelty.topic_name}: {novelty.describe()}')
         if self.loaded.readout is None:
             self.get_logger().info(f'no context read-out in the checkpoint: nothing on '
                                    f'{TOPICS.CONTEXT_READOUT} (zeus export calibrates one)')
             return
         if self._pub_readout is None:
-            self._pub_readout = self.create_publisher(ContextTruth, TOPICS.CONTEXT_READOUT,
-                                                      step_qos())
+            self._pub_readout = self.create_publisher(
+                ContextTruth, TOPICS.CONTEXT_READOUT, publisher_qos(self.params['mode']))
         self.get_logger().info(f'{self._pub_readout.topic_name}: '
                                f'{self.loaded.readout.describe()}')
 

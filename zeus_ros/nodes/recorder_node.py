@@ -62,8 +62,10 @@ SPECS: dict[str, Spec] = {
                            low=0.001, high=MAX_FLUSH_PERIOD_S),
     'image_best_effort': Spec(False, 'subscribe to frames best effort (realtime only)'),
 }
-RECORD_DEPTH = 100
-"""Reliable keep-last depth: absorbs a slow disk for ~100 steps before the publisher drops."""
+RECORD_DEPTH = 1000
+"""Reliable keep-last depth: what arrives while the recorder is held up (a slow flush, no CPU
+on a busy machine) waits here; with 100, a fast lockstep loop (a few hundred steps/s in one
+process) overflowed it in a fraction of a second and the bag had gaps."""
 SPLIT_GRACE_S = 1.0
 """After a split the previous bag stays open this long for late messages of its own steps."""
 RECENT_STAMPS = 256

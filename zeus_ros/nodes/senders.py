@@ -28,10 +28,13 @@ from rclpy.type_support import check_is_valid_msg_type
 from rclpy.waitable import NumberOfEntities, Waitable
 
 if TYPE_CHECKING:
+    from rclpy.callback_groups import CallbackGroup
+    from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.node import Node
+    from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
 
-__all__ = ['Sender', 'SenderPairing', 'SenderSubscription']
+__all__ = ['Sender', 'SenderPairing', 'SenderSubscription', 'publisher_gid']
 
 _GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
 _TAKE_OK = 0
@@ -83,6 +86,12 @@ class _Rcl:
                               ctypes.POINTER(_Allocator)]
         self.fini = rcutils.rcutils_uint8_array_fini
         self.fini.argtypes = [ctypes.POINTER(_Bytes)]
+        self.rmw_publisher = rcl.rcl_publisher_get_rmw_handle
+        self.rmw_publisher.argtypes = [ctypes.c_void_p]
+        self.rmw_publisher.restype = ctypes.c_void_p
+        self.publisher_gid = rcl.rmw_get_gid_for_publisher  # found through librcl's rmw
+        self.publisher_gid.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Gid)]
+        self.publisher_gid.restype = ctypes.c_int32
 
 
 _RCL: _Rcl | None = None
@@ -95,6 +104,16 @@ def _rcl() -> _Rcl:
     return _RCL
 
 
+def publisher_gid(publisher: Publisher) -> bytes:
+    """The GID of one of our own publishers: what its messages carry as publisher_gid."""
+    gid = _Gid()
+    with publisher.handle:
+        rmw_handle = _rcl().rmw_publisher(publisher.handle.pointer)
+        if not rmw_handle or _rcl().publisher_gid(rmw_handle, ctypes.byref(gid)) != _TAKE_OK:
+            raise RuntimeError(f'no GID for the publisher of {publisher.topic_name}')
+    return bytes(gid.data)
+
+
 class SenderSubscription(Waitable):
     """A subscription that admits only messages whose publisher GID `admit` accepts.
 
@@ -102,25 +121,42 @@ class SenderSubscription(Waitable):
     paired sender's messages are taken before the reader's history overflows. Resolves its
     topic like `create_subscription` (namespace, remaps) and shows in the graph like any
     subscription. `destroy()` before the node is destroyed.
+
+    In a node of the single-process container (`node.intra_process`, nodes/intra_process.py)
+    it also receives the messages of the container's publishers as Python objects, through the
+    container's bus, and drops their DDS copies here, unread. `event_callbacks` adds rclpy's
+    QoS event handlers (as `create_subscription` does; None: none).
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str, qos: QoSProfile,
-                 callback: Callable[[Any], None], admit: Callable[[bytes], bool]) -> None:
+                 callback: Callable[[Any], None], admit: Callable[[bytes], bool], *,
+                 callback_group: CallbackGroup | None = None,
+                 event_callbacks: SubscriptionEventCallbacks | None = None) -> None:
         check_is_valid_msg_type(msg_type)
         with node.handle:
             self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
                                                qos.get_c_qos_profile())
-        super().__init__(node.default_callback_group)
+        super().__init__(callback_group or node.default_callback_group)
         self._node = node
-        self._msg_type = msg_type
-        self._callback = callback
-        self._admit = admit
+        self.msg_type = msg_type
+        self.qos = qos
+        self.callback = callback
+        self.admit = admit
         self._index: int | None = None
+        self._destroyed = False
         self._buffer = _Bytes()
         allocator = _rcl().default_allocator()
         if _rcl().init(ctypes.byref(self._buffer), 256, ctypes.byref(allocator)) != _TAKE_OK:
             raise MemoryError('could not allocate a serialized-message buffer')
+        self._events = [] if event_callbacks is None else event_callbacks.create_event_handlers(
+            self.callback_group, self._handle, self.topic_name)
         node.add_waitable(self)
+        for handler in self._events:
+            node.add_waitable(handler)
+        self._bus = getattr(node, 'intra_process', None)
+        self._local: set[bytes] | frozenset[bytes] = frozenset()  # GIDs delivered by the bus
+        if self._bus is not None:
+            self._local = self._bus.add_subscription(self)
 
     @property
     def topic_name(self) -> str:
@@ -134,7 +170,15 @@ class SenderSubscription(Waitable):
             return self._handle.get_publisher_count()
 
     def destroy(self) -> None:
-        """Leave the executor and free the subscription and its buffer."""
+        """Leave the executor and the bus; free the subscription and its buffer (once)."""
+        if self._destroyed:
+            return
+        self._destroyed = True
+        if self._bus is not None:
+            self._bus.remove_subscription(self)
+        for handler in self._events:
+            self._node.remove_waitable(handler)
+            handler.destroy()
         self._node.remove_waitable(self)
         self._handle.destroy_when_not_in_use()
         _rcl().fini(ctypes.byref(self._buffer))
@@ -163,15 +207,16 @@ class SenderSubscription(Waitable):
             if result != _TAKE_OK:
                 raise RuntimeError(f'rcl_take_serialized_message on {self.topic_name} '
                                    f'returned {result}')
-            if self._admit(bytes(info.publisher_gid.data)):
+            gid = bytes(info.publisher_gid.data)
+            if gid not in self._local and self.admit(gid):  # the bus delivered a local one
                 data = ctypes.string_at(self._buffer.buffer, self._buffer.buffer_length)
-                taken.append(deserialize_message(data, self._msg_type))
+                taken.append(deserialize_message(data, self.msg_type))
         return taken
 
     async def execute(self, taken_data: list[Any]) -> None:
         """Hand each admitted message to the callback."""
         for msg in taken_data:
-            self._callback(msg)
+            self.callback(msg)
 
     def get_num_entities(self) -> NumberOfEntities:
         """One subscription."""

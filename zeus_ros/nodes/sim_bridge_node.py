@@ -31,6 +31,7 @@ from zeus_ros.nodes.common import (
     image_from_array,
     image_qos,
     missing_peers,
+    publisher_qos,
     run_node,
     stamp_from_seconds,
     steady_timer,
@@ -95,7 +96,7 @@ class SimBridgeNode(Node):
         self._started = False
         self._start_after = math.inf
 
-        qos = step_qos()
+        qos = publisher_qos(self.mode)
         self._pub_state = self.create_publisher(StateVector, TOPICS.STATE, qos)
         self._pub_step = self.create_publisher(StepFeedback, TOPICS.STEP, qos)
         self._pub_truth = self.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, qos)

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['FIELDS', 'decode_messages']
+__all__ = ['FIELDS', 'decode_messages', 'stack_field']
 
 FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     'zeus_msgs/msg/StateVector': (('step', 'u8'), ('data', 'f8[]')),
@@ -108,8 +108,13 @@ def _strings(block: np.ndarray, offset: int, length: int) -> list[str]:
     return [texts[i] for i in inverse.ravel()]
 
 
-def _columns(block: np.ndarray, items: list[_Item]) -> dict[str, list[Any]]:
-    """Every field of every row of `block` (rows: messages of one layout)."""
+def _columns(block: np.ndarray, items: list[_Item], matrices: dict[str, np.ndarray]
+             ) -> dict[str, list[Any]]:
+    """Every field of every row of `block` (rows: messages of one layout).
+
+    Each sequence of numbers is also put in `matrices` as one 2-D array (a row per message),
+    which the per-message arrays are views of (stack_field).
+    """
     rows = block.shape[0]
     columns: dict[str, list[Any]] = {}
     for name, kind, offset, count in items:
@@ -122,7 +127,8 @@ def _columns(block: np.ndarray, items: list[_Item]) -> dict[str, list[Any]]:
         elif kind.endswith('[]'):
             dtype = np.dtype(_DTYPES[kind[:-2]])
             values = np.ascontiguousarray(block[:, offset:offset + count * dtype.itemsize])
-            columns[name] = list(values.view(dtype).reshape(rows, count))
+            matrices[name] = values.view(dtype).reshape(rows, count)
+            columns[name] = list(matrices[name])
         else:
             dtype = np.dtype(_DTYPES[kind])
             values = np.ascontiguousarray(block[:, offset:offset + dtype.itemsize])
@@ -176,8 +182,28 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
 
 @cache
 def _record_type(names: tuple[str, ...]) -> Any:
-    """A light read-only message: its fields and stamp_ns (one per message type)."""
-    return namedtuple('CdrRecord', [*names, 'stamp_ns'])
+    """A light read-only message: its fields, stamp_ns, and its group's matrices and row."""
+    return namedtuple('CdrRecord', [*names, 'stamp_ns', 'group', 'row'])
+
+
+def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
+    """`np.stack` of field `name` of `messages`, taken from their group's 2-D array at once.
+
+    Why: stacking tens of thousands of row views one by one was a good part of ingest. Works
+    when every message was decoded in one group (the usual bag: one layout per topic); else
+    None, and the caller stacks as before. The result is a new array either way.
+    """
+    group = getattr(messages[0], 'group', None) if messages else None
+    if group is None or name not in group:
+        return None
+    try:
+        rows = np.fromiter((m.row if m.group is group else -1 for m in messages), np.intp,
+                           len(messages))
+    except AttributeError:  # a message decoded alone (the fallback) is among them
+        return None
+    if (rows < 0).any():
+        return None
+    return group[name][rows]
 
 
 def _with_stamp(message: Any, stamp_ns: int) -> Any:
@@ -201,13 +227,15 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
     fits = (block[:, 0] == 0) & (block[:, 1] == 1)
     for pos in prefixes:
         fits &= (block[:, pos:pos + 4] == block[0, pos:pos + 4]).all(axis=1)
-    columns = _columns(block[fits], items)
+    matrices: dict[str, np.ndarray] = {}
+    columns = _columns(block[fits], items, matrices)
     sec, nanosec = columns.pop('sec'), columns.pop('nanosec')
     del columns['frame_id']
     record = _record_type(tuple(name for name, _kind in spec))
     members = [i for i, ok in zip(indices, fits.tolist(), strict=True) if ok]
     stamps = (np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nanosec, np.int64)).tolist()
-    rows = zip(*(columns[name] for name in record._fields[:-1]), stamps, strict=True)
+    rows = zip(*(columns[name] for name in record._fields[:-3]), stamps,
+               [matrices] * len(members), range(len(members)), strict=True)
     for index, row in zip(members, rows, strict=True):
         out[index] = record._make(row)
     if not _agrees(out[members[0]], fallback(members[0]), spec):

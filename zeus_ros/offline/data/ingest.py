@@ -35,7 +35,7 @@ from rosbags.rosbag2 import Reader
 
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
-from zeus_ros.offline.data.cdr_columns import decode_messages
+from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -284,7 +284,8 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            f"type hash {conn.digest} != this checkout's "
                                            f'{ours} for {expected}: written with another '
                                            'definition; decoding may fail'))
-        # Step topics are decoded in batches after the read (cdr_columns), images one by one.
+        # Step topics are decoded in batches after the read (cdr_columns), images one by one
+        # (a batch of frames measured slower: it copies every frame more often).
         raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _STEP_TOPICS}
         for conn, _, raw in reader.messages(connections=conns):
             count += 1
@@ -413,8 +414,12 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
                ) -> dict[str, list[int]]:
     """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
     bad: dict[str, list[int]] = {}
-    values = [getattr(msg, name) for _, msg in checked]
-    if length is not None:
+    messages = [msg for _, msg in checked]
+    matrix = stack_field(messages, name) if length is not None else None
+    if matrix is not None and matrix.shape[1] == length:  # one layout, all of that length
+        rows = matrix.astype(np.float64)
+    elif length is not None:
+        values = [getattr(msg, name) for msg in messages]
         sized = np.fromiter((len(v) == length for v in values), bool, len(values))
         if not sized.all():
             bad['length'] = [checked[i][0] for i in np.flatnonzero(~sized)]
@@ -422,12 +427,18 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
         if sized.any():
             rows[sized] = np.stack([v for v, ok in zip(values, sized, strict=True) if ok])
     else:
-        rows = np.asarray(values, np.float64).reshape(-1, 1)
+        rows = np.asarray([getattr(msg, name) for msg in messages], np.float64).reshape(-1, 1)
     with np.errstate(invalid='ignore', over='ignore'):
         wrong = ~(np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
     if wrong.any():
         bad['nonfinite'] = [checked[i][0] for i in np.flatnonzero(wrong)]
     return bad
+
+
+def _stacked(messages: list[Any], name: str) -> np.ndarray:
+    """Field `name` of `messages` as one array, a row each (from the decoded group if it can)."""
+    matrix = stack_field(messages, name)
+    return np.stack([getattr(m, name) for m in messages]) if matrix is None else matrix
 
 
 _FIELDS: tuple[tuple[str, str, bool, bool], ...] = (
@@ -513,10 +524,10 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
-    present = [(i, acts[s][1].data) for i, s in enumerate(piece)
+    present = [(i, acts[s][1]) for i, s in enumerate(piece)
                if s in acts and len(acts[s][1].data) == action_dim]
     if present:  # a request of another length or with a bad value stays absent (NaN)
-        rows = np.stack([data for _, data in present]).astype(np.float64)
+        rows = _stacked([msg for _, msg in present], 'data').astype(np.float64)
         with np.errstate(invalid='ignore'):
             usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
         policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
@@ -532,16 +543,16 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
         episode=int(fb[0].episode),
         steps=np.asarray(piece, np.int64),
         stamps_ns=np.asarray([topics[TOPIC_STEP].by_step[s][0] for s in piece], np.int64),
-        obs=np.stack([topics[TOPIC_STATE].by_step[s][1].data for s in piece]),
+        obs=_stacked([topics[TOPIC_STATE].by_step[s][1] for s in piece], 'data'),
         frames=pix,
-        action=np.stack([m.applied_action for m in fb[1:]]).astype(np.float32),
+        action=_stacked(fb[1:], 'applied_action').astype(np.float32),
         action_status=np.asarray([m.action_status for m in fb[1:]], np.uint8),
         policy_action=policy,
         reward=np.asarray([m.reward for m in fb[1:]], np.float64),
         first=np.asarray([m.first for m in fb], bool),
         last=np.asarray([m.last for m in fb], bool),
         episode_step=np.asarray([m.episode_step for m in fb], np.int64),
-        context=np.stack([m.values for m in truth]).astype(np.float64),
+        context=_stacked(truth, 'values').astype(np.float64),
         segment=np.asarray([m.segment for m in truth], np.int64),
     )
 
