@@ -272,14 +272,6 @@ class NodeFinished(Exception):  # noqa: N818 - a signal, not an error
     """Raised from a callback when a node has done its job (e.g. max_steps reached)."""
 
 
-def _stop_quietly(_signum: int, _frame: object) -> None:
-    """Python's half of SIGINT/SIGTERM: nothing, so no KeyboardInterrupt breaks a clean-up.
-
-    rclpy's own handler, which runs first, shuts the context down and wakes the executor; a
-    second signal during `close()` (a recorder closing its bag) then changes nothing.
-    """
-
-
 def _exit_now(code: int) -> NoReturn:
     """Leave without Python's interpreter teardown, which adds about a second with torch.
 
@@ -310,6 +302,9 @@ def _deliver_published(nodes: Sequence[Node], timeout: float = 2.0) -> None:
 
 DRAIN_LIMIT_S = 2.0
 """The longest a draining node goes on taking messages after a stop signal."""
+STOP_DELIVERY_S = 0.5
+"""The longest a node stopped by a signal waits for its reliable readers to take its last
+messages (a finished node waits 2 s: nothing else is stopping it)."""
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, drain: float = 0.0
@@ -319,22 +314,25 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, drain: 
     A `ValueError` raised while building the node (bad parameters) is printed as one clear line
     and gives exit code 2, instead of a traceback. A signal ends the spin, `close()` runs to its
     end, and the process exits 0 (or the node's `exit_code`). With `drain` (a recorder) the
-    node first takes what is still queued for it (see `_spin_then_drain`).
+    node first takes what is still queued for it (see `_drain`); any other node first lets its
+    reliable readers take what it published last (`_deliver_published`).
     """
     run_nodes([factory], args, drain)
 
 
-def _spin_then_drain(executor: SingleThreadedExecutor, nodes: Sequence[Node],
-                     signals: list[int], quiet: float) -> None:
-    """Spin until a stop signal, then on until no message came for `quiet` s (DRAIN_LIMIT_S).
+def _spin_until_signal(executor: SingleThreadedExecutor, signals: list[int]) -> None:
+    """Spin until a stop signal (noted in `signals` by our handler) or a shutdown."""
+    while not signals and rclpy.ok():
+        executor.spin_once(timeout_sec=0.1)
+
+
+def _drain(executor: SingleThreadedExecutor, nodes: Sequence[Node], quiet: float) -> None:
+    """After a stop signal: spin on until no message came for `quiet` s (DRAIN_LIMIT_S).
 
     `zeus launch` stops a recorder after the nodes it records: what they published last may
     still wait in this process's DDS queues (a recorder behind a fast loop, ~20 steps), and the
     bag must hold it. Messages are counted by the nodes' `received` attribute.
     """
-    while not signals and rclpy.ok():
-        executor.spin_once(timeout_sec=0.1)
-
     def received() -> int:
         return sum(int(getattr(node, 'received', 0)) for node in nodes)
 
@@ -356,10 +354,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     """
     signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(stop_signal, (lambda signum, _frame: signals.append(signum)) if drain
-                      else _stop_quietly)
-    # Draining, the signals are ours: rclpy's handlers would shut the context down at once.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO if drain else None)
+        signal.signal(stop_signal, lambda signum, _frame: signals.append(signum))
+    # The signals are ours: rclpy's handlers would shut the context down at once, and what a
+    # node published last would be lost with its publishers (a recorder one step short).
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Node] = []
     try:
         for factory in factories:
@@ -374,10 +372,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     for node in nodes:
         executor.add_node(node)
     try:
+        _spin_until_signal(executor, signals)
         if drain:
-            _spin_then_drain(executor, nodes, signals, drain)
+            _drain(executor, nodes, drain)
         else:
-            executor.spin()
+            _deliver_published(nodes, timeout=STOP_DELIVERY_S)
     except NodeFinished:
         _deliver_published(nodes)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -390,8 +389,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     finally:
         for node in nodes:  # as rclpy.spin leaves its executor
             executor.remove_node(node)
-        # Destroyed first: a signal has already shut the context down, and the node's logger
-        # would then fail to publish close()'s last lines on /rosout (the console gets them).
+        # Destroyed first, then closed (close() may log its summary after its node is gone).
         for node in nodes:
             node.destroy_node()
         for node in nodes:
