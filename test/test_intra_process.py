@@ -86,6 +86,16 @@ def settle(spin: Callable[[Callable[[], bool], float], bool], seconds: float = 1
     spin(lambda: False, seconds)
 
 
+def publish_states(talker: Any, spin: Callable[..., bool], readers: int, count: int
+                   ) -> list[Any]:
+    """Once `talker` has matched `readers` subscriptions, publish states 0..count-1 (returned)."""
+    assert spin(lambda: talker.get_subscription_count() == readers, 20), 'no DDS match'
+    sent = [state(step) for step in range(count)]
+    for msg in sent:
+        talker.publish(msg)
+    return sent
+
+
 def test_co_located_subscriber_gets_each_message_once_as_the_published_object() -> None:
     """In process: the very objects, in order, once each; outside: every message via DDS."""
     from zeus_msgs.msg import StateVector
@@ -99,10 +109,7 @@ def test_co_located_subscriber_gets_each_message_once_as_the_published_object() 
         inside('policy').create_subscription(StateVector, TOPIC, local.append, step_qos(50))
         outside('recorder').create_subscription(StateVector, TOPIC,
                                                 lambda m: remote.append(m.step), step_qos(50))
-        assert spin(lambda: talker.get_subscription_count() == 2, 20), 'no DDS match'
-        sent = [state(step) for step in range(30)]
-        for msg in sent:
-            talker.publish(msg)
+        sent = publish_states(talker, spin, 2, 30)
         assert spin(lambda: len(remote) == 30 and len(local) == 30, 20), (len(local), remote)
         settle(spin)
         assert [m.step for m in local] == list(range(30)), 'a DDS copy came through as well'
@@ -120,10 +127,7 @@ def test_without_the_bus_messages_between_nodes_of_a_process_go_through_dds() ->
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
         local: list[Any] = []
         inside('policy').create_subscription(StateVector, TOPIC, local.append, step_qos(50))
-        assert spin(lambda: talker.get_subscription_count() == 1, 20), 'no DDS match'
-        sent = [state(step) for step in range(10)]
-        for msg in sent:
-            talker.publish(msg)
+        sent = publish_states(talker, spin, 1, 10)
         assert spin(lambda: len(local) == 10, 20)
         settle(spin, 0.3)
         assert [m.step for m in local] == list(range(10))
@@ -169,10 +173,7 @@ def test_namespaces_and_remaps_decide_who_is_connected() -> None:
             StateVector, 'zeus/in', remapped.append, step_qos(50))
         inside('policy', namespace='/r2').create_subscription(
             StateVector, 'zeus/out', elsewhere.append, step_qos(50))
-        assert spin(lambda: talker.get_subscription_count() == 1, 20), 'no DDS match'
-        sent = [state(step) for step in range(5)]
-        for msg in sent:
-            talker.publish(msg)
+        sent = publish_states(talker, spin, 1, 5)
         assert spin(lambda: len(remapped) == 5, 20)
         settle(spin, 0.5)
         assert same_objects(remapped, sent)
