@@ -147,6 +147,31 @@ def test_reliability_normaliser_in_the_agent(tmp_path) -> None:
         _config('zeus', context_norm='reliability', aggregation='max')
 
 
+def test_context_noise_perturbs_the_normalised_context_at_every_use() -> None:
+    """Diagnostic noise: the configured std after the normaliser, fresh per call, off by default.
+
+    It needs a normaliser to have a unit.
+    """
+    system = SyntheticSystem(k=3)
+    oracle = make_agent(_config('oracle', context_norm='running', context_noise=0.5),
+                        system.spec())
+    oracle.update(system.sample(8), None, 0)
+    oracle.modules['context_norm'].eval()
+    context = system.sample(8).context.float()[:1].expand(20000, -1)
+    clean = oracle.modules['context_norm'](context)
+    first, second = oracle.policy_context(context), oracle.policy_context(context)
+    assert float((first - clean).std()) == pytest.approx(0.5, rel=0.05)
+    assert abs(float((first - clean).mean())) < 0.02
+    assert not torch.equal(first, second)
+    plain = make_agent(_config('oracle', context_norm='running'), system.spec())
+    plain.modules['context_norm'].eval()
+    torch.testing.assert_close(plain.policy_context(context), plain.policy_context(context))
+    with pytest.raises(ConfigError, match="context_norm is 'none'"):
+        _config('oracle', context_norm='none', context_noise=0.5)
+    with pytest.raises(ConfigError, match='context_noise'):
+        _config('oracle', context_norm='running', context_noise=-1.0)
+
+
 def test_scale_free_context_loss_ignores_the_size_of_psi() -> None:
     """Shrinking psi 1000x lowers eq. 1 as written but leaves the scale-free form unchanged."""
     torch.manual_seed(0)

@@ -202,9 +202,15 @@ class ZeusAgent:
             self.method == 'up_osi' and step < self.up_osi_warmup_updates)
 
     def policy_context(self, context: torch.Tensor) -> torch.Tensor:
-        """The context as actor and critic see it: as given, or through the context normaliser."""
+        """The context as actor and critic see it: normalised when configured, plus any noise.
+
+        The diagnostic `context_noise` is drawn fresh at every call, as an estimate's error is.
+        """
         norm = self.modules.get('context_norm')
-        return context if norm is None else norm(context)
+        context = context if norm is None else norm(context)
+        if self.config.context_noise > 0 and context.shape[-1] > 0:
+            context = context + self.config.context_noise * torch.randn_like(context)
+        return context
 
     def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
         """Task-bound actions -> [-1, 1] (what every network sees)."""

@@ -116,6 +116,11 @@ class ZeusConfig:
     """> 0: a slow (EMA) copy of psi encodes H_{t+1} for the TD target, updated with this rate
     at `target_update_freq` like the critic's and encoder's targets (SAC-AE), so that with
     `critic_context_grad` the target does not move with every psi step. 0: online psi."""
+    context_noise: float = 0.0
+    """> 0 (a diagnostic): Gaussian noise of this standard deviation is added to the context at
+    the actor/critic input, after the normaliser (so in units of the context's spread), at every
+    use: updates, collection, evaluation and deployment. On the oracle it answers how exact an
+    inferred context must be for knowing it to pay (docs/results.md, session 5). 0: off."""
     exploration: str = 'stochastic'
     """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
     paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
@@ -206,6 +211,11 @@ class ZeusConfig:
                               f'of a mean or sum over k transitions; aggregation is '
                               f"{self.aggregation!r}: use aggregation mean or sum, or "
                               f"context_norm 'running'")
+        _check_float('context_noise', self.context_noise, low=0.0)
+        if self.context_noise > 0 and self.context_norm == 'none':
+            raise ConfigError(f'context_noise={self.context_noise} is in units of the '
+                              "normalised context, but context_norm is 'none': set context_norm "
+                              "'running' (or 'reliability')")
         _check_choice('exploration', self.exploration, EXPLORATIONS)
         if not isinstance(self.critic_context_grad, bool):
             raise ConfigError(f'critic_context_grad must be true or false, '
