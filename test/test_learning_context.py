@@ -61,6 +61,44 @@ def test_all_masked_history_gives_finite_psi(operator: str) -> None:
     assert torch.isfinite(out).all()
 
 
+def _speed_target_histories(generator: torch.Generator, n: int, k: int = 8
+                            ) -> tuple[HistoryFeatures, torch.Tensor]:
+    """Cheetah-Run-v1 in one dimension: speeds v_j and rewards -|v_j - target|."""
+    target = torch.rand(n, 1, generator=generator) * 3
+    speed = torch.rand(n, k, 1, generator=generator) * 4
+    reward = -(speed - target.unsqueeze(1)).abs()
+    return HistoryFeatures(speed, torch.zeros(n, k, 1), reward, speed,
+                           torch.ones(n, k, dtype=torch.bool)), target
+
+
+def test_mlp_head_combines_transitions_a_linear_head_can_only_average() -> None:
+    """A nonlinear head after the mean finds the target every transition allows.
+
+    Each |v - target| allows two targets; keeping the one all transitions agree on needs Deep
+    Sets' rho. Same codes, same training: the MLP head's error is under half the linear head's
+    (0.15-0.31 of it over seeds 0-3).
+    """
+    errors = {}
+    for head in ('linear', 'mlp'):
+        torch.manual_seed(0)
+        generator = torch.Generator().manual_seed(0)
+        psi = ContextEncoder(1, 1, 8, context_dim=1, aggregation='mean', transition_dim=16,
+                             hidden_dim=32, head=head)
+        optimizer = torch.optim.Adam(psi.parameters(), lr=3e-3)
+        for _ in range(600):
+            history, target = _speed_target_histories(generator, 128)
+            loss = ((psi(history) - target) ** 2).mean()
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+        history, target = _speed_target_histories(generator, 2048)
+        with torch.no_grad():
+            errors[head] = float(((psi(history) - target) ** 2).mean())
+    assert errors['mlp'] < 0.5 * errors['linear'], errors
+    with pytest.raises(ValueError, match='linear, mlp'):
+        ContextEncoder(1, 1, 8, context_dim=1, head='attention')
+
+
 def test_mean_divides_by_number_of_real_slots() -> None:
     """Mean aggregation averages over real transitions only."""
     codes = torch.tensor([[[9.0], [2.0], [4.0]]])

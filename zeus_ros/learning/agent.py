@@ -114,7 +114,7 @@ class ZeusAgent:
         if source == 'psi':
             self.modules['psi'] = ContextEncoder(
                 cfg.feature_dim, a_dim, cfg.k, self.context_dim, cfg.aggregation,
-                cfg.transition_dim, cfg.context_hidden_dim)
+                cfg.transition_dim, cfg.context_hidden_dim, cfg.context_head)
         for name in self.method_spec.models:
             model_class = RewardModel if name == 'reward' else TransitionModel
             self.modules[name] = model_class(cfg.feature_dim, a_dim, self.context_dim,

@@ -52,6 +52,8 @@ LEGACY_CONFIG: dict[str, Any] = {'context_norm': 'none', 'context_loss': 'paper'
 
 AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
 """Operators that combine the k per-transition encodings of psi."""
+CONTEXT_HEADS = ('linear', 'mlp')
+"""What maps psi's aggregated transition codes to the context (context.ContextEncoder)."""
 
 ALPHA_PSI_BY_TASK: dict[str, float] = {
     'Cheetah-Run-v0': 1.0,
@@ -94,6 +96,10 @@ class ZeusConfig:
     context_consistency: float = 0.0
     """Weight of the consistency loss (representation.consistency_loss): psi should drift little
     from one step to the next of an episode relative to its spread across the batch. 0: off."""
+    context_head: str = 'linear'
+    """After the aggregation: 'linear' (psi a linear map of the aggregated codes, the paper's
+    reading) or 'mlp' (Deep Sets' rho: a ReLU MLP of context_hidden_dim, so psi can combine what
+    the transitions say instead of averaging it; measured in docs/results.md, session 5)."""
     context_norm: str = 'none'
     """'running': standardise the context (psi or the true one) at the actor/critic input with
     running statistics of the training batches; 'none': feed it raw (the paper, and the default:
@@ -204,6 +210,7 @@ class ZeusConfig:
         _check_choice('aggregation', self.aggregation, AGGREGATIONS)
         _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
         _check_choice('context_loss', self.context_loss, CONTEXT_LOSSES)
+        _check_choice('context_head', self.context_head, CONTEXT_HEADS)
         _check_choice('context_norm', self.context_norm, CONTEXT_NORMS)
         _check_choice('context_input_init', self.context_input_init, CONTEXT_INPUT_INITS)
         if self.context_norm == 'reliability' and self.aggregation not in ('mean', 'sum'):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from zeus_ros.learning.config import AGGREGATIONS
+from zeus_ros.learning.config import AGGREGATIONS, CONTEXT_HEADS
 from zeus_ros.learning.utils import mlp
 
 __all__ = ['ContextEncoder', 'ContextNormalizer', 'HistoryFeatures', 'aggregate']
@@ -92,18 +92,25 @@ class ContextEncoder(nn.Module):
 
     def __init__(self, feature_dim: int, action_dim: int, k: int, context_dim: int,
                  aggregation: str = 'mean', transition_dim: int = 64,
-                 hidden_dim: int = 128) -> None:
+                 hidden_dim: int = 128, head: str = 'linear') -> None:
         super().__init__()
         if aggregation not in AGGREGATIONS:
             raise ValueError(f'aggregation must be one of {", ".join(AGGREGATIONS)}, '
                              f'got {aggregation!r}')
+        if head not in CONTEXT_HEADS:
+            raise ValueError(f'head must be one of {", ".join(CONTEXT_HEADS)}, got {head!r}')
         self.k = k
         self.aggregation = aggregation
         self.context_dim = context_dim
         in_dim = 2 * feature_dim + action_dim + 1
         self.transition = mlp(in_dim, (hidden_dim, hidden_dim), transition_dim)
         aggregated = transition_dim * (k if aggregation == 'concat' else 1)
-        self.head = nn.Linear(aggregated, context_dim)
+        # 'linear': psi is a linear map of the aggregate (the paper's reading). 'mlp': Deep Sets'
+        # rho, a nonlinear function of it, which can combine transitions (e.g. keep the target
+        # speed consistent with every |v - target| seen) where a linear map can only average what
+        # each transition says on its own.
+        self.head = (nn.Linear(aggregated, context_dim) if head == 'linear'
+                     else mlp(aggregated, (hidden_dim, hidden_dim), context_dim))
 
     def forward(self, history: HistoryFeatures) -> torch.Tensor:
         """Encode a history in phi space into (B, context_dim)."""
