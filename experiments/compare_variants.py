@@ -95,8 +95,6 @@ def variant_rows(tables: dict[str, Path]) -> list[dict[str, Any]]:
         for split in SPLIT_ORDER:
             headroom = paired_difference(baselines, BOUND, REFERENCE, split)
             for method in methods:
-                if variant != REFERENCE_VARIANT and method in (REFERENCE, BOUND):
-                    continue
                 cells = [r for r in mine if r['method'] == method and r['split'] == split]
                 if not cells:
                     continue
