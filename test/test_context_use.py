@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -170,6 +172,31 @@ def test_context_noise_perturbs_the_normalised_context_at_every_use() -> None:
         _config('oracle', context_norm='none', context_noise=0.5)
     with pytest.raises(ConfigError, match='context_noise'):
         _config('oracle', context_norm='running', context_noise=-1.0)
+
+
+def test_persistent_context_noise_is_shared_in_updates_and_slow_in_acting() -> None:
+    """context_noise_steps > 0: one error per sample for all uses, an AR(1) error in acting."""
+    system = SyntheticSystem(k=3)
+    oracle = make_agent(_config('oracle', context_norm='running', context_noise=0.5,
+                                context_noise_steps=10), system.spec())
+    shared = oracle._update_noise(4000)
+    assert shared.shape == (4000, oracle.context_dim)
+    assert float(shared.std()) == pytest.approx(0.5, rel=0.05)
+    errors = torch.stack([oracle._acting_noise(torch.Size((2000, oracle.context_dim)))
+                          for _ in range(30)])
+    assert float(errors.std()) == pytest.approx(0.5, rel=0.1)
+    step_change = float((errors[1:] - errors[:-1]).std())
+    assert step_change == pytest.approx(0.5 * math.sqrt(2 * (1 - math.exp(-0.1))), rel=0.1)
+    obs = np.zeros(system.spec().obs_shape, np.float32)
+    context = np.zeros(system.spec().num_context_params, np.float32)
+    assert not np.array_equal(oracle.act(obs, context), oracle.act(obs, context))
+    fresh = make_agent(_config('oracle', context_norm='running', context_noise=0.5),
+                       system.spec())
+    assert fresh._update_noise(8) is None and fresh._acting_noise(torch.Size((1, 2))) is None
+    for metrics in (oracle.update(system.sample(8), None, step) for step in range(2)):
+        assert np.isfinite(metrics['loss/critic'])
+    with pytest.raises(ConfigError, match='context_noise_steps'):
+        _config('oracle', context_norm='running', context_noise=0.5, context_noise_steps=-1)
 
 
 def test_scale_free_context_loss_ignores_the_size_of_psi() -> None:

@@ -149,6 +149,7 @@ class ZeusAgent:
         self.log_alpha = torch.tensor(math.log(cfg.init_temperature), device=self.device,
                                       requires_grad=True)
         self.target_entropy = -float(a_dim)
+        self._acting_error: torch.Tensor | None = None  # context_noise_steps > 0 in act()
         self.optimizers = self._make_optimizers()
 
     def _make_optimizers(self) -> dict[str, torch.optim.Optimizer]:
@@ -201,16 +202,40 @@ class ZeusAgent:
         return self.method_spec.context_source == 'true' or (
             self.method == 'up_osi' and step < self.up_osi_warmup_updates)
 
-    def policy_context(self, context: torch.Tensor) -> torch.Tensor:
+    def policy_context(self, context: torch.Tensor, noise: torch.Tensor | None = None
+                       ) -> torch.Tensor:
         """The context as actor and critic see it: normalised when configured, plus any noise.
 
-        The diagnostic `context_noise` is drawn fresh at every call, as an estimate's error is.
+        The diagnostic `context_noise` is `noise` when given (a persistent error, see
+        `context_noise_steps`), else drawn fresh at this call.
         """
         norm = self.modules.get('context_norm')
         context = context if norm is None else norm(context)
         if self.config.context_noise > 0 and context.shape[-1] > 0:
-            context = context + self.config.context_noise * torch.randn_like(context)
+            if noise is None:
+                noise = self.config.context_noise * torch.randn_like(context)
+            context = context + noise
         return context
+
+    def _update_noise(self, batch_size: int) -> torch.Tensor | None:
+        """One persistent context error per sample for every use in an update, or None."""
+        cfg = self.config
+        if cfg.context_noise <= 0 or cfg.context_noise_steps == 0 or self.context_dim == 0:
+            return None
+        return cfg.context_noise * torch.randn(batch_size, self.context_dim, device=self.device)
+
+    def _acting_noise(self, shape: torch.Size) -> torch.Tensor | None:
+        """The persistent context error in acting: AR(1) with time constant context_noise_steps."""
+        cfg = self.config
+        if cfg.context_noise <= 0 or cfg.context_noise_steps == 0 or shape[-1] == 0:
+            return None
+        fresh = cfg.context_noise * torch.randn(shape, device=self.device)
+        previous = self._acting_error
+        if previous is not None and previous.shape == fresh.shape:
+            keep = math.exp(-1.0 / cfg.context_noise_steps)
+            fresh = keep * previous + math.sqrt(1.0 - keep ** 2) * fresh
+        self._acting_error = fresh
+        return fresh
 
     def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
         """Task-bound actions -> [-1, 1] (what every network sees)."""
@@ -296,9 +321,10 @@ class ZeusAgent:
             norm.update(context, next_context, batch.not_done)
             if norm.noise_scale is not None:
                 metrics['train/context_reliability'] = norm.reliability().mean()
-        self._update_critic(batch, context, next_context, step, metrics)
+        noise = self._update_noise(batch.batch_size)
+        self._update_critic(batch, context, next_context, step, metrics, noise)
         if step % self.config.actor_update_freq == 0:
-            self._update_actor_and_alpha(batch, context, metrics)
+            self._update_actor_and_alpha(batch, context, metrics, noise)
         if step % self.config.target_update_freq == 0:
             m = self.modules
             soft_update_params(m['critic'], m['critic_target'], self.config.critic_tau)
@@ -334,12 +360,13 @@ class ZeusAgent:
 
     def _update_critic(self, batch: HistoryBatch, context: torch.Tensor,
                        next_context: torch.Tensor, step: int,
-                       metrics: dict[str, torch.Tensor]) -> None:
+                       metrics: dict[str, torch.Tensor],
+                       noise: torch.Tensor | None = None) -> None:
         """Clipped double-Q TD step on critic + phi (SAC-AE), and on psi when configured."""
         m, cfg = self.modules, self.config
         with torch.no_grad():
             next_feat = m['encoder'](batch.next_obs)
-            next_c = self.policy_context(next_context)
+            next_c = self.policy_context(next_context, noise)
             next_x = torch.cat([next_feat, next_c], dim=-1)
             sample = squashed_sample(m['actor'](next_x))
             target_x = torch.cat([m['encoder_target'](batch.next_obs), next_c], dim=-1)
@@ -354,7 +381,7 @@ class ZeusAgent:
                                                batch.hist_mask)
             context = m['psi'](history)
             self.optimizers['psi'].zero_grad(set_to_none=True)
-        x = torch.cat([m['encoder'](batch.obs), self.policy_context(context)], dim=-1)
+        x = torch.cat([m['encoder'](batch.obs), self.policy_context(context, noise)], dim=-1)
         q = m['critic'](x, self.normalize_action(batch.action))
         loss = F.mse_loss(q.q1, target_q) + F.mse_loss(q.q2, target_q)
         self.optimizers['critic'].zero_grad(set_to_none=True)
@@ -366,11 +393,13 @@ class ZeusAgent:
         metrics['train/q'] = q.q1.mean()
 
     def _update_actor_and_alpha(self, batch: HistoryBatch, context: torch.Tensor,
-                                metrics: dict[str, torch.Tensor]) -> None:
+                                metrics: dict[str, torch.Tensor],
+                                noise: torch.Tensor | None = None) -> None:
         """Policy step on detached [phi(o), c], then the temperature step."""
         m = self.modules
         with torch.no_grad():
-            x = torch.cat([m['encoder'](batch.obs), self.policy_context(context)], dim=-1)
+            x = torch.cat([m['encoder'](batch.obs), self.policy_context(context, noise)],
+                          dim=-1)
         sample = squashed_sample(m['actor'](x))
         actor_q = m['critic'](x, sample.action).min()
         actor_loss = (self.alpha.detach() * sample.log_prob - actor_q).mean()
@@ -433,7 +462,8 @@ class ZeusAgent:
         if ctx.shape[1] != self.context_dim:
             raise ValueError(f'context has {ctx.shape[1]} values per sample, expected '
                              f'context_dim={self.context_dim}')
-        x = torch.cat([self.modules['encoder'](obs_t), self.policy_context(ctx)], dim=-1)
+        x = torch.cat([self.modules['encoder'](obs_t),
+                       self.policy_context(ctx, self._acting_noise(ctx.shape))], dim=-1)
         action = squashed_sample(self.modules['actor'](x), deterministic).action
         action = (action * self._action_scale + self._action_bias).cpu().numpy()
         return action[0] if single else action

@@ -127,6 +127,12 @@ class ZeusConfig:
     the actor/critic input, after the normaliser (so in units of the context's spread), at every
     use: updates, collection, evaluation and deployment. On the oracle it answers how exact an
     inferred context must be for knowing it to pay (docs/results.md, session 5). 0: off."""
+    context_noise_steps: int = 0
+    """How long one `context_noise` error persists. 0: drawn fresh at every use (c_t and c_{t+1}
+    of one TD target get independent errors). > 0: an error that persists like an estimate's:
+    one draw per sample shared by every use in an update (critic, TD target, actor), and in
+    acting an AR(1) process with this time constant in steps (psi's error over a k-step
+    window changes slowly too)."""
     exploration: str = 'stochastic'
     """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
     paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
@@ -219,6 +225,10 @@ class ZeusConfig:
                               f"{self.aggregation!r}: use aggregation mean or sum, or "
                               f"context_norm 'running'")
         _check_float('context_noise', self.context_noise, low=0.0)
+        if isinstance(self.context_noise_steps, bool) or not isinstance(
+                self.context_noise_steps, int) or self.context_noise_steps < 0:
+            raise ConfigError(f'context_noise_steps must be an integer >= 0, '
+                              f'got {self.context_noise_steps!r}')
         if self.context_noise > 0 and self.context_norm == 'none':
             raise ConfigError(f'context_noise={self.context_noise} is in units of the '
                               "normalised context, but context_norm is 'none': set context_norm "
