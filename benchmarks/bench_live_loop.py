@@ -1,11 +1,12 @@
 """End-to-end rate of the three-node loop next to the in-process loop doing the same work.
 
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
-deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
-live loop runs sim_bridge, context_estimator and policy in lockstep, as separate processes
-(multi) and as nodes of one process on one executor (single, zeus launch --single-process, with
-intra-process delivery; single-dds: the same without it, every message through DDS). A probe
-subscriber measures observation-to-action latency; /proc gives each node's resident memory.
+deployment code (ContextHistory + InferenceAgent, each frame encoded once as the nodes do): the
+in-process loop calls them directly, the live loop runs sim_bridge, context_estimator and policy
+in lockstep, as separate processes (multi) and as nodes of one process on one executor
+(single, zeus launch --single-process, with intra-process delivery; single-dds: the same
+without it, every message through DDS). A probe subscriber measures observation-to-action
+latency; /proc gives each node's resident memory.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
 """
@@ -62,7 +63,7 @@ def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float]:
     from zeus_ros.learning.inference import InferenceAgent
 
     torch.set_num_threads(1)
-    agent = InferenceAgent.from_checkpoint(checkpoint)
+    agent = InferenceAgent.from_checkpoint(checkpoint, reuse_features=True)
     task = make_task(TASK, seed=0)
     env = ScheduledEnv(task, schedule_from_config(SCHEDULE, task, 0))
     history = agent.new_history()
