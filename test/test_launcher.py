@@ -326,6 +326,7 @@ def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) 
     estimator = load_inference_agent('context_estimator', params)
     policy = load_inference_agent('policy', {**params, 'checkpoint': str(copy)})
     assert policy.agent is estimator.agent and policy.agent.reuse_features
+    assert sorted(policy.agent.agent.modules) == ['actor', 'encoder', 'psi']  # no critics
     assert policy.path == copy
     checked = load_inference_agent('policy', {**params, 'task': 'Cheetah-Run-v0'})
     assert checked.agent is not estimator.agent

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from zeus_ros.learning.agent import ZeusAgent
-from zeus_ros.learning.checkpoint import load_checkpoint
+from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
 from zeus_ros.learning.context import HistoryFeatures
 from zeus_ros.learning.sac import squashed_sample
 
@@ -154,6 +154,15 @@ class InferenceAgent:
         loaded = load_checkpoint(path, map_location=device, expect_task=expect_task,
                                  expect_obs_kind=expect_obs_kind, load_optimizers=False)
         return cls(loaded.agent, reuse_features=reuse_features)
+
+    def drop_training_modules(self) -> None:
+        """Free what acting never uses: critics, target copies, decoder, models, optimizers.
+
+        For a deployed node (pixels: ~35 MiB); the agent can no longer be trained or saved whole.
+        """
+        for name in [name for name in self.agent.modules if name not in DEPLOY_MODULES]:
+            del self.agent.modules[name]
+        self.agent.optimizers.clear()
 
     # ---------------------------------------------------------------- what nodes need to know
     @property

@@ -12,6 +12,8 @@ estimator has just encoded instead of encoding it again (InferenceAgent reuse_fe
 from __future__ import annotations
 
 from collections.abc import Mapping
+import contextlib
+import ctypes
 from dataclasses import dataclass
 import hashlib
 from pathlib import Path
@@ -83,6 +85,8 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
                 reuse_features=True)
         except CheckpointError as error:
             raise ValueError(f'{node_name}: {error}') from error
+        agent.drop_training_modules()
+        _release_freed_memory()
         _SHARED[key] = agent
     try:
         readout, novelty = stored_monitors(data)
@@ -95,6 +99,12 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
             raise ValueError(f'{node_name}: checkpoint {path}: its {what} expects psi of {size} '
                              f'values, the agent has {agent.context_dim}')
     return LoadedAgent(agent, path, sha256, readout, novelty)
+
+
+def _release_freed_memory() -> None:
+    """Hand freed heap pages back to the system: glibc keeps them (elsewhere nothing happens)."""
+    with contextlib.suppress(AttributeError, OSError):
+        ctypes.CDLL(None).malloc_trim(0)
 
 
 def check_swappable(node_name: str, old: InferenceAgent, new: InferenceAgent) -> None:
