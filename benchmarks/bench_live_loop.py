@@ -159,15 +159,14 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     probe = rclpy.create_node('bench_probe', context=context)
     seen_obs: dict[int, float] = {}
     seen_act: dict[int, float] = {}
-    counted: list[tuple[float, int]] = []  # single-quiet: (time, sim_bridge's steps so far)
+    counted: list[tuple[float, int, float]] = []  # single-quiet: time, steps so far, CPU s
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name.endswith('sim_bridge: step loop'):
                 steps_so_far = int({kv.key: kv.value for kv in status.values}['steps'])
-                counted.append((time.perf_counter(), steps_so_far))
-                for step in range(len(seen_obs), steps_so_far):  # for the CPU window below
-                    seen_obs[step] = seen_act[step] = counted[-1][0]
+                counted.append((time.perf_counter(), steps_so_far,
+                                sum(cpu_seconds(p.pid) for p in processes.values())))
 
     if quiet:
         probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
@@ -186,7 +185,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
         deadline = time.monotonic() + 500
         while processes[loop].poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.02)
-            if len(seen_obs) >= steps // 2 and not memory:
+            if max(len(seen_obs), counted[-1][1] if counted else 0) >= steps // 2 and not memory:
                 memory = {name: rss_mb(p.pid) for name, p in processes.items()}
             # CPU per step between 10 % and 90 % of the run: load on the machine stretches
             # the wall clock, not the work a step costs.
@@ -200,20 +199,20 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
         executor.shutdown()
         probe.destroy_node()
         rclpy.shutdown(context=context)
+    memory_values = {f'rss_{k}': v for k, v in memory.items()}
+    if quiet:  # between the first and the last count taken while the loop ran
+        running = [entry for entry in counted if 0 < entry[1] < steps]
+        if len(running) < 2:
+            raise RuntimeError(f'sim_bridge reported its steps {len(running)} time(s) while '
+                               'running: raise --steps')
+        (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
+        return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
+                'p50': float('nan'), 'p99': float('nan'), **memory_values}
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
     cpu_ms = (cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]) * 1e3 if len(cpu) == 2 \
         else float('nan')
-    memory_values = {f'rss_{k}': v for k, v in memory.items()}
-    if quiet:  # between the first and the last count taken while the loop ran
-        running = [(t, n) for t, n in counted if 0 < n < steps]
-        if len(running) < 2:
-            raise RuntimeError(f'sim_bridge reported its steps {len(running)} time(s) while '
-                               'running: raise --steps')
-        (t0, n0), (t1, n1) = running[0], running[-1]
-        return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': cpu_ms, 'p50': float('nan'),
-                'p99': float('nan'), **memory_values}
     latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
     span = seen_obs[done[-1]] - seen_obs[done[0]]
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
