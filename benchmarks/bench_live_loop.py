@@ -235,7 +235,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
-    parser.add_argument('--modes', default='multi,single,single-dds',
+    parser.add_argument('--modes', default='multi,single,single-dds,single-quiet',
                         help='multi: a process per node; single: one process, one executor, '
                         'intra-process delivery; single-dds: the same through DDS; '
                         'single-quiet: single with no outside subscriber (rate only)')
