@@ -1,9 +1,12 @@
 """Deployment logic, in one place: the rolling k-step history and the inference wrapper.
 
 Used by the ROS nodes (context_estimator, policy) and by the in-process collector/evaluator, so
-that what runs on the robot is exactly what runs in evaluation. The nodes build their agent with
-`reuse_features=True`: every frame goes through phi once, however many histories and actions use
-it (the same networks, equal to the batched path up to float rounding).
+that what runs on the robot is exactly what runs in evaluation. The nodes and `zeus collect
+--checkpoint` build their agent with `reuse_features=True`: every frame goes through phi once
+(one row at a time), however many histories and actions use it, so a live recording and a
+collection still agree to the bit. Evaluation keeps the batched path, which agrees up to float
+rounding (the batch size changes the kernels' summation order). Never reuse features of an
+agent that is being trained: its phi changes with every update.
 """
 
 from __future__ import annotations
