@@ -1,11 +1,15 @@
 """End-to-end rate of the three-node loop next to the in-process loop doing the same work.
 
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
-deployment code (ContextHistory + InferenceAgent): the in-process loop calls them directly, the
-live loop runs sim_bridge, context_estimator and policy in lockstep, as separate processes
-(multi) and as nodes of one process on one executor (single, zeus launch --single-process, with
-intra-process delivery; single-dds: the same without it, every message through DDS). A probe
-subscriber measures observation-to-action latency; /proc gives each node's resident memory.
+deployment code (ContextHistory + InferenceAgent, each frame encoded once as the nodes do): the
+in-process loop calls them directly, the live loop runs sim_bridge, context_estimator and policy
+in lockstep, as separate processes (multi) and as nodes of one process on one executor
+(single, zeus launch --single-process, with intra-process delivery; single-dds: the same
+without it, every message through DDS). A probe subscriber measures observation-to-action
+latency; /proc gives each node's resident memory. The probe is itself an outside subscriber:
+the container then publishes every step and action on DDS too. `single-quiet` runs the single
+mode with no outside subscriber on the loop's topics (10x the steps; the rate comes from
+sim_bridge's step count on /diagnostics, so it has no latency).
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
 """
@@ -62,7 +66,7 @@ def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float]:
     from zeus_ros.learning.inference import InferenceAgent
 
     torch.set_num_threads(1)
-    agent = InferenceAgent.from_checkpoint(checkpoint)
+    agent = InferenceAgent.from_checkpoint(checkpoint, reuse_features=True)
     task = make_task(TASK, seed=0)
     env = ScheduledEnv(task, schedule_from_config(SCHEDULE, task, 0))
     history = agent.new_history()
@@ -112,6 +116,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     `mode` (MODES): a process per node, or the three nodes in one process on one executor
     (zeus launch --single-process) with or without intra-process delivery.
     """
+    from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -124,12 +129,14 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     domain = int(env['ROS_DOMAIN_ID'])
     values = '[' + ','.join(str(v) for v in SCHEDULE['values']) + ']'
+    quiet = mode == 'single-quiet'
     params = {
         'context_estimator': [f'checkpoint:={checkpoint}'],
         'policy': [f'checkpoint:={checkpoint}'],
         'sim_bridge': [f'task:={TASK}', f'max_steps:={steps}',
                        f'pixels:={"true" if pixels else "false"}', 'schedule.kind:=switch',
-                       'schedule.every:=100', f'schedule.values:={values}', 'min_observers:=3'],
+                       'schedule.every:=100', f'schedule.values:={values}',
+                       f'min_observers:={2 if quiet else 3}'],
     }
     ros_args = {name: ['--ros-args', *(a for v in values for a in ('-p', v))]
                 for name, values in params.items()}
@@ -152,12 +159,24 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     probe = rclpy.create_node('bench_probe', context=context)
     seen_obs: dict[int, float] = {}
     seen_act: dict[int, float] = {}
-    probe.create_subscription(StepFeedback, TOPICS.STEP,
-                              lambda m: seen_obs.setdefault(m.step, time.perf_counter()),
-                              step_qos(50))
-    probe.create_subscription(Action, TOPICS.ACTION,
-                              lambda m: seen_act.setdefault(m.step, time.perf_counter()),
-                              step_qos(50))
+    counted: list[tuple[float, int, float]] = []  # single-quiet: time, steps so far, CPU s
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.endswith('sim_bridge: step loop'):
+                steps_so_far = int({kv.key: kv.value for kv in status.values}['steps'])
+                counted.append((time.perf_counter(), steps_so_far,
+                                sum(cpu_seconds(p.pid) for p in processes.values())))
+
+    if quiet:
+        probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
+    else:
+        probe.create_subscription(StepFeedback, TOPICS.STEP,
+                                  lambda m: seen_obs.setdefault(m.step, time.perf_counter()),
+                                  step_qos(50))
+        probe.create_subscription(Action, TOPICS.ACTION,
+                                  lambda m: seen_act.setdefault(m.step, time.perf_counter()),
+                                  step_qos(50))
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     memory: dict[str, float] = {}
@@ -166,7 +185,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
         deadline = time.monotonic() + 500
         while processes[loop].poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.02)
-            if len(seen_obs) == steps // 2 and not memory:
+            if max(len(seen_obs), counted[-1][1] if counted else 0) >= steps // 2 and not memory:
                 memory = {name: rss_mb(p.pid) for name, p in processes.items()}
             # CPU per step between 10 % and 90 % of the run: load on the machine stretches
             # the wall clock, not the work a step costs.
@@ -180,22 +199,32 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
         executor.shutdown()
         probe.destroy_node()
         rclpy.shutdown(context=context)
+    memory_values = {f'rss_{k}': v for k, v in memory.items()}
+    if quiet:  # between the first and the last count taken while the loop ran
+        running = [entry for entry in counted if 0 < entry[1] < steps]
+        if len(running) < 2:
+            raise RuntimeError(f'sim_bridge reported its steps {len(running)} time(s) while '
+                               'running: raise --steps')
+        (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
+        return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
+                'p50': float('nan'), 'p99': float('nan'), **memory_values}
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
-    latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
-    span = seen_obs[done[-1]] - seen_obs[done[0]]
     cpu_ms = (cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]) * 1e3 if len(cpu) == 2 \
         else float('nan')
+    latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
+    span = seen_obs[done[-1]] - seen_obs[done[0]]
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
             'p50': float(np.percentile(latency, 50)),
-            'p99': float(np.percentile(latency, 99)), **{f'rss_{k}': v for k, v in memory.items()}}
+            'p99': float(np.percentile(latency, 99)), **memory_values}
 
 
-MODES = ('multi', 'single', 'single-dds')
+MODES = ('multi', 'single', 'single-dds', 'single-quiet')
 RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8, ('state', 'single-dds'): 0.8,
-                 ('pixels', 'multi'): 0.9, ('pixels', 'single'): 0.9,
-                 ('pixels', 'single-dds'): 0.9}
+                 ('state', 'single-quiet'): 0.8, ('pixels', 'multi'): 0.9,
+                 ('pixels', 'single'): 0.9, ('pixels', 'single-dds'): 0.9,
+                 ('pixels', 'single-quiet'): 0.9}
 """Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
 P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
 """Issue 14's observation -> action p99 targets."""
@@ -206,9 +235,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
-    parser.add_argument('--modes', default='multi,single,single-dds',
+    parser.add_argument('--modes', default='multi,single,single-dds,single-quiet',
                         help='multi: a process per node; single: one process, one executor, '
-                        'intra-process delivery; single-dds: the same through DDS')
+                        'intra-process delivery; single-dds: the same through DDS; '
+                        'single-quiet: single with no outside subscriber (rate only)')
     parser.add_argument('--kinds', default='state,pixels', help='observation kinds to run')
     parser.add_argument('--repeat', type=int, default=1,
                         help='rounds of in-process + every mode (A/B on a loaded machine)')
@@ -232,14 +262,15 @@ def main() -> None:
                 if mode is None:  # each round against its own in-process rate
                     local, local_cpu = in_process_rate(checkpoint, steps)
                     continue
-                live = live_rate(checkpoint, steps, pixels=kind == 'pixels', mode=mode)
+                live = live_rate(checkpoint, steps * (10 if mode == 'single-quiet' else 1),
+                                 pixels=kind == 'pixels', mode=mode)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
                                   if k.startswith('rss_'))
                 ratio_text = f'{ratio:.3f} [{target}]' + ('' if ratio >= target else '!')
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
-                    '' if live['p99'] <= p99_target else '!')
+                    '' if live['p99'] <= p99_target or np.isnan(live['p99']) else '!')
                 cpu_text = f'{local_cpu:.2f}/{live["cpu_ms"]:.2f}'
                 print(f'{kind:<7} {mode:<10} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '

@@ -304,3 +304,34 @@ def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,
     with pytest.raises(ValueError, match=r"policy: parameter checkpoint 'nope.pt' not found"):
         load_inference_agent('policy', {'checkpoint': 'nope.pt', 'task': '', 'device': 'cpu',
                                         'torch_threads': 1})
+
+
+def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) -> None:
+    """Estimator and policy in one container hold one copy of the networks and phi's memo.
+
+    A copy of the file is the same checkpoint (same sha256); another task expectation, or an
+    agent no node holds any more, loads afresh.
+    """
+    import gc
+    import shutil
+    import weakref
+
+    from zeus_ros.launch_defaults import share_dir
+    from zeus_ros.nodes.agent_loader import load_inference_agent
+
+    shipped = share_dir() / 'checkpoints/cheetah_run_v0_zeus_state.pt'
+    copy = tmp_path / 'copy.pt'
+    shutil.copyfile(shipped, copy)
+    params = {'checkpoint': str(shipped), 'task': '', 'device': 'cpu', 'torch_threads': 1}
+    estimator = load_inference_agent('context_estimator', params)
+    policy = load_inference_agent('policy', {**params, 'checkpoint': str(copy)})
+    assert policy.agent is estimator.agent and policy.agent.reuse_features
+    assert sorted(policy.agent.agent.modules) == ['actor', 'encoder', 'psi']  # no critics
+    assert policy.path == copy
+    checked = load_inference_agent('policy', {**params, 'task': 'Cheetah-Run-v0'})
+    assert checked.agent is not estimator.agent
+    shared = weakref.ref(estimator.agent)
+    del estimator, policy
+    gc.collect()
+    assert shared() is None  # a redeployed checkpoint's networks do not stay in memory
+    assert load_inference_agent('policy', params).agent.reuse_features

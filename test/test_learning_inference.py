@@ -12,10 +12,10 @@ from zeus_ros.learning.synthetic import SyntheticSystem
 torch.set_num_threads(1)
 
 
-def _inference(method: str = 'zeus') -> InferenceAgent:
-    config = ZeusConfig(method=method, k=3, alpha_psi=1.0, hidden_dim=16, model_hidden_dim=16,
-                        context_hidden_dim=16, encoder_hidden_dim=16, transition_dim=8,
-                        context_dim=3, device='cpu')
+def _inference(method: str = 'zeus', seed: int = 0) -> InferenceAgent:
+    config = ZeusConfig(method=method, seed=seed, k=3, alpha_psi=1.0, hidden_dim=16,
+                        model_hidden_dim=16, context_hidden_dim=16, encoder_hidden_dim=16,
+                        transition_dim=8, context_dim=3, device='cpu')
     return InferenceAgent(make_agent(config, SyntheticSystem(k=3).spec()))
 
 
@@ -120,3 +120,86 @@ def test_frame_stack_rejects_non_rgb() -> None:
     """A frame without 3 colour channels is refused."""
     with pytest.raises(ValueError, match='HxWx3'):
         FrameStack().push(np.zeros((84, 84), dtype=np.uint8))
+
+
+def _pixel_inference() -> InferenceAgent:
+    from zeus_ros.learning import AgentSpec
+
+    config = ZeusConfig(method='zeus', obs_kind='pixels', k=3, alpha_psi=1.0, hidden_dim=16,
+                        model_hidden_dim=16, context_hidden_dim=16, transition_dim=8,
+                        context_dim=3, num_filters=8, num_conv_layers=2, device='cpu')
+    spec = AgentSpec(task='Synthetic', context_names=('mass',), obs_kind='pixels',
+                     obs_shape=(9, 84, 84), action_dim=2, action_low=np.full(2, -1.0),
+                     action_high=np.full(2, 1.0))
+    return InferenceAgent(make_agent(config, spec))
+
+
+def _episodes(inference: InferenceAgent, steps: int, seed: int = 0) -> list[tuple]:
+    """(obs, action, reward, first) per step: two episodes, as a node receives them."""
+    rng = np.random.default_rng(seed)
+
+    def frame() -> np.ndarray:
+        if inference.obs_kind == 'pixels':
+            return rng.integers(0, 256, inference.obs_shape, dtype=np.uint8)
+        return rng.normal(size=inference.obs_shape).astype(np.float32)
+
+    return [(frame(), rng.uniform(-1, 1, inference.action_dim).astype(np.float32),
+             float(rng.normal()), step in (0, steps // 2)) for step in range(steps)]
+
+
+def _run(inference: InferenceAgent, steps: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """Contexts and deterministic actions of the estimator/policy loop over `steps`."""
+    history, contexts, actions, prev = inference.new_history(), [], [], None
+    for obs, action, reward, first in steps:
+        if first:
+            history.clear()
+        else:
+            history.push(prev[0], prev[1], reward, obs.copy())  # a new array, as decoded
+        contexts.append(inference.context(history))
+        actions.append(inference.act(obs.copy(), contexts[-1]))
+        prev = (obs, action)
+    return np.stack(contexts), np.stack(actions)
+
+
+@pytest.mark.parametrize('kind', ['state', 'pixels'])
+def test_reused_features_give_the_contexts_and_actions_of_the_batched_path(kind: str) -> None:
+    """reuse_features changes how often phi runs, not what comes out (float rounding aside)."""
+    plain = _pixel_inference() if kind == 'pixels' else _inference()
+    reusing = InferenceAgent(plain.agent, reuse_features=True)
+    steps = _episodes(plain, 12)
+    (plain_ctx, plain_act), (ctx, act) = _run(plain, steps), _run(reusing, steps)
+    np.testing.assert_allclose(ctx, plain_ctx, atol=1e-5)
+    np.testing.assert_allclose(act, plain_act, atol=1e-5)
+    # On the same context the action is the same to the bit: one frame through phi either way.
+    for (obs, *_), context in zip(steps, plain_ctx, strict=True):
+        assert np.array_equal(reusing.act(obs, context), plain.act(obs, context))
+
+
+def test_each_frame_goes_through_phi_once() -> None:
+    """With reuse_features the estimator's history and the policy encode each new frame once."""
+    plain = _inference()
+    reusing = InferenceAgent(plain.agent, reuse_features=True)
+    encoded: list[int] = []
+    plain.agent.modules['encoder'].register_forward_hook(
+        lambda _module, inputs, _out: encoded.append(inputs[0].shape[0]))
+    steps = _episodes(plain, 12)
+    _run(reusing, steps)
+    assert sum(encoded) == len(steps)  # o_t once: by the history or by act, whichever is first
+    encoded.clear()
+    _run(plain, steps)
+    assert sum(encoded) > 3 * len(steps)
+
+
+def test_features_of_another_agent_are_not_reused() -> None:
+    """A history encoded by one checkpoint gives a swapped-in one its own psi."""
+    first = InferenceAgent(_inference().agent, reuse_features=True)
+    second = _inference(seed=1)
+    history = first.new_history()
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        history.push(rng.normal(size=6), rng.uniform(-1, 1, 2), 0.3, rng.normal(size=6))
+    first.context(history)
+    expected = second.context(history)
+    assert not np.allclose(first.context(history), expected)
+    np.testing.assert_allclose(InferenceAgent(second.agent, reuse_features=True).context(history),
+                               expected, atol=1e-5)

@@ -1,12 +1,18 @@
 """Deployment logic, in one place: the rolling k-step history and the inference wrapper.
 
 Used by the ROS nodes (context_estimator, policy) and by the in-process collector/evaluator, so
-that what runs on the robot is exactly what runs in evaluation.
+that what runs on the robot is exactly what runs in evaluation. The nodes and `zeus collect
+--checkpoint` build their agent with `reuse_features=True`: every frame goes through phi once
+(one row at a time), however many histories and actions use it, so a live recording and a
+collection still agree to the bit. Evaluation keeps the batched path, which agrees up to float
+rounding (the batch size changes the kernels' summation order). Never reuse features of an
+agent that is being trained: its phi changes with every update.
 """
 
 from __future__ import annotations
 
-from collections import deque
+from collections import OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,7 +21,9 @@ import numpy as np
 import torch
 
 from zeus_ros.learning.agent import ZeusAgent
-from zeus_ros.learning.checkpoint import load_checkpoint
+from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
+from zeus_ros.learning.context import HistoryFeatures
+from zeus_ros.learning.sac import squashed_sample
 
 __all__ = ['ContextHistory', 'HistoryArrays', 'InferenceAgent']
 
@@ -48,10 +56,14 @@ class ContextHistory:
         self.action_dim = action_dim
         self.obs_dtype = np.dtype(obs_dtype)
         self._items: deque[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = deque(maxlen=k)
+        # phi(o) and phi(o') of each transition, filled by features() for one encoder owner.
+        self._features: deque[list[torch.Tensor | None]] = deque(maxlen=k)
+        self._features_of: object = None
 
     def clear(self) -> None:
         """Start a new episode (a transition never spans a reset)."""
         self._items.clear()
+        self._features.clear()
 
     def push(self, obs: Any, action: Any, reward: float, next_obs: Any) -> None:
         """Append (o_t, a_t, r_{t+1}, o_{t+1}); the oldest falls out after k."""
@@ -67,6 +79,38 @@ class ContextHistory:
         if not np.isfinite(reward_f):
             raise ValueError(f'reward must be finite, got {reward}')
         self._items.append((obs_a.copy(), act_a.copy(), reward_f, next_a.copy()))
+        self._features.append([None, None])
+
+    def features(self, encode: Callable[[np.ndarray], torch.Tensor], owner: object
+                 ) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """(phi(o), phi(o')) of each held transition, oldest first, by `encode` of one frame.
+
+        A frame is encoded once while it stays in the history; `owner` (the encoder's holder)
+        drops what another owner encoded, so a swapped checkpoint never sees old features.
+        """
+        if owner is not self._features_of:
+            for slot in self._features:
+                slot[0] = slot[1] = None
+            self._features_of = owner
+        out = []
+        for (obs, _act, _rew, next_obs), slot in zip(self._items, self._features, strict=True):
+            if slot[0] is None:
+                slot[0] = encode(obs)
+            if slot[1] is None:
+                slot[1] = encode(next_obs)
+            out.append((slot[0], slot[1]))
+        return out
+
+    def transitions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """hist_action (k, A), hist_reward (k, 1) and hist_mask (k,), front-padded, no frames."""
+        k, n = self.k, len(self._items)
+        action = np.zeros((k, self.action_dim), dtype=np.float32)
+        reward = np.zeros((k, 1), dtype=np.float32)
+        mask = np.zeros(k, dtype=bool)
+        for slot, (_obs, act, rew, _next) in enumerate(self._items, start=k - n):
+            action[slot], reward[slot, 0] = act, rew
+        mask[k - n:] = True
+        return action, reward, mask
 
     def arrays(self) -> HistoryArrays:
         """The five hist_* arrays, front-padded like HistoryBatch."""
@@ -93,19 +137,35 @@ class ContextHistory:
 class InferenceAgent:
     """A trained agent for deployment: context from a history, clipped actions, no training."""
 
-    def __init__(self, agent: ZeusAgent) -> None:
+    FEATURE_MEMO = 8
+    """Frames whose phi is kept by content (the estimator's newest o' is the policy's o)."""
+
+    def __init__(self, agent: ZeusAgent, *, reuse_features: bool = False) -> None:
+        """`reuse_features`: encode each frame once (for the live nodes, see the module doc)."""
         self.agent = agent
+        self.reuse_features = reuse_features
         self._low = np.asarray(agent.spec.action_low, dtype=np.float32)
         self._high = np.asarray(agent.spec.action_high, dtype=np.float32)
+        self._memo: OrderedDict[bytes, torch.Tensor] = OrderedDict()
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, *, expect_task: str | None = None,
                         expect_obs_kind: str | None = None,
-                        device: str | torch.device = 'cpu') -> InferenceAgent:
+                        device: str | torch.device = 'cpu',
+                        reuse_features: bool = False) -> InferenceAgent:
         """Load and validate a checkpoint (CheckpointError on any mismatch)."""
         loaded = load_checkpoint(path, map_location=device, expect_task=expect_task,
                                  expect_obs_kind=expect_obs_kind, load_optimizers=False)
-        return cls(loaded.agent)
+        return cls(loaded.agent, reuse_features=reuse_features)
+
+    def drop_training_modules(self) -> None:
+        """Free what acting never uses: critics, target copies, decoder, models, optimizers.
+
+        For a deployed node (pixels: ~35 MiB); the agent can no longer be trained or saved whole.
+        """
+        for name in [name for name in self.agent.modules if name not in DEPLOY_MODULES]:
+            del self.agent.modules[name]
+        self.agent.optimizers.clear()
 
     # ---------------------------------------------------------------- what nodes need to know
     @property
@@ -191,6 +251,8 @@ class InferenceAgent:
             return np.zeros(0, dtype=np.float32)
         if history.k != self.k:
             raise ValueError(f'history has k={history.k}, the agent uses k={self.k}')
+        if self.reuse_features and 'psi' in self.agent.modules:
+            return self._context_from_features(history)
         arrays = history.arrays()
         out = self.agent.encode_context(arrays.hist_obs, arrays.hist_action, arrays.hist_reward,
                                         arrays.hist_next_obs, arrays.hist_mask)
@@ -199,9 +261,60 @@ class InferenceAgent:
     def act(self, obs: Any, context: Any, deterministic: bool = True, noise: float = 0.0,
             rng: np.random.Generator | None = None) -> np.ndarray:
         """Action in task bounds; optional Gaussian noise with std noise * half the range."""
-        action = self.agent.act(obs, context, deterministic=deterministic)
+        if self.reuse_features:
+            action = self._act_on_features(obs, context, deterministic)
+        else:
+            action = self.agent.act(obs, context, deterministic=deterministic)
         if noise > 0.0:
             rng = np.random.default_rng() if rng is None else rng
             half_range = (self._high - self._low) / 2
             action = action + noise * half_range * rng.standard_normal(action.shape)
         return np.clip(action, self._low, self._high).astype(np.float32)
+
+    # ---------------------------------------------------------------- each frame encoded once
+    @torch.no_grad()
+    def _phi(self, obs: np.ndarray) -> torch.Tensor:
+        """The phi of one observation (F,), from the memo when these very values were encoded."""
+        frame = np.ascontiguousarray(obs, dtype=self.obs_dtype)
+        key = frame.tobytes()
+        feature = self._memo.get(key)
+        if feature is None:
+            agent = self.agent
+            feature = agent.modules['encoder'](agent._as_tensor(frame[None]))[0]
+            self._memo[key] = feature
+            if len(self._memo) > self.FEATURE_MEMO:
+                self._memo.popitem(last=False)
+        else:
+            self._memo.move_to_end(key)
+        return feature
+
+    @torch.no_grad()
+    def _context_from_features(self, history: ContextHistory) -> np.ndarray:
+        """psi(H) as ZeusAgent.encode_context computes it, on phi of each frame encoded once."""
+        agent, k = self.agent, self.k
+        pairs = history.features(self._phi, self)
+        action, reward, mask = history.transitions()
+        # Missing slots stay zero: psi ignores them whatever they hold (context.aggregate).
+        feat = torch.zeros(1, k, agent.config.feature_dim, device=agent.device)
+        next_feat = torch.zeros_like(feat)
+        if pairs:
+            feat[0, k - len(pairs):] = torch.stack([p[0] for p in pairs])
+            next_feat[0, k - len(pairs):] = torch.stack([p[1] for p in pairs])
+        history_features = HistoryFeatures(
+            feat=feat, action=agent.normalize_action(agent._as_tensor(action[None])),
+            reward=agent._as_tensor(reward[None]), next_feat=next_feat,
+            mask=agent._as_tensor(mask[None]))
+        return agent.modules['psi'](history_features)[0].cpu().numpy().astype(np.float32)
+
+    @torch.no_grad()
+    def _act_on_features(self, obs: Any, context: Any, deterministic: bool) -> np.ndarray:
+        """ZeusAgent.act for one observation on its memoised phi; batches go to agent.act."""
+        agent = self.agent
+        frame = np.asarray(obs)
+        values = None if context is None else np.asarray(context, np.float32).reshape(-1)
+        if frame.shape != self.obs_shape or values is None or values.size != self.context_dim:
+            return agent.act(obs, context, deterministic=deterministic)  # its checks and errors
+        ctx = agent.policy_context(agent._as_tensor(values[None]))
+        x = torch.cat([self._phi(frame)[None], ctx], dim=-1)
+        action = squashed_sample(agent.modules['actor'](x), deterministic).action
+        return (action * agent._action_scale + agent._action_bias)[0].cpu().numpy()

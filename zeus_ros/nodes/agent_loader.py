@@ -3,15 +3,22 @@
 A node says exactly what it loaded (absolute path and sha256), at start and on a live
 redeploy, and the estimator stamps every estimate with that sha256: the policy acts only on
 estimates of its own checkpoint, so a half-done redeploy never pairs mismatched networks.
+
+Nodes of one process (zeus launch --single-process) that load the same file share one
+InferenceAgent: one copy of the networks, and the policy acts on the phi of the observation the
+estimator has just encoded instead of encoding it again (InferenceAgent reuse_features).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+import contextlib
+import ctypes
 from dataclasses import dataclass
 import hashlib
 from pathlib import Path
 from typing import Any
+import weakref
 
 import torch
 
@@ -21,6 +28,10 @@ from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.offline.evaluation.readout import ContextReadout, NoveltyMonitor, stored_monitors
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
+
+_SHARED: weakref.WeakValueDictionary[tuple[str, str, str], InferenceAgent] = \
+    weakref.WeakValueDictionary()
+"""Agents of this process by (sha256, device, expected task), alive while a node holds them."""
 
 
 @dataclass(frozen=True)
@@ -64,11 +75,19 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
         data = path.read_bytes()
     except OSError as error:
         raise ValueError(f'{node_name}: checkpoint {path}: {error.strerror or error}') from error
-    try:
-        agent = InferenceAgent.from_checkpoint(
-            path, expect_task=params['task'] or None, device=params['device'])
-    except CheckpointError as error:
-        raise ValueError(f'{node_name}: {error}') from error
+    sha256 = hashlib.sha256(data).hexdigest()
+    key = (sha256, str(params['device']), str(params['task']))
+    agent = _SHARED.get(key)
+    if agent is None:
+        try:
+            agent = InferenceAgent.from_checkpoint(
+                path, expect_task=params['task'] or None, device=params['device'],
+                reuse_features=True)
+        except CheckpointError as error:
+            raise ValueError(f'{node_name}: {error}') from error
+        agent.drop_training_modules()
+        _release_freed_memory()
+        _SHARED[key] = agent
     try:
         readout, novelty = stored_monitors(data)
     except ValueError as error:
@@ -79,7 +98,13 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
         if size is not None and size != agent.context_dim:
             raise ValueError(f'{node_name}: checkpoint {path}: its {what} expects psi of {size} '
                              f'values, the agent has {agent.context_dim}')
-    return LoadedAgent(agent, path, hashlib.sha256(data).hexdigest(), readout, novelty)
+    return LoadedAgent(agent, path, sha256, readout, novelty)
+
+
+def _release_freed_memory() -> None:
+    """Hand freed heap pages back to the system: glibc keeps them (elsewhere nothing happens)."""
+    with contextlib.suppress(AttributeError, OSError):
+        ctypes.CDLL(None).malloc_trim(0)
 
 
 def check_swappable(node_name: str, old: InferenceAgent, new: InferenceAgent) -> None:

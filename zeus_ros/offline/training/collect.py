@@ -338,7 +338,8 @@ def main(argv: list[str] | None = None) -> int:
         # recording and a collection of the same schedule ingest to identical arrays).
         torch.set_num_threads(1)
         try:
-            agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name)
+            agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name,
+                                                   reuse_features=True)  # as the nodes do
         except CheckpointError as exc:
             task.close()
             print(f'zeus collect: --checkpoint: {exc}', file=sys.stderr)

@@ -79,7 +79,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
         if job.checkpoint is not None:
             from zeus_ros.learning.inference import InferenceAgent
 
-            agent = InferenceAgent.from_checkpoint(job.checkpoint, expect_task=task.name)
+            agent = InferenceAgent.from_checkpoint(job.checkpoint, expect_task=task.name,
+                                                   reuse_features=True)  # as the nodes do
             policy = AgentPolicy(agent, noise=0.0 if job.stochastic else job.noise,
                                  seed=job.seed, stochastic=job.stochastic)
         job.bag.parent.mkdir(parents=True, exist_ok=True)
