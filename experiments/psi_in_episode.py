@@ -10,7 +10,10 @@ policy deterministically for --episodes episodes per value of the split at a con
 - for runs with a learned psi: psi read as a context value by ONE affine map fitted over every
   step of the run's own episodes (labels only measure here), its RMS error per block, and the
   value it reads on the lowest context value in the last block (a policy that speeds up
-  because psi says "faster" shows as a growing error there).
+  because psi says "faster" shows as a growing error there);
+- on full histories, the R^2 of an affine map of psi against the context and against the mean
+  reward of the history's own transitions (psi that summarises how well the policy is doing
+  rather than the context scores higher on the second).
 Writes <out>.csv and <out>.png and prints a table.
 """
 
@@ -40,6 +43,13 @@ def episodes_of(trace, value: float) -> list[dict[str, np.ndarray]]:
             for a, b in itertools.pairwise(starts) if b - a > 1]
 
 
+def linear_r2(x: np.ndarray, y: np.ndarray) -> float:
+    """Share of y's variance an affine map of x explains (least squares)."""
+    design = np.c_[x, np.ones(len(x))]
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    return float(1.0 - (y - design @ coef).var() / y.var())
+
+
 def run_profile(run: Path, split: str, episodes: int, blocks: int) -> dict[str, np.ndarray]:
     """Reward per block and psi's error per block for one run."""
     from zeus_ros.learning.inference import InferenceAgent
@@ -56,7 +66,8 @@ def run_profile(run: Path, split: str, episodes: int, blocks: int) -> dict[str, 
     reward = np.stack([e['reward'][:length] for e in eps])
     profile = {'reward': np.array([reward[:, a:b].sum(1).mean()
                                    for a, b in itertools.pairwise(edges)])}
-    if eps[0]['psi'] is not None:
+    if eps[0]['psi'] is not None and np.asarray(eps[0]['psi']).ndim == 2 \
+            and np.asarray(eps[0]['psi']).shape[1] > 0:
         psi = np.stack([e['psi'][:length] for e in eps])  # (E, T, C)
         target = np.array([e['value'] for e in eps])[:, None].repeat(length, 1)
         design = np.c_[psi[:, 1:].reshape(-1, psi.shape[-1]), np.ones(target[:, 1:].size)]
@@ -69,6 +80,13 @@ def run_profile(run: Path, split: str, episodes: int, blocks: int) -> dict[str, 
             for a, b in itertools.pairwise(edges)])
         lowest = target[:, 0] == target[:, 0].min()
         profile['lowest_read_last_block'] = np.array([read[lowest, edges[-2]:].mean()])
+        # what psi encodes on full histories: the context, or the mean reward of its history
+        k = agent.k
+        full = psi[:, k:].reshape(-1, psi.shape[-1])
+        history_reward = np.stack([np.convolve(r, np.ones(k) / k, mode='valid')[:length - k]
+                                   for r in reward])
+        profile['r2_context'] = np.array([linear_r2(full, target[:, k:].ravel())])
+        profile['r2_history_reward'] = np.array([linear_r2(full, history_reward.ravel())])
     return profile
 
 
@@ -98,7 +116,8 @@ def main() -> None:
                              'block': index, 'mean': mean, 'se': se})
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_csv(args.out.with_suffix('.csv'), rows)
-    for key in ('reward', 'psi_rms_error', 'lowest_read_last_block'):
+    for key in ('reward', 'psi_rms_error', 'lowest_read_last_block', 'r2_context',
+                'r2_history_reward'):
         for label in groups:
             cells = [f'{r["mean"]:.2f} ± {r["se"]:.2f}' for r in rows
                      if r['label'] == label and r['quantity'] == key]
