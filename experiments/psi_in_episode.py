@@ -25,6 +25,7 @@ import itertools
 from pathlib import Path
 
 import numpy as np
+from psi_probe import linear_r2  # same folder: the probe's affine R^2
 
 from zeus_ros.offline.evaluation.evaluate import evaluate_contexts, split_values
 from zeus_ros.offline.evaluation.metrics import write_csv
@@ -41,13 +42,6 @@ def episodes_of(trace, value: float) -> list[dict[str, np.ndarray]]:
     return [{'reward': trace.reward[a + 1:b],
              'psi': None if trace.psi is None else trace.psi[a:b - 1], 'value': value}
             for a, b in itertools.pairwise(starts) if b - a > 1]
-
-
-def linear_r2(x: np.ndarray, y: np.ndarray) -> float:
-    """Share of y's variance an affine map of x explains (least squares)."""
-    design = np.c_[x, np.ones(len(x))]
-    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-    return float(1.0 - (y - design @ coef).var() / y.var())
 
 
 def run_profile(run: Path, split: str, episodes: int, blocks: int) -> dict[str, np.ndarray]:

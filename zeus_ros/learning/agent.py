@@ -462,11 +462,22 @@ class ZeusAgent:
         if ctx.shape[1] != self.context_dim:
             raise ValueError(f'context has {ctx.shape[1]} values per sample, expected '
                              f'context_dim={self.context_dim}')
-        x = torch.cat([self.modules['encoder'](obs_t),
-                       self.policy_context(ctx, self._acting_noise(ctx.shape))], dim=-1)
-        action = squashed_sample(self.modules['actor'](x), deterministic).action
-        action = (action * self._action_scale + self._action_bias).cpu().numpy()
+        action = self.act_on_features(self.modules['encoder'](obs_t), ctx, deterministic)
+        action = action.cpu().numpy()
         return action[0] if single else action
+
+    @torch.no_grad()
+    def act_on_features(self, feat: torch.Tensor, context: torch.Tensor,
+                        deterministic: bool = True) -> torch.Tensor:
+        """Actions in task bounds (B, A) from phi(o) (B, F) and raw contexts (B, C), unchecked.
+
+        The one place that turns features into actions: `act`, and deployment when it already
+        holds phi(o) (InferenceAgent reuse_features).
+        """
+        x = torch.cat([feat, self.policy_context(context, self._acting_noise(context.shape))],
+                      dim=-1)
+        action = squashed_sample(self.modules['actor'](x), deterministic).action
+        return action * self._action_scale + self._action_bias
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:

@@ -23,7 +23,6 @@ import torch
 from zeus_ros.learning.agent import ZeusAgent
 from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
 from zeus_ros.learning.context import HistoryFeatures
-from zeus_ros.learning.sac import squashed_sample
 
 __all__ = ['ContextHistory', 'HistoryArrays', 'InferenceAgent']
 
@@ -314,7 +313,6 @@ class InferenceAgent:
         values = None if context is None else np.asarray(context, np.float32).reshape(-1)
         if frame.shape != self.obs_shape or values is None or values.size != self.context_dim:
             return agent.act(obs, context, deterministic=deterministic)  # its checks and errors
-        ctx = agent.policy_context(agent._as_tensor(values[None]))
-        x = torch.cat([self._phi(frame)[None], ctx], dim=-1)
-        action = squashed_sample(agent.modules['actor'](x), deterministic).action
-        return (action * agent._action_scale + agent._action_bias)[0].cpu().numpy()
+        action = agent.act_on_features(self._phi(frame)[None], agent._as_tensor(values[None]),
+                                       deterministic)
+        return action[0].cpu().numpy()
