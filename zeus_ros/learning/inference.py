@@ -160,7 +160,8 @@ class InferenceAgent:
     def drop_training_modules(self) -> None:
         """Free what acting never uses: critics, target copies, decoder, models, optimizers.
 
-        For a deployed node (pixels: ~35 MiB); the agent can no longer be trained or saved whole.
+        For a deployed node (measured: pixel node -25 MiB); the agent can no longer be trained
+        or saved whole.
         """
         for name in [name for name in self.agent.modules if name not in DEPLOY_MODULES]:
             del self.agent.modules[name]
