@@ -3,6 +3,7 @@
     python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
         [--splits train extrapolation] [--episodes 3] [--jobs 1] [--updates 20000]
+        [--shipped checkpoints/issue10] [--variants default k10 ...]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -12,7 +13,9 @@ over `no_context` of the default protocol (same seeds), the share of the oracle'
 recovers, and the adaptation diagnostics. With --export, each finished run is also shipped as a
 deployment checkpoint with its card under <export>/<variant>/<group>/. --updates picks the budget:
 10,000 (runs in <task>/), or a longer one (runs in <task>_<N>k/, as run_one.sh lays them out with
-ROUNDS > 5); the tables of a longer budget are named <task>_<N>k.
+ROUNDS > 5); the tables of a longer budget are named <task>_<N>k. With --shipped, variants that
+have no runs under --root are evaluated from their shipped checkpoints instead (a fresh clone
+regenerates the tables from checkpoints/issue10 alone).
 """
 
 from __future__ import annotations
@@ -52,11 +55,19 @@ def _task_folder(task: str, updates: int = BASE_UPDATES) -> str:
 
 def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
                      splits: list[str] | None, episodes: int, jobs: int,
-                     updates: int = BASE_UPDATES) -> Path | None:
-    """Evaluate the finished runs of one variant at one budget; returns its tables' folder."""
+                     updates: int = BASE_UPDATES, shipped: Path | None = None) -> Path | None:
+    """Evaluate the finished runs of one variant at one budget; returns its tables' folder.
+
+    A variant without training runs under `root` is evaluated from its shipped checkpoints
+    (`shipped`/<variant>/<group>/*.pt, which act exactly like the runs they came from), so the
+    tables can be regenerated on a clone that holds only the shipped files.
+    """
     runs = root / variant / _task_folder(task, updates)
     finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*/'))
               if read_state(p).trained]
+    exported = shipped / variant / group_name(task, updates) if shipped is not None else None
+    if not finals and exported is not None and exported.is_dir():
+        finals = sorted(exported.glob('*.pt'))
     if not finals:
         return None
     evaluate_many(find_checkpoints(finals), evals / variant, splits=splits, jobs=jobs,
@@ -205,6 +216,13 @@ def main() -> None:
     parser.add_argument('--evals', type=Path, default=Path('out/i10'))
     parser.add_argument('--out', type=Path, default=Path('docs/results/issue10'))
     parser.add_argument('--export', type=Path, help='ship finished runs here (with cards)')
+    parser.add_argument('--shipped', type=Path, action='append', default=[],
+                        help='a folder of shipped checkpoints (<variant>/<group>/*.pt, e.g. '
+                             'checkpoints/issue10): variants with no runs under --root are '
+                             'evaluated from it; repeat it for several folders')
+    parser.add_argument('--variants', nargs='+',
+                        help=f'only these variants (default: all; {REFERENCE_VARIANT!r} holds the '
+                             'no_context and oracle runs that define the headroom)')
     parser.add_argument('--splits', nargs='+', choices=SPLIT_ORDER,
                         help="default: every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
@@ -212,16 +230,27 @@ def main() -> None:
     parser.add_argument('--updates', type=int, default=BASE_UPDATES,
                         help='budget of the runs compared (default 10000: run_one.sh 5 rounds)')
     args = parser.parse_args()
-    variants = sorted((p.name for p in args.root.iterdir() if p.is_dir()),
-                      key=lambda v: (v != REFERENCE_VARIANT, v != 'paper', v))
+    sources = {p.name: None for p in args.root.iterdir() if p.is_dir()} \
+        if args.root.is_dir() else {}
+    for folder in args.shipped:
+        for p in sorted(folder.iterdir()):
+            if (p / group_name(args.task, args.updates)).is_dir():
+                sources.setdefault(p.name, folder)
+    if args.variants:
+        missing = sorted(set(args.variants) - set(sources))
+        if missing:
+            parser.error(f'no runs or shipped checkpoints of variant(s) {", ".join(missing)} '
+                         f'for {args.task}; found: {", ".join(sorted(sources))}')
+        sources = {v: sources[v] for v in args.variants}
+    variants = sorted(sources, key=lambda v: (v != REFERENCE_VARIANT, v != 'paper', v))
     tables = {}
     for variant in variants:
         folder = evaluate_variant(args.root, variant, args.task, args.evals,
                                   splits=args.splits, episodes=args.episodes, jobs=args.jobs,
-                                  updates=args.updates)
+                                  updates=args.updates, shipped=sources[variant])
         if folder is not None:
             tables[variant] = folder
-            if args.export:
+            if args.export and sources[variant] is None:
                 export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)

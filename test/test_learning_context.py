@@ -186,3 +186,23 @@ def test_representation_step_trains_t_r_only_through_model_losses() -> None:
         assert all(p.grad is None for p in agent.modules[name].parameters())
     assert any(p.grad is not None and p.grad.abs().sum() > 0
                for p in agent.modules['psi'].parameters())
+
+
+def test_models_predict_the_sampled_transition_ahead() -> None:
+    """T and R are fit on the batch's model transition when it carries one (model_horizon)."""
+    system, agent = _tiny_zeus(alpha_psi=0.0)
+    batch = system.sample(16)
+    torch.manual_seed(0)
+    plain: dict[str, torch.Tensor] = {}
+    representation_losses(agent, batch, None, plain)
+    batch.model_obs, batch.model_action = batch.obs, batch.action
+    batch.model_reward, batch.model_next_obs = batch.reward, batch.next_obs
+    same: dict[str, torch.Tensor] = {}
+    representation_losses(agent, batch, None, same)
+    assert torch.allclose(same['loss/reward'], plain['loss/reward'])
+    assert torch.allclose(same['loss/dynamics'], plain['loss/dynamics'])
+    batch.model_reward = batch.reward + 10.0
+    moved: dict[str, torch.Tensor] = {}
+    representation_losses(agent, batch, None, moved)
+    assert moved['loss/reward'] > plain['loss/reward'] + 50.0
+    assert torch.allclose(moved['loss/dynamics'], plain['loss/dynamics'])

@@ -138,3 +138,21 @@ def test_obs_mean_std_match_dataset() -> None:
     np.testing.assert_allclose(buf.obs_std, np.maximum(allobs.std(0), 1e-3), rtol=1e-5)
     const = ReplayBuffer(_dataset([5]), history=1)
     assert const.obs_std[1] == pytest.approx(1e-3)
+
+
+def test_model_transition_lies_ahead_in_the_same_episode() -> None:
+    """With model_horizon m the models' transition u is one of t .. t+m-1 of t's episode."""
+    data = _dataset([3, 10, 1, 6])
+    buf = ReplayBuffer(data, history=2, seed=0, model_horizon=4)
+    b = buf.sample(2000)
+    t, u = b.obs[:, 0], b.model_obs[:, 0]
+    ahead = (u - t).int()
+    assert ahead.min() == 0 and ahead.max() == 3
+    assert set(ahead.tolist()) == {0, 1, 2, 3}
+    assert torch.equal(b.model_obs[:, 1], b.obs[:, 1])  # same episode
+    assert torch.equal(b.model_next_obs[:, 0], u + 1)
+    assert torch.equal(b.model_next_obs[:, 1], b.obs[:, 1])  # never past the episode's end
+    assert torch.allclose(b.model_action[:, 0], u + 0.25)
+    assert torch.allclose(b.model_reward[:, 0], u + 0.5)
+    plain = ReplayBuffer(data, history=2, seed=0).sample(8)
+    assert plain.model_obs is None and plain.model_transition()[0] is plain.obs

@@ -41,6 +41,15 @@ class HistoryBatch:
     """(B, k) bool: True where the history slot holds a real transition."""
     context: torch.Tensor
     """(B, C) float32: the true context of o_{t+1} (privileged: only up_osi/oracle/eval use it)."""
+    model_obs: torch.Tensor | None = None
+    """o_u of the transition the context-conditioned models (T, R) predict from psi(H_t), with
+    u drawn from t .. t + model_horizon - 1 in the same episode; None: u = t (the paper)."""
+    model_action: torch.Tensor | None = None
+    """a_u: (B, A), with model_obs."""
+    model_reward: torch.Tensor | None = None
+    """r_{u+1}: (B, 1), with model_obs."""
+    model_next_obs: torch.Tensor | None = None
+    """o_{u+1}: (B, *obs_shape), with model_obs."""
 
     @property
     def batch_size(self) -> int:
@@ -49,4 +58,11 @@ class HistoryBatch:
 
     def to(self, device: torch.device | str) -> HistoryBatch:
         """Copy every field to `device`."""
-        return HistoryBatch(**{name: getattr(self, name).to(device) for name in self.__slots__})
+        return HistoryBatch(**{name: None if getattr(self, name) is None
+                               else getattr(self, name).to(device) for name in self.__slots__})
+
+    def model_transition(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(o, a, r, o') the models predict from psi(H_t): the sampled u's, else t's."""
+        if self.model_obs is None:
+            return self.obs, self.action, self.reward, self.next_obs
+        return self.model_obs, self.model_action, self.model_reward, self.model_next_obs

@@ -100,6 +100,13 @@ class ZeusConfig:
     """After the aggregation: 'linear' (psi a linear map of the aggregated codes, the paper's
     reading) or 'mlp' (Deep Sets' rho: a ReLU MLP of context_hidden_dim, so psi can combine what
     the transitions say instead of averaging it; measured in docs/results.md, session 5)."""
+    model_horizon: int = 1
+    """Which transition the context-conditioned models (T and R of zeus, cadm's pair) predict
+    from psi(H_t): one drawn uniformly from the `model_horizon` transitions that start at o_t,
+    clamped to the episode (1: the next one, as the paper). The next reward is predicted well by
+    the rewards just seen, whatever the context; a transition further on, from another state, is
+    predicted only by what stays constant, so psi has to encode the context rather than its
+    history's reward level (docs/results.md, session 6). Uses no context labels."""
     context_norm: str = 'none'
     """'running': standardise the context (psi or the true one) at the actor/critic input with
     running statistics of the training batches; 'none': feed it raw (the paper, and the default:
@@ -237,7 +244,8 @@ class ZeusConfig:
         if not isinstance(self.critic_context_grad, bool):
             raise ConfigError(f'critic_context_grad must be true or false, '
                               f'got {self.critic_context_grad!r}')
-        for name in ('k', 'context_dim', 'transition_dim', 'context_hidden_dim', 'feature_dim',
+        for name in ('k', 'model_horizon', 'context_dim', 'transition_dim', 'context_hidden_dim',
+                     'feature_dim',
                      'num_conv_layers', 'num_filters', 'encoder_hidden_dim', 'hidden_dim',
                      'model_hidden_dim', 'batch_size', 'num_updates', 'eval_interval',
                      'eval_episodes', 'checkpoint_interval', 'log_interval',

@@ -128,16 +128,25 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
         metrics['loss/reconstruction'] = total
         return RepresentationLosses(total=total, context=None, next_context=None)
 
-    history, (feat, next_feat) = agent.history_features(
+    ahead = batch.model_obs is not None and objective in ('zeus', 'cadm')
+    extra = (batch.model_obs, batch.model_next_obs) if ahead else ()
+    history, (feat, next_feat, *model_feats) = agent.history_features(
         batch.hist_obs, batch.hist_action, batch.hist_reward, batch.hist_next_obs,
-        batch.hist_mask, batch.obs, batch.next_obs)
+        batch.hist_mask, batch.obs, batch.next_obs, *extra)
     psi1 = m['psi'](history)
     action = agent.normalize_action(batch.action)
     target_next = next_feat.detach()  # stopped phi(o'): no gradient from the dynamics loss
+    # What T and R predict from psi(H_t): the next transition, or one further on
+    # (config.model_horizon).
+    _, model_action, model_reward, _ = batch.model_transition()
+    model_feat, model_next = (model_feats[0], model_feats[1].detach()) if ahead \
+        else (feat, target_next)
+    model_action = agent.normalize_action(model_action) if ahead else action
     total = zero
     if objective == 'zeus':
-        dyn = dynamics_loss(m['transition'](feat, action, psi1), target_next, cfg.dynamics_loss)
-        rew = F.mse_loss(m['reward'](feat, action, psi1), batch.reward.float())
+        dyn = dynamics_loss(m['transition'](model_feat, model_action, psi1), model_next,
+                            cfg.dynamics_loss)
+        rew = F.mse_loss(m['reward'](model_feat, model_action, psi1), model_reward.float())
         total = dyn + rew
         metrics['loss/dynamics'], metrics['loss/reward'] = dyn, rew
         if pair is not None:
@@ -153,10 +162,11 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
             metrics['train/task_distance'] = ctx.task_distance.mean()
             metrics['train/context_distance'] = ctx.context_distance.mean()
     elif objective == 'cadm':
-        forward = dynamics_loss(m['transition'](feat, action, psi1), target_next,
+        forward = dynamics_loss(m['transition'](model_feat, model_action, psi1), model_next,
                                 cfg.dynamics_loss)
-        backward = dynamics_loss(m['backward'](next_feat, action, psi1), feat.detach(),
-                                 cfg.dynamics_loss)
+        backward_from = model_feats[1] if ahead else next_feat
+        backward = dynamics_loss(m['backward'](backward_from, model_action, psi1),
+                                 model_feat.detach(), cfg.dynamics_loss)
         total = forward + cfg.cadm_beta * backward
         metrics['loss/dynamics'], metrics['loss/backward_dynamics'] = forward, backward
     elif objective == 'up_osi':

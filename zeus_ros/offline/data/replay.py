@@ -62,6 +62,9 @@ class ReplayBuffer:
         pixels: sample stacked frames as observations; default: when the dataset has frames.
         device: where the sampled tensors go.
         seed: seed of the sampling generator.
+        model_horizon: > 1: each batch also carries a transition u drawn uniformly from
+            t .. t + model_horizon - 1 of the same episode (clamped to its last transition),
+            the one the context-conditioned models predict (ZeusConfig.model_horizon).
     """
 
     def __init__(
@@ -72,10 +75,14 @@ class ReplayBuffer:
         pixels: bool | None = None,
         device: torch.device | str = 'cpu',
         seed: int = 0,
+        model_horizon: int = 1,
     ) -> None:
         if history < 1:
             raise ValueError(f'history (k) must be >= 1, got {history}')
+        if model_horizon < 1:
+            raise ValueError(f'model_horizon must be >= 1, got {model_horizon}')
         self.history = int(history)
+        self.model_horizon = int(model_horizon)
         self.pixels = dataset.has_frames if pixels is None else bool(pixels)
         if self.pixels and not dataset.has_frames:
             raise ValueError('pixels=True but the dataset has no frames '
@@ -91,6 +98,7 @@ class ReplayBuffer:
         self._reward = _Column((), np.float32)
         self._context = _Column(ep0.context.shape[1:], np.float32)
         self._ep_start = _Column((), np.int64)
+        self._ep_last = _Column((), np.int64)  # the episode's last valid transition index
         self._valid = _Column((), np.int64)
         self._sum = np.zeros(ep0.obs.shape[1], np.float64)
         self._sumsq = np.zeros(ep0.obs.shape[1], np.float64)
@@ -121,6 +129,7 @@ class ReplayBuffer:
             self._reward.extend(np.append(ep.reward, 0.0).astype(np.float32))
             self._context.extend(ep.context.astype(np.float32))
             self._ep_start.extend(np.full(n, start, np.int64))
+            self._ep_last.extend(np.full(n, start + n - 2, np.int64))
             self._valid.extend(np.arange(start, start + n - 1, dtype=np.int64))
             self._sum += ep.obs.sum(0)
             self._sumsq += np.square(ep.obs).sum(0)
@@ -176,6 +185,14 @@ class ReplayBuffer:
         hist_rew = self._reward.view[jc][..., None]
         for arr in (hist_obs, hist_next, hist_act, hist_rew):
             arr[~mask] = 0
+        model: dict[str, torch.Tensor] = {}
+        if self.model_horizon > 1:
+            ahead = self._rng.integers(0, self.model_horizon, t.shape[0])
+            u = np.minimum(t + ahead, self._ep_last.view[t])
+            model = {'model_obs': self._tensor(self._obs(u)),
+                     'model_action': self._tensor(self._action.view[u]),
+                     'model_reward': self._tensor(self._reward.view[u][:, None]),
+                     'model_next_obs': self._tensor(self._obs(u + 1))}
         return HistoryBatch(
             obs=self._tensor(self._obs(t)),
             action=self._tensor(self._action.view[t]),
@@ -188,6 +205,7 @@ class ReplayBuffer:
             hist_next_obs=self._tensor(hist_next),
             hist_mask=self._tensor(mask),
             context=self._tensor(self._context.view[t + 1]),
+            **model,
         )
 
     def _tensor(self, arr: np.ndarray) -> torch.Tensor:

@@ -228,7 +228,7 @@ def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
         raise TrainError('the config trains on pixels but the bags carry no frames: '
                          'collect with --pixels or use a state config')
     replay = ReplayBuffer(dataset, history=config.k, pixels=config.obs_kind == 'pixels',
-                          device=device, seed=seed)
+                          device=device, seed=seed, model_horizon=config.model_horizon)
     if len(replay) < config.batch_size:
         raise TrainError(f'the bags hold {len(replay)} transitions, fewer than one batch '
                          f'({config.batch_size}); record more steps')
