@@ -52,7 +52,7 @@ from zeus_ros.nodes.robot_io import (
     parse_safe_command,
     read_joint_state,
 )
-from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
+from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
 
 SPECS: dict[str, Spec] = {
     'task': Spec('', "the robot's task name, written into every step (bags and checkpoints "
@@ -257,7 +257,7 @@ class RobotBridgeNode(Node):
             missing += missing_peers(self, outputs, self._sub_action,
                                      self.params['min_observers'], others=[self._pub_truth])
             if not missing and self._senders.paired is None:
-                problem = self._senders.pair()
+                problem = self._senders.pair(settle=PAIRING_SETTLE_S)
                 missing += [problem] if problem else []
         if missing:
             self._wait_report.waiting('; '.join(missing))

@@ -34,9 +34,11 @@ if TYPE_CHECKING:
     from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
 
-__all__ = ['Sender', 'SenderPairing', 'SenderSubscription', 'publisher_gid']
+__all__ = ['PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'SenderSubscription', 'publisher_gid']
 
 _GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
+PAIRING_SETTLE_S = 0.5
+"""Seconds the action publishers must stay the same before a bridge pairs with the only one."""
 _TAKE_OK = 0
 _TAKE_EMPTY = 401  # RCL_RET_SUBSCRIPTION_TAKE_FAILED: nothing to take
 _UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
@@ -265,6 +267,7 @@ class SenderPairing:
         self._graph: dict[bytes, Sender] = {}
         self._graph_at = -1.0
         self._named: set[bytes] = set()
+        self._settling: tuple[frozenset[bytes], float] = (frozenset(), 0.0)
 
     def publishers(self, max_age: float = 0.0) -> dict[bytes, Sender]:
         """The topic's publishers from the graph, re-read when older than `max_age` seconds."""
@@ -279,14 +282,26 @@ class SenderPairing:
             self._graph_at = now
         return self._graph
 
-    def pair(self) -> str | None:
-        """Pair with the expected node's publisher or the only one; else say what is wrong."""
+    def pair(self, settle: float = 0.0) -> str | None:
+        """Pair with the expected node's publisher or the only one; else say what is wrong.
+
+        `settle` (seconds, used at start-up when no node is expected): pair with the only
+        publisher only once the set of publishers has stayed the same that long. Discovery
+        reports the endpoints of a graph one by one, so "the only one" seen at the first
+        instant may be the first of two.
+        """
         graph = list(self.publishers().values())
         candidates = [s for s in graph if s.node == self.expected] if self.expected else graph
         wanted = self.expected or 'a publisher'
         if not candidates:
             return f'{wanted} on {self.topic}' + (
                 f' ({self.setting}; found {", ".join(map(str, graph))})' if graph else '')
+        if not self.expected and settle > 0:
+            seen, now = frozenset(s.gid for s in graph), time.monotonic()
+            if seen != self._settling[0]:
+                self._settling = (seen, now)
+            if now - self._settling[1] < settle:
+                return f'the publishers of {self.topic} to settle ({len(graph)} so far)'
         if any(not s.node for s in candidates):
             return f'the ROS graph to name the publishers of {self.topic}'
         if len(candidates) > 1:

@@ -38,7 +38,7 @@ from zeus_ros.nodes.common import (
     step_qos,
 )
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
-from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
+from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
 
 MODES = ('lockstep', 'realtime')
 ACTION_BACKLOG = 1000  # reader history of zeus/action: room for a flood between two takes
@@ -194,7 +194,7 @@ class SimBridgeNode(Node):
         matched = self._sub_action.get_publisher_count()
         # DDS may have matched a publisher the ROS graph cannot name yet: wait for its name.
         problem = f'the ROS graph to name all {matched} publishers of {self._senders.topic}' \
-            if matched > named else self._senders.pair()
+            if matched > named else self._senders.pair(settle=PAIRING_SETTLE_S)
         if problem is not None:
             self._wait_report.waiting(problem)
         return problem is None
