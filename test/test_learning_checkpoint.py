@@ -144,3 +144,17 @@ def test_deployment_export_acts_like_the_original_and_is_smaller(tmp_path: Path,
     stored = torch.load(small, weights_only=True)['state']
     assert set(stored['modules']) <= {'encoder', 'psi', 'context_norm', 'actor'}
     assert not stored['optimizers']
+
+
+def test_acting_only_load_has_no_optimizers_and_refuses_to_train(tmp_path: Path) -> None:
+    """load_optimizers=False: same actions, no Adam state, and update says how to train."""
+    system, agent, path = _trained(tmp_path)
+    loaded = load_checkpoint(path, load_optimizers=False)
+    assert loaded.agent.optimizers == {}
+    b = system.sample(4)
+    args = (b.hist_obs, b.hist_action, b.hist_reward, b.hist_next_obs, b.hist_mask)
+    ctx = agent.encode_context(*args)
+    np.testing.assert_array_equal(loaded.agent.act(b.obs, ctx), agent.act(b.obs, ctx))
+    with pytest.raises(RuntimeError, match='load the checkpoint with its optimizers'):
+        loaded.agent.update(system.sample(8), system.sample(8), 3)
+    assert load_checkpoint(path).agent.optimizers  # the default still resumes training

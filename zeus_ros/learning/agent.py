@@ -78,7 +78,12 @@ class ZeusAgent:
     """SAC(-AE) on [phi(o), c] where c is psi(H), the true context or nothing (see `method`)."""
 
     def __init__(self, config: ZeusConfig, spec: AgentSpec, *,
-                 device: str | torch.device | None = None) -> None:
+                 device: str | torch.device | None = None, optimizers: bool = True) -> None:
+        """Build the networks (and, unless `optimizers=False`, their optimizers).
+
+        `optimizers=False` gives an agent that only acts (deployment, evaluation): no Adam
+        state, and torch.optim's first use, which imports torch._dynamo, never happens.
+        """
         if config.alpha_psi == 'auto' or config.adam_beta1 == 'auto':
             raise ValueError('ZeusAgent needs a resolved config: build it with make_agent()')
         self.config = config
@@ -150,7 +155,7 @@ class ZeusAgent:
                                       requires_grad=True)
         self.target_entropy = -float(a_dim)
         self._acting_error: torch.Tensor | None = None  # context_noise_steps > 0 in act()
-        self.optimizers = self._make_optimizers()
+        self.optimizers = self._make_optimizers() if optimizers else {}
 
     def _make_optimizers(self) -> dict[str, torch.optim.Optimizer]:
         """Adam per group; policy, Q and temperature use the task's beta1 (paper tables)."""
@@ -302,6 +307,10 @@ class ZeusAgent:
         Returns:
             Slash-named scalar metrics, e.g. 'loss/critic', 'loss/context', 'loss/dynamics'.
         """
+        if not self.optimizers:
+            raise RuntimeError('this agent was built to act only (optimizers=False, e.g. loaded '
+                               'with load_optimizers=False): load the checkpoint with its '
+                               'optimizers to train it')
         self._check_batch(batch, 'batch')
         batch = batch.to(self.device)
         needs_pair = self.method_spec.context_loss and self.config.alpha_psi > 0

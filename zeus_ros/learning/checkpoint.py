@@ -171,6 +171,9 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
                     load_optimizers: bool = True) -> LoadedCheckpoint:
     """Rebuild the agent stored at `path` on `map_location`, validating it on the way.
 
+    `load_optimizers=False` (and every deployment export) gives an agent that acts only (no
+    optimizers: less memory and start-up; `update` refuses).
+
     Raises:
         CheckpointError: missing or unreadable file, other format version, task or obs-kind
             other than expected, or weights that do not fit the stored shapes.
@@ -217,8 +220,9 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
         raise _fail(path, f'invalid stored spec/config ({error})') from None
     if isinstance(config.alpha_psi, str) or isinstance(config.adam_beta1, str):
         raise _fail(path, 'stored config is not resolved (alpha_psi / adam_beta1)')
-    agent = ZeusAgent(config, spec, device=map_location)
     deploy = bool(payload.get('deploy', False))
+    agent = ZeusAgent(config, spec, device=map_location,
+                      optimizers=load_optimizers and not deploy)
     try:
         agent.load_state_dict(payload['state'], optimizers=load_optimizers and not deploy,
                               only=[m for m in DEPLOY_MODULES if m in agent.modules]
