@@ -3,7 +3,8 @@
     python experiments/psi_in_episode.py --runs k10=runs/i10/k10/cheetah_run_v1/zeus_s0 ...
         [--split train] [--episodes 3] [--blocks 8] [--out docs/results/issue10/psi_in_episode]
 
-Each --runs entry is LABEL=RUN_FOLDER (repeat a label for its seeds). Every run drives its own
+Each --runs entry is LABEL=RUN_FOLDER or LABEL=CHECKPOINT.pt (a shipped one; repeat a label for
+its seeds). Every run drives its own
 policy deterministically for --episodes episodes per value of the split at a constant context
 (`zeus eval`'s per-value protocol, seed 100). Per label, mean +- s.e. over its runs:
 - the reward earned in each of --blocks equal blocks of the episode;
@@ -48,7 +49,8 @@ def run_profile(run: Path, split: str, episodes: int, blocks: int) -> dict[str, 
     """Reward per block and psi's error per block for one run."""
     from zeus_ros.learning.inference import InferenceAgent
 
-    agent = InferenceAgent.from_checkpoint(run / 'run' / 'final.pt')
+    agent = InferenceAgent.from_checkpoint(
+        run if run.suffix == '.pt' else run / 'run' / 'final.pt')
     values = split_values(agent.task, split)
     traces: list = []
     evaluate_contexts(agent, values, episodes=episodes, seed=100, progress=False, traces=traces)
@@ -96,8 +98,11 @@ def main() -> None:
     groups: dict[str, list[dict[str, np.ndarray]]] = defaultdict(list)
     for entry in args.runs:
         label, sep, folder = entry.partition('=')
-        if not sep or not (Path(folder) / 'run' / 'final.pt').is_file():
-            parser.error(f'--runs {entry!r}: expected LABEL=RUN with RUN/run/final.pt')
+        path = Path(folder)
+        if not sep or not ((path.is_file() and path.suffix == '.pt')
+                           or (path / 'run' / 'final.pt').is_file()):
+            parser.error(f'--runs {entry!r}: expected LABEL=RUN with RUN/run/final.pt, or '
+                         'LABEL=CHECKPOINT.pt (a shipped checkpoint)')
         groups[label].append(run_profile(Path(folder), args.split, args.episodes, args.blocks))
         print(f'{label}: {folder} done', flush=True)
     rows = []
