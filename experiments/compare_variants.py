@@ -58,16 +58,17 @@ def evaluate_variant(root: Path, variant: str, task: str, evals: Path, *,
                      updates: int = BASE_UPDATES, shipped: Path | None = None) -> Path | None:
     """Evaluate the finished runs of one variant at one budget; returns its tables' folder.
 
-    A variant without training runs under `root` is evaluated from its shipped checkpoints
-    (`shipped`/<variant>/<group>/*.pt, which act exactly like the runs they came from), so the
-    tables can be regenerated on a clone that holds only the shipped files.
+    Shipped checkpoints (`shipped`/<variant>/<group>/<method>_s<seed>.pt, which act exactly
+    like the runs they came from) stand in for runs that are not under `root`, so the tables
+    can be regenerated on a clone that holds only the shipped files.
     """
     runs = root / variant / _task_folder(task, updates)
     finals = [p / 'run' / 'final.pt' for p in sorted(runs.glob('*_s*/'))
               if read_state(p).trained]
     exported = shipped / variant / group_name(task, updates) if shipped is not None else None
-    if not finals and exported is not None and exported.is_dir():
-        finals = sorted(exported.glob('*.pt'))
+    if exported is not None and exported.is_dir():
+        trained = {p.parent.parent.name for p in finals}  # <method>_s<seed>
+        finals += [p for p in sorted(exported.glob('*.pt')) if p.stem not in trained]
     if not finals:
         return None
     evaluate_many(find_checkpoints(finals), evals / variant, splits=splits, jobs=jobs,
@@ -234,8 +235,8 @@ def main() -> None:
         if args.root.is_dir() else {}
     for folder in args.shipped:
         for p in sorted(folder.iterdir()):
-            if (p / group_name(args.task, args.updates)).is_dir():
-                sources.setdefault(p.name, folder)
+            if (p / group_name(args.task, args.updates)).is_dir() and sources.get(p.name) is None:
+                sources[p.name] = folder
     if args.variants:
         missing = sorted(set(args.variants) - set(sources))
         if missing:
@@ -250,7 +251,7 @@ def main() -> None:
                                   updates=args.updates, shipped=sources[variant])
         if folder is not None:
             tables[variant] = folder
-            if args.export and sources[variant] is None:
+            if args.export:
                 export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
     rows = variant_rows(tables)
     args.out.mkdir(parents=True, exist_ok=True)
