@@ -3,7 +3,7 @@
     python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
         [--splits train extrapolation] [--episodes 3] [--jobs 1] [--updates 20000]
-        [--shipped checkpoints/issue10] [--variants default k10 ...]
+        [--shipped checkpoints/issue10] [--variants default k10 ...] [--against k10]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -96,8 +96,12 @@ def _floats(rows: list[dict[str, Any]], key: str) -> list[float]:
     return out
 
 
-def variant_rows(tables: dict[str, Path]) -> list[dict[str, Any]]:
-    """One row per (split, variant, method) with the numbers of the comparison table."""
+def variant_rows(tables: dict[str, Path], against: str | None = None) -> list[dict[str, Any]]:
+    """One row per (split, variant, method) with the numbers of the comparison table.
+
+    `against`: a variant whose runs of the same method each row is also compared with,
+    paired by seed ('vs_against', e.g. a new option against the default config).
+    """
     runs = {variant: per_run(folder) for variant, folder in tables.items()}
     reference = runs.get(REFERENCE_VARIANT, [])
     baselines = [r for r in reference if r['method'] in (REFERENCE, BOUND)]
@@ -128,6 +132,14 @@ def variant_rows(tables: dict[str, Path]) -> list[dict[str, Any]]:
                        'spearman': _cell(_floats(cells, 'spearman'), 2),
                        'headroom': '-' if headroom is None
                        else f'{headroom[0]:.1f} ± {headroom[1]:.1f}'}
+                if against is not None:
+                    theirs = [{**r, 'method': 'against'} for r in runs.get(against, [])
+                              if r['method'] == method and r['split'] == split]
+                    paired = None if variant == against else paired_difference(
+                        [*theirs, *({**r, 'method': 'mine'} for r in cells)], 'mine', 'against',
+                        split)
+                    row['vs_against'] = '-' if paired is None else \
+                        f'{paired[0]:.1f} ± {paired[1]:.1f} ({paired[2]} seeds)'
                 rows.append(row)
     return rows
 
@@ -140,17 +152,19 @@ COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
            ('adaptation_mean', 'value of adaptation (mean)'), ('spearman', 'Spearman'))
 
 
-def markdown(rows: list[dict[str, Any]]) -> str:
+def markdown(rows: list[dict[str, Any]], against: str | None = None) -> str:
     """One table per split, headroom in its heading."""
+    columns = COLUMNS if against is None else (
+        *COLUMNS, ('vs_against', f'return vs the same method of {against} (paired)'))
     sections = []
     for split in SPLIT_ORDER:
         mine = [r for r in rows if r['split'] == split]
         if not mine:
             continue
         lines = [f'#### {split} (headroom {BOUND} - {REFERENCE}: {mine[0]["headroom"]})', '',
-                 '| ' + ' | '.join(title for _, title in COLUMNS) + ' |',
-                 '|' + '---|' * len(COLUMNS)]
-        lines += ['| ' + ' | '.join(str(r[key]) for key, _ in COLUMNS) + ' |' for r in mine]
+                 '| ' + ' | '.join(title for _, title in columns) + ' |',
+                 '|' + '---|' * len(columns)]
+        lines += ['| ' + ' | '.join(str(r[key]) for key, _ in columns) + ' |' for r in mine]
         sections.append('\n'.join(lines))
     return '\n\n'.join(sections) + '\n'
 
@@ -224,6 +238,8 @@ def main() -> None:
     parser.add_argument('--variants', nargs='+',
                         help=f'only these variants (default: all; {REFERENCE_VARIANT!r} holds the '
                              'no_context and oracle runs that define the headroom)')
+    parser.add_argument('--against', help='also compare each row with the same method of this '
+                        'variant, paired by seed (e.g. k10, the default config)')
     parser.add_argument('--splits', nargs='+', choices=SPLIT_ORDER,
                         help="default: every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
@@ -253,7 +269,9 @@ def main() -> None:
             tables[variant] = folder
             if args.export:
                 export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
-    rows = variant_rows(tables)
+    if args.against and args.against not in tables:
+        parser.error(f'--against {args.against}: no evaluated runs of that variant')
+    rows = variant_rows(tables, args.against)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task, args.updates)
     walls = []
@@ -265,10 +283,10 @@ def main() -> None:
         'Seconds of training (`zeus loop`: collection + updates) + evaluation (all splits), '
         'two runs sharing the two cores:\n\n' + '\n\n'.join(walls) + '\n')
     write_csv(stem.with_suffix('.csv'), rows)
-    stem.with_suffix('.md').write_text(markdown(rows))
+    stem.with_suffix('.md').write_text(markdown(rows, args.against))
     plot(rows, stem.with_suffix('.png'),
          f'{args.task}, {args.updates:,} updates: configs and methods')
-    print(markdown(rows))
+    print(markdown(rows, args.against))
     print(f'wrote {stem}.csv, .md, .png and {stem.name}_wall_times.md')
 
 
