@@ -11,7 +11,7 @@
 # runs finished before it, marked by .done_train / eval_<split>/.done files, count as finished.
 # CONFIG (default params/train/state_cpu.yaml) picks the training config (a variant goes in its
 # own OUT_ROOT); EVAL=0 skips the evaluation (run `zeus eval` over the checkpoints later).
-#   usage: [ROUNDS=10] [CONFIG=...] [EVAL=0] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
+#   usage: [ROUNDS=10] [CONFIG=...] [EVAL=0] [SCHEDULE=...] bash experiments/run_one.sh TASK METHOD SEED [OUT_ROOT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
@@ -31,8 +31,11 @@ export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 # Collection switches the context every 100 steps (5 times per 500-step episode); the
 # reward-varying family has 40-step episodes, so it switches every 20 steps there (`zeus eval`
 # then switches every 10 steps, a quarter episode).
+# SCHEDULE overrides it for every method alike (a protocol of its own goes in its own OUT_ROOT),
+# e.g. SCHEDULE=switch:train:every_episodes=1 keeps one context per episode.
 collect_every=100
 if [ "$TASK" = Cheetah-Run-v1 ]; then collect_every=20; fi
+SCHEDULE=${SCHEDULE:-switch:train:every=$collect_every}
 mkdir -p "$OUT"
 if ! mkdir "$run.lock" 2>/dev/null; then echo "skip: $run is running elsewhere"; exit 0; fi
 trap 'rmdir "$run.lock"' EXIT
@@ -54,7 +57,7 @@ if [ ! -f "$run/run/final.pt" ] || ! finished "$run"; then
   start=$(date +%s)
   zeus loop --task "$TASK" --config "$CONFIG" --method "$METHOD" \
     --seed "$SEED" --out "$run" --rounds "$ROUNDS" --random-steps 1500 --steps 2000 \
-    --updates 2000 --noise 0.2 --schedule "switch:train:every=$collect_every" \
+    --updates 2000 --noise 0.2 --schedule "$SCHEDULE" \
     "${resume[@]}" --no-eval --no-progress >> "$run.train.log" 2>&1
   state mark-trained "$run" $(( $(date +%s) - start ))
 fi
