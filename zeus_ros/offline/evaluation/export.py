@@ -71,8 +71,9 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'| context options | context_norm `{config.context_norm}`, context_loss '
         f'`{config.context_loss}`, critic_context_grad `{config.critic_context_grad}`, '
         f'context_target_tau {config.context_target_tau}, '
-        f'context_consistency {config.context_consistency}, exploration '
-        f'`{config.exploration}` |',
+        f'context_consistency {config.context_consistency}, context_head '
+        f'`{config.context_head}`, model_horizon {config.model_horizon}, '
+        f'context_noise {config.context_noise}, exploration `{config.exploration}` |',
         f'| observations | {obs} |',
         f'| networks | {config.hidden_dim}-wide actor/critic, {config.model_hidden_dim}-wide '
         f'T/R, {config.context_hidden_dim}-wide psi, feature dim {config.feature_dim} |',
