@@ -422,3 +422,28 @@ def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: P
     assert len(lines) == 3  # the curves, not the error-bar caps
     assert len({(line.get_marker(), line.get_linestyle()) for line in lines}) == 3
     assert (tmp_path / 'out' / 'collection.png').stat().st_size > 10_000
+
+
+def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any) -> None:
+    """blind_steps d: the frozen context in the first d steps of every episode, live after."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
+
+    agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
+    values = [{'torso_length': 0.7}]
+    frozen = [np.full(agent.context_dim, 0.25, np.float32)]
+    traces: list[Any] = []
+    evaluate_contexts(agent, values, episodes=2, seed=3, progress=False, traces=traces,
+                      frozen=frozen, blind_steps=4)
+    trace = traces[0]
+    starts = np.flatnonzero(trace.first)
+    assert len(starts) >= 2
+    for start in starts[:2]:
+        assert np.allclose(trace.psi[start:start + 4], 0.25)
+        assert not np.allclose(trace.psi[start + 4:start + 8], 0.25)
+    always = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, frozen=frozen)
+    blind_all = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
+                                  frozen=frozen, blind_steps=10_000)
+    assert [r['return'] for r in always] == [r['return'] for r in blind_all]
+    with pytest.raises(ValueError, match='needs a frozen_context'):
+        evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, blind_steps=2)

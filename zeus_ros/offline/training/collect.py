@@ -213,13 +213,19 @@ class AgentPolicy:
 
     def __init__(self, agent: InferenceAgent, *, noise: float, seed: int,
                  stochastic: bool = False,
-                 frozen_context: np.ndarray | None = None) -> None:
+                 frozen_context: np.ndarray | None = None, blind_steps: int = 0) -> None:
         """Wrap `agent`; options for training collection and for diagnostics.
 
         `stochastic` samples the SAC policy (seeded torch RNG) instead of taking its mode;
         `frozen_context` replaces the live context at every step (the value-of-adaptation
-        diagnostic: what the policy earns when it cannot follow the context).
+        diagnostic: what the policy earns when it cannot follow the context), or with
+        `blind_steps` > 0 only for that many steps after each episode start and each change of
+        the true context (the inference-delay yardstick: an oracle that, like any estimator,
+        must first see a context before it knows it).
         """
+        if blind_steps < 0 or (blind_steps > 0 and frozen_context is None):
+            raise ValueError(f'blind_steps={blind_steps}: needs a frozen_context to act on '
+                             'while blind, and must be >= 0')
         import torch
 
         from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
@@ -231,6 +237,8 @@ class AgentPolicy:
             torch.manual_seed(seed)
         self.frozen_context = (None if frozen_context is None
                                else np.asarray(frozen_context, np.float32))
+        self.blind_steps = int(blind_steps)
+        self._seen: tuple[np.ndarray | None, int] = (None, 0)  # true context, steps known
         self.rng = np.random.default_rng(seed)
         self.history = agent.new_history()
         self.frames = FrameStack() if agent.obs_kind == 'pixels' else None
@@ -256,12 +264,23 @@ class AgentPolicy:
         truth = es.observation.context
         true_ctx = np.asarray([truth[n] for n in self.agent.context_names], np.float32)
         psi = self.agent.context(self.history, true_context=true_ctx)
-        if self.frozen_context is not None:
+        if self.frozen_context is not None and self._blind(true_ctx, es.observation.first):
             psi = self.frozen_context
         action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
                                 rng=self.rng)
         return PolicyDecision(action, None if self.agent.needs_true_context else psi,
                             len(self.history))
+
+
+    def _blind(self, true_ctx: np.ndarray, first: bool) -> bool:
+        """Whether this step acts on the frozen context (always, without blind_steps)."""
+        if self.blind_steps == 0:
+            return True
+        known, steps = self._seen
+        if first or known is None or not np.array_equal(known, true_ctx):
+            known, steps = true_ctx, 0
+        self._seen = (known, steps + 1)
+        return steps < self.blind_steps
 
 
 def _build_parser() -> argparse.ArgumentParser:
