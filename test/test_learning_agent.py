@@ -168,3 +168,38 @@ def test_unchained_history_encodes_every_next_frame() -> None:
                                             b.hist_next_obs, b.hist_mask)
         direct = agent.modules['encoder'](b.hist_next_obs.flatten(0, 1)).view(8, 3, -1)
     torch.testing.assert_close(history.next_feat, direct)
+
+
+@pytest.mark.parametrize('method', ['zeus', 'oracle', 'no_context'])
+def test_frozen_representation_trains_only_actor_and_critic(method: str) -> None:
+    """Frozen from update 2: phi, psi and the models keep their weights, actor and critic learn.
+
+    The representation losses are still logged (computed without gradient).
+    """
+    system = SyntheticSystem(k=3)
+    agent = make_agent(_config(method, representation_frozen_from=2), system.spec())
+    for step in range(2):
+        agent.update(system.sample(8), system.sample(8), step)
+    frozen = {name: [p.detach().clone() for p in agent.modules[name].parameters()]
+              for name in ('encoder', 'psi', 'transition', 'reward') if name in agent.modules}
+    heads = {name: [p.detach().clone() for p in agent.modules[name].parameters()]
+             for name in ('actor', 'critic')}
+    for step in range(2, 6):
+        metrics = agent.update(system.sample(8), system.sample(8), step)
+    assert 'loss/critic' in metrics
+    assert ('loss/representation' in metrics) == agent.has_representation_step
+    for name, before in frozen.items():
+        after = list(agent.modules[name].parameters())
+        assert all(torch.equal(a, b) for a, b in zip(after, before, strict=True)), name
+    for name, before in heads.items():
+        after = list(agent.modules[name].parameters())
+        assert not all(torch.equal(a, b) for a, b in zip(after, before, strict=True)), name
+
+
+def test_representation_frozen_from_must_be_a_count() -> None:
+    """A negative or non-integer start is named in the error."""
+    from zeus_ros.learning.config import ConfigError
+
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ConfigError, match='representation_frozen_from'):
+            _config('zeus', representation_frozen_from=bad)

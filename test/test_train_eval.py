@@ -119,6 +119,29 @@ def test_resume_with_another_config_fails_clearly(trained: Any, bags: Path,
         train([bags], other, run, progress=False, log=lambda _m: None)
 
 
+def test_resume_may_set_a_freeze_it_has_not_reached(trained: Any, bags: Path,
+                                                     tmp_path: Path) -> None:
+    """A resume at update 240 may set representation_frozen_from to 240 or later, not earlier.
+
+    The field acts only from its update on, so the run so far is what that config would have done.
+    """
+    run = tmp_path / 'run'
+    shutil.copytree(trained.out, run)
+    early = load_config_from(CONFIG | {'num_updates': 260, 'representation_frozen_from': 100})
+    with pytest.raises(TrainError, match=r'representation_frozen_from: checkpoint 0, now 100'):
+        train([bags], early, run, resume=True, progress=False, log=lambda _m: None)
+    later = load_config_from(CONFIG | {'num_updates': 260, 'representation_frozen_from': 240})
+    train([bags], later, run, resume=True, progress=False, evaluate=False, log=lambda _m: None)
+    before, after = (load_checkpoint(path).agent for path in
+                     (trained.out / 'checkpoint.pt', run / 'checkpoint.pt'))
+    assert after.config.representation_frozen_from == 240
+    for name in ('encoder', 'psi'):
+        assert all(torch.equal(a, b) for a, b in zip(
+            after.modules[name].parameters(), before.modules[name].parameters(), strict=True))
+    assert not all(torch.equal(a, b) for a, b in zip(
+        after.modules['actor'].parameters(), before.modules['actor'].parameters(), strict=True))
+
+
 def load_config_from(data: dict[str, Any]) -> Any:
     """A ZeusConfig from a dict (as a YAML file would give)."""
     from zeus_ros.learning.config import config_from_dict

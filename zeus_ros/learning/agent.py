@@ -207,6 +207,11 @@ class ZeusAgent:
         return self.method_spec.context_source == 'true' or (
             self.method == 'up_osi' and step < self.up_osi_warmup_updates)
 
+    def representation_frozen(self, step: int) -> bool:
+        """Whether phi, psi and models are frozen at this update (representation_frozen_from)."""
+        start = self.config.representation_frozen_from
+        return 0 < start <= step
+
     def policy_context(self, context: torch.Tensor, noise: torch.Tensor | None = None
                        ) -> torch.Tensor:
         """The context as actor and critic see it: normalised when configured, plus any noise.
@@ -349,7 +354,12 @@ class ZeusAgent:
                              ) -> tuple[torch.Tensor, torch.Tensor]:
         """Train phi/psi/T/R (and the decoder); return detached contexts for H_t and H_{t+1}."""
         context = next_context = None
-        if self.has_representation_step:
+        if self.has_representation_step and self.representation_frozen(step):
+            with torch.no_grad():  # the same contexts and logged losses, nothing trained
+                losses = representation_losses(self, batch, pair, metrics)
+            metrics['loss/representation'] = losses.total
+            context, next_context = losses.context, losses.next_context
+        elif self.has_representation_step:
             losses = representation_losses(self, batch, pair, metrics)
             names = [name for name in ('encoder', 'decoder', 'psi', 'model')
                      if name in self.optimizers]
@@ -383,14 +393,17 @@ class ZeusAgent:
             soft_v = next_q - self.alpha * sample.log_prob
             target_q = batch.reward + batch.not_done * cfg.discount * soft_v
         psi_trained = (cfg.critic_context_grad and 'psi' in m
-                       and not self.uses_true_context(step))
+                       and not self.uses_true_context(step)
+                       and not self.representation_frozen(step))
         if psi_trained:  # psi(H_t) again, with its graph, so the TD error reaches psi
             history, _ = self.history_features(batch.hist_obs, batch.hist_action,
                                                batch.hist_reward, batch.hist_next_obs,
                                                batch.hist_mask)
             context = m['psi'](history)
             self.optimizers['psi'].zero_grad(set_to_none=True)
-        x = torch.cat([m['encoder'](batch.obs), self.policy_context(context, noise)], dim=-1)
+        with torch.set_grad_enabled(not self.representation_frozen(step)):
+            feat = m['encoder'](batch.obs)  # frozen: the TD loss leaves phi alone too
+        x = torch.cat([feat, self.policy_context(context, noise)], dim=-1)
         q = m['critic'](x, self.normalize_action(batch.action))
         loss = F.mse_loss(q.q1, target_q) + F.mse_loss(q.q2, target_q)
         self.optimizers['critic'].zero_grad(set_to_none=True)

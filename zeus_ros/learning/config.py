@@ -140,6 +140,12 @@ class ZeusConfig:
     one draw per sample shared by every use in an update (critic, TD target, actor), and in
     acting an AR(1) process with this time constant in steps (psi's error over a k-step
     window changes slowly too)."""
+    representation_frozen_from: int = 0
+    """> 0: from this update on phi, psi and the models stop training (their losses are still
+    logged) and actor and critic keep training on the fixed representation, so the context
+    they condition on stops moving under them. A test of whether psi's drift (half its spread
+    per 10k updates, docs/results.md session 4) is what stops ZeUS improving; it may be set on
+    a resume that has not reached it. 0: never (the paper)."""
     exploration: str = 'stochastic'
     """How `zeus loop` collects with a trained policy: 'stochastic' samples the SAC policy (the
     paper's Algorithm 1); 'noise' acts deterministically plus Gaussian noise (--noise)."""
@@ -240,6 +246,10 @@ class ZeusConfig:
             raise ConfigError(f'context_noise={self.context_noise} is in units of the '
                               "normalised context, but context_norm is 'none': set context_norm "
                               "'running' (or 'reliability')")
+        if isinstance(self.representation_frozen_from, bool) or not isinstance(
+                self.representation_frozen_from, int) or self.representation_frozen_from < 0:
+            raise ConfigError(f'representation_frozen_from must be an integer >= 0 (0: never), '
+                              f'got {self.representation_frozen_from!r}')
         _check_choice('exploration', self.exploration, EXPLORATIONS)
         if not isinstance(self.critic_context_grad, bool):
             raise ConfigError(f'critic_context_grad must be true or false, '

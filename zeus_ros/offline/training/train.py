@@ -44,6 +44,8 @@ FINAL = 'final.pt'
 RUN_CONTROL_FIELDS = frozenset({'num_updates', 'eval_interval', 'eval_episodes',
                                 'checkpoint_interval', 'log_interval', 'device'})
 """Config fields a resumed run may change: they steer the run, not the networks or losses."""
+LATER_FIELD = 'representation_frozen_from'
+"""A config field that acts only from its update on: a resume before it may change it."""
 SHOWN_LOSSES = ('loss/critic', 'loss/actor', 'loss/context', 'loss/dynamics', 'loss/reward',
                 'loss/osi', 'loss/reconstruction')
 """Losses shown on the progress bar (those the method has)."""
@@ -208,10 +210,21 @@ def _report_cut_bags(bags: Sequence[str], log: Callable[[str], None]) -> None:
             'asked for (`zeus loop --resume` collects what a round lacks)')
 
 
-def _config_differences(stored: ZeusConfig, wanted: ZeusConfig) -> list[str]:
+def _config_differences(stored: ZeusConfig, wanted: ZeusConfig, step: int) -> list[str]:
+    """Fields that would make a resume at `step` differ from one run with `wanted` from 0.
+
+    `representation_frozen_from` acts only from its update on, so a resume that has reached
+    neither the stored nor the wanted value may change it (a frozen-from-10k variant continues
+    a finished 10k run).
+    """
     old, new = stored.to_dict(), wanted.to_dict()
+
+    def not_reached(value: int) -> bool:
+        return value == 0 or value >= step
+
     return [f'{key}: checkpoint {old[key]!r}, now {new[key]!r}' for key in old
-            if key not in RUN_CONTROL_FIELDS and old[key] != new[key]]
+            if key not in RUN_CONTROL_FIELDS and old[key] != new[key]
+            and not (key == LATER_FIELD and not_reached(old[key]) and not_reached(new[key]))]
 
 
 def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
@@ -259,7 +272,7 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
         raise TrainError(f'--resume: {path} is a deployment export (acting networks only, no '
                          "critics or optimizers); resume from the run's checkpoint.pt instead")
     wanted = resolve_config(config, dataset.task)
-    diffs = _config_differences(loaded.config, wanted)
+    diffs = _config_differences(loaded.config, wanted, loaded.step)
     if diffs:
         raise TrainError(f'--resume: {path} was trained with another config; '
                          f'differences: {"; ".join(diffs)}. Resume with the same config and '
@@ -270,7 +283,7 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
         raise TrainError(f'--resume: {path} expects observations of shape '
                          f'{loaded.spec.obs_shape}, the bags hold {dataset.obs_dim}-d states')
     agent = loaded.agent
-    run = {name: getattr(wanted, name) for name in RUN_CONTROL_FIELDS}
+    run = {name: getattr(wanted, name) for name in (*RUN_CONTROL_FIELDS, LATER_FIELD)}
     agent.config = loaded.config.replace(**run)
     set_seed_everywhere(wanted.seed + loaded.step)
     return agent, loaded.step
