@@ -3,7 +3,7 @@
     python experiments/compare_variants.py --task Cheetah-Run-v1 [--root runs/i10]
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
         [--splits train extrapolation] [--episodes 3] [--jobs 1] [--updates 20000]
-        [--shipped checkpoints/issue10] [--variants default k10 ...] [--against k10]
+        [--shipped checkpoints/issue10] [--variants default k10 ...] [--against k10 [default]]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -21,6 +21,7 @@ regenerates the tables from checkpoints/issue10 alone).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -96,11 +97,14 @@ def _floats(rows: list[dict[str, Any]], key: str) -> list[float]:
     return out
 
 
-def variant_rows(tables: dict[str, Path], against: str | None = None) -> list[dict[str, Any]]:
+def variant_rows(tables: dict[str, Path], against: Sequence[str] = ()
+                 ) -> list[dict[str, Any]]:
     """One row per (split, variant, method) with the numbers of the comparison table.
 
-    `against`: a variant whose runs of the same method each row is also compared with,
-    paired by seed ('vs_against', e.g. a new option against the default config).
+    `against`: variants whose runs of the same method each row is also compared with, paired
+    by seed ('vs_against', e.g. a new option against the default config); the first of them
+    that has runs of the row's method is used (`k10 default`: zeus against k10's, the
+    baselines against default's).
     """
     runs = {variant: per_run(folder) for variant, folder in tables.items()}
     reference = runs.get(REFERENCE_VARIANT, [])
@@ -132,10 +136,12 @@ def variant_rows(tables: dict[str, Path], against: str | None = None) -> list[di
                        'spearman': _cell(_floats(cells, 'spearman'), 2),
                        'headroom': '-' if headroom is None
                        else f'{headroom[0]:.1f} ± {headroom[1]:.1f}'}
-                if against is not None:
-                    theirs = [{**r, 'method': 'against'} for r in runs.get(against, [])
+                if against:
+                    source = next((v for v in against if any(
+                        r['method'] == method for r in runs.get(v, []))), None)
+                    theirs = [{**r, 'method': 'against'} for r in runs.get(source, [])
                               if r['method'] == method and r['split'] == split]
-                    paired = None if variant == against else paired_difference(
+                    paired = None if variant == source else paired_difference(
                         [*theirs, *({**r, 'method': 'mine'} for r in cells)], 'mine', 'against',
                         split)
                     row['vs_against'] = '-' if paired is None else \
@@ -152,10 +158,11 @@ COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
            ('adaptation_mean', 'value of adaptation (mean)'), ('spearman', 'Spearman'))
 
 
-def markdown(rows: list[dict[str, Any]], against: str | None = None) -> str:
+def markdown(rows: list[dict[str, Any]], against: Sequence[str] = ()) -> str:
     """One table per split, headroom in its heading."""
-    columns = COLUMNS if against is None else (
-        *COLUMNS, ('vs_against', f'return vs the same method of {against} (paired)'))
+    columns = COLUMNS if not against else (
+        *COLUMNS, ('vs_against', f'return vs the same method of {" or ".join(against)} '
+                                 '(paired)'))
     sections = []
     for split in SPLIT_ORDER:
         mine = [r for r in rows if r['split'] == split]
@@ -238,8 +245,10 @@ def main() -> None:
     parser.add_argument('--variants', nargs='+',
                         help=f'only these variants (default: all; {REFERENCE_VARIANT!r} holds the '
                              'no_context and oracle runs that define the headroom)')
-    parser.add_argument('--against', help='also compare each row with the same method of this '
-                        'variant, paired by seed (e.g. k10, the default config)')
+    parser.add_argument('--against', nargs='+', default=[],
+                        help='also compare each row with the same method of this variant, '
+                             'paired by seed (e.g. k10, the default config); with several, the '
+                             'first that has runs of the method (k10 default)')
     parser.add_argument('--splits', nargs='+', choices=SPLIT_ORDER,
                         help="default: every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
@@ -269,8 +278,9 @@ def main() -> None:
             tables[variant] = folder
             if args.export:
                 export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
-    if args.against and args.against not in tables:
-        parser.error(f'--against {args.against}: no evaluated runs of that variant')
+    missing = [v for v in args.against if v not in tables]
+    if missing:
+        parser.error(f'--against {" ".join(missing)}: no evaluated runs of that variant')
     rows = variant_rows(tables, args.against)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task, args.updates)
