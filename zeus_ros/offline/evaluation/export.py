@@ -73,7 +73,8 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'context_target_tau {config.context_target_tau}, '
         f'context_consistency {config.context_consistency}, context_head '
         f'`{config.context_head}`, model_horizon {config.model_horizon}, '
-        f'context_noise {config.context_noise}, exploration `{config.exploration}` |',
+        f'context_noise {config.context_noise}, exploration `{config.exploration}`, '
+        f'representation_frozen_from {config.representation_frozen_from} |',
         f'| observations | {obs} |',
         f'| networks | {config.hidden_dim}-wide actor/critic, {config.model_hidden_dim}-wide '
         f'T/R, {config.context_hidden_dim}-wide psi, feature dim {config.feature_dim} |',
