@@ -89,9 +89,9 @@ def test_schedule_is_spelled_one_way_in_every_help(capsys: pytest.CaptureFixture
 
     _run('loop', ['--help'])
     text = capsys.readouterr().out
-    assert 'switch:train:every=100' in text and 'values=train' not in text
-    assert parse_schedule('switch:train:every=100') == {'kind': 'switch', 'values': 'train',
-                                                        'every': 100}
+    assert 'switch:train:every_episodes=1' in text and 'values=train' not in text
+    assert parse_schedule('switch:train:every_episodes=1') == {
+        'kind': 'switch', 'values': 'train', 'every_episodes': 1}
 
 
 def test_demo_offers_every_task_family(capsys: pytest.CaptureFixture) -> None:

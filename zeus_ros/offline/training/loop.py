@@ -172,7 +172,8 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
 LOOP_JSON = 'loop.json'
 """The loop's flags, stored in --out at the start, so `--resume` needs only --out and --rounds."""
 DEFAULTS: dict[str, Any] = {'random_steps': 1500, 'steps': 1500, 'updates': None,
-                            'noise': 0.2, 'schedule': 'switch:train:every=100', 'method': None,
+                            'noise': 0.2, 'schedule': 'switch:train:every_episodes=1',
+                            'method': None,
                             'seed': None, 'device': None, 'no_eval': False, 'set': []}
 STORED = ('task', 'config', *DEFAULTS)
 
@@ -203,7 +204,9 @@ def _build_parser() -> argparse.ArgumentParser:
                         'the SAC policy instead)')
     parser.add_argument('--schedule',
                         help='context schedule while collecting (default: '
-                        f'{DEFAULTS["schedule"]}; grammar below)')
+                        f'{DEFAULTS["schedule"]}, one train value per episode in turn: the '
+                        'critic can value a context that holds for the episode, and the '
+                        'policy learns to adapt (docs/results.md, session 7); grammar below)')
     parser.add_argument('--set', nargs='+', action='extend', metavar='KEY=VALUE',
                         help=f'{SET_HELP}; on --resume added to the stored ones')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
