@@ -143,7 +143,8 @@ class ZeusConfig:
     representation_frozen_from: int = 0
     """> 0: from this update on phi, psi and the models stop training (their losses are still
     logged) and actor and critic keep training on the fixed representation, so the context
-    they condition on stops moving under them. A test of whether psi's drift (half its spread
+    they condition on stops moving under them (a `context_norm` keeps updating its running
+    statistics, which settle). A test of whether psi's drift (half its spread
     per 10k updates, docs/results.md session 4) is what stops ZeUS improving; it may be set on
     a resume that has not reached it. 0: never (the paper)."""
     exploration: str = 'stochastic'
