@@ -29,6 +29,9 @@ if TYPE_CHECKING:
 __all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyDecision', 'collect', 'main',
            'next_bag_path', 'parse_schedule', 'random_policy']
 
+DEFAULT_SCHEDULE = 'switch:train:every_episodes=1'
+"""What `zeus loop` and `zeus sweep` collect with unless told: one train value per episode, in
+turn (docs/results.md, session 7: the critic can value a context that holds for the episode)."""
 SCHEDULE_HELP = """\
 context schedule: a YAML file (as accepted by sim_bridge.schedules.schedule_from_config), or
 the inline form KIND[:PRESET][:KEY=VALUE[,KEY=VALUE...]] where KIND is a schedule kind

@@ -26,7 +26,12 @@ from typing import Any
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.training.collect import SCHEDULE_HELP, next_bag_path, parse_schedule
+from zeus_ros.offline.training.collect import (
+    DEFAULT_SCHEDULE,
+    SCHEDULE_HELP,
+    next_bag_path,
+    parse_schedule,
+)
 from zeus_ros.offline.training.collect_workers import CollectJob, collect_bag
 from zeus_ros.offline.training.train import (
     CHECKPOINT,
@@ -172,8 +177,7 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
 LOOP_JSON = 'loop.json'
 """The loop's flags, stored in --out at the start, so `--resume` needs only --out and --rounds."""
 DEFAULTS: dict[str, Any] = {'random_steps': 1500, 'steps': 1500, 'updates': None,
-                            'noise': 0.2, 'schedule': 'switch:train:every_episodes=1',
-                            'method': None,
+                            'noise': 0.2, 'schedule': DEFAULT_SCHEDULE, 'method': None,
                             'seed': None, 'device': None, 'no_eval': False, 'set': []}
 STORED = ('task', 'config', *DEFAULTS)
 

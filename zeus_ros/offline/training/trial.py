@@ -85,14 +85,14 @@ class Trial:
 
 
 def default_schedule(task: str) -> str:
-    """One train value per collected episode, in turn, for every task (as `zeus loop`).
+    """`zeus loop`'s default schedule (collect.DEFAULT_SCHEDULE), the same for every task.
 
-    Measured on Cheetah-Run-v1 (docs/results.md, sessions 6-7): the same returns as switching
-    mid-episode at 10k updates, and at 20k a policy whose gain is adaptation. `task` stays in
-    the signature so a task-specific default can return without changing callers.
+    `task` stays in the signature so a task-specific default can return without changing callers.
     """
+    from zeus_ros.offline.training.collect import DEFAULT_SCHEDULE
+
     del task
-    return 'switch:train:every_episodes=1'
+    return DEFAULT_SCHEDULE
 
 
 def recorded_differences(trial: Trial) -> list[str]:
