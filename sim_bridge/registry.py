@@ -23,6 +23,7 @@ __all__ = ['TASK_NAMES', 'declared_task', 'is_simulated', 'is_task_file', 'make_
 _TASKS: dict[str, tuple[str, str]] = {
     'Cheetah-Run-v0': ('sim_bridge.cheetah', 'CheetahRunTask'),
     'Cheetah-Run-v1': ('sim_bridge.cheetah', 'CheetahVelocityTask'),
+    'Cheetah-Motor-v0': ('sim_bridge.cheetah', 'CheetahMotorTask'),
     'Walker-Walk-v0': ('sim_bridge.walker', 'WalkerFrictionTask'),
     'Walker-Walk-v1': ('sim_bridge.walker', 'WalkerFootTask'),
     'Finger-Spin-v0': ('sim_bridge.finger', 'FingerSpinTask'),

@@ -18,8 +18,8 @@ from sim_bridge.registry import TASK_NAMES, make_task
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
 Build = Callable[..., DmcTask]
-DMC_TASKS = ('Cheetah-Run-v0', 'Cheetah-Run-v1', 'Walker-Walk-v0', 'Walker-Walk-v1',
-             'Finger-Spin-v0')
+DMC_TASKS = ('Cheetah-Run-v0', 'Cheetah-Run-v1', 'Cheetah-Motor-v0', 'Walker-Walk-v0',
+             'Walker-Walk-v1', 'Finger-Spin-v0')
 
 
 @pytest.fixture
@@ -216,10 +216,43 @@ def test_target_reward_is_linear_in_the_target_below_the_speed(build: Build) -> 
     np.testing.assert_allclose(np.subtract(low, high), repeat * 1.5, atol=1e-9)
 
 
+# --- Cheetah-Motor-v0: motor_gain ---------------------------------------------------------------
+
+@pytest.mark.parametrize('gain', [0.2, 1.0, 1.6])
+def test_motor_gain_scales_every_gear_and_nothing_else(build: Build, gain: float) -> None:
+    """The gear (torque per unit command) of each motor is the suite's times the gain."""
+    suite_model = build('Cheetah-Run-v0').model
+    model = build('Cheetah-Motor-v0', motor_gain=gain).model
+    np.testing.assert_allclose(model.actuator_gear, suite_model.actuator_gear * gain)
+    np.testing.assert_array_equal(model.body_mass, suite_model.body_mass)
+    np.testing.assert_array_equal(model.actuator_ctrlrange, suite_model.actuator_ctrlrange)
+
+
+def test_weaker_motors_move_the_body_less_for_the_same_commands(build: Build) -> None:
+    """Same start and commands: joint speeds grow with the gain (the context is dynamics)."""
+    actions = np.random.default_rng(4).uniform(-1, 1, (5, 6))
+    speeds = []
+    for gain in (0.3, 1.0, 1.5):
+        states, _ = _run(build('Cheetah-Motor-v0', motor_gain=gain), actions)
+        speeds.append(float(np.abs(np.array(states)[1:, -6:]).mean()))  # joint velocities
+    assert speeds[0] < speeds[1] < speeds[2]
+
+
+def test_motor_reward_tracks_two_metres_per_second(build: Build) -> None:
+    """Standing still costs |0 - 2| per control step, whatever the motors (plus no action)."""
+    for gain in (0.4, 1.1):
+        task = build('Cheetah-Motor-v0', motor_gain=gain)
+        task.reset(seed=0)
+        speed_before = float(task.data.sensor('torso_subtreelinvel').data[0])
+        reward = task.step(np.zeros(6)).reward
+        assert reward == pytest.approx(-2.0 * task.action_repeat, abs=0.1 + 4 * abs(speed_before))
+
+
 # --- shared behaviour ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize(('name', 'parameter', 'value'), [
     ('Cheetah-Run-v0', 'torso_length', 1.2),
+    ('Cheetah-Motor-v0', 'motor_gain', 0.3),
     ('Walker-Walk-v1', 'foot_length', 0.18),
     ('Finger-Spin-v0', 'finger_size', 0.2),
 ])

@@ -62,8 +62,9 @@ ALPHA_PSI_BY_TASK: dict[str, float] = {
     'Walker-Walk-v1': 0.1,
     'Cheetah-Run-v1': 1.0,
     'Sawyer-Peg-v0': 1.0,
+    'Cheetah-Motor-v0': 1.0,  # ours, not in the paper: the value of both cheetah families
 }
-"""alpha_psi per task from the paper's ZeUS hyper-parameter table."""
+"""alpha_psi per task from the paper's ZeUS hyper-parameter table (and our own families)."""
 
 REWARD_VARYING_TASKS = frozenset({'Cheetah-Run-v1', 'Sawyer-Peg-v0'})
 """Tasks whose context changes the reward; the paper uses Adam beta1 0.5 there, 0.9 elsewhere."""
