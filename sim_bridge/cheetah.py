@@ -1,5 +1,4 @@
-"""Cheetah tasks: Cheetah-Run-v0 (torso length, dynamics), Cheetah-Run-v1 (target velocity) and
-Cheetah-Motor-v0 (motor strength, dynamics).
+"""Cheetah tasks: torso length (v0), target velocity (v1), motor strength (Cheetah-Motor-v0).
 
 Torso length L is the half-length of the torso capsule (dm_control default 0.5, fromto
 "-L 0 0 L 0 0"). The legs and head are attached to the torso ends and move with them
