@@ -135,7 +135,14 @@ def test_record_train_redeploy_with_a_fake_robot(robot_processes: ProcessGroup,
         assert obs.shape == (5,) and obs[4] == pytest.approx(0.5)
         if not feedback[step].first:  # reward velocity:shoulder is the shoulder's velocity
             assert feedback[step].reward == pytest.approx(obs[2])
-    assert [feedback[s].first for s in (0, 101, 202)] == [True] * 3  # episode_length 100
+    # episode_length 100: every episode ends at its step 100 and the next step starts one. An
+    # input that arrives later than input_timeout (a loaded machine can stall the fake robot)
+    # restarts the episode early by design, so boundaries are checked by episode, not by index.
+    assert feedback[0].first
+    assert max(feedback[s].episode_step for s in range(steps + 1)) == 100
+    ends = [s for s in range(steps + 1) if feedback[s].last]
+    assert ends and all(feedback[s].episode_step == 100 for s in ends)
+    assert all(feedback[s + 1].first for s in ends if s < steps)
     truth = topics['/zeus/context_truth'][steps]
     assert list(truth.names) == ['payload_kg'] and list(truth.values) == [0.5]
     contexts = topics['/zeus/context']
