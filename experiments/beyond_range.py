@@ -14,8 +14,9 @@ acting as in the training contexts? Every checkpoint acts on the split's values 
 protocol: constant context, evaluation seed 100, --episodes per value) with its context live,
 frozen at its mean context over the train values, and frozen at the mean context of the train
 value nearest to each value (the best a policy that recognised only training contexts could
-pick). Differences are paired on the same environment seeds; per method, mean ± s.e. over seeds.
-Writes <out>.csv (summary), <out>_runs.csv and <out>.png, and prints the table.
+pick), and under two deployable guards (FREEZES). Differences are paired on the same
+environment seeds; per method, mean ± s.e. over seeds. Writes <out>.csv (summary),
+<out>_runs.csv and <out>.png, and prints the table.
 """
 
 from __future__ import annotations
@@ -34,8 +35,11 @@ from zeus_ros.offline.evaluation.metrics import write_csv
 from zeus_ros.offline.evaluation.report import mean_se
 
 _NAME = re.compile(r'(?P<method>.+)_s(?P<seed>\d+)$')
-FREEZES = ('live', 'train_mean', 'nearest_train')
-"""How the context is set: live, frozen at the train values' mean, at the nearest train value's."""
+FREEZES = ('live', 'train_mean', 'nearest_train', 'train_box', 'snap_outside')
+"""How the context is set: live; frozen at the train values' mean; frozen at the nearest train
+value's; two deployable guards that need no true context: live clipped into the box the train
+values' mean contexts span, and live replaced by the nearest train mean context (Euclidean) when
+it leaves that box."""
 
 
 def _first(value: dict[str, float]) -> float:
@@ -54,9 +58,9 @@ def returns(path: Path, split: str, episodes: int) -> list[dict[str, Any]]:
     values = split_values(agent.task, split)
     base = {'method': match['method'], 'seed': int(match['seed']), 'split': split}
 
-    def run(frozen: list[np.ndarray] | None) -> float:
+    def run(frozen: list[np.ndarray] | None, transform: Any = None) -> float:
         rows = evaluate_contexts(agent, values, episodes=episodes, seed=100, progress=False,
-                                 frozen=frozen)
+                                 frozen=frozen, context_transform=transform)
         return float(np.mean([r['return'] for r in rows]))
 
     out = [{**base, 'freeze': 'live', 'return': run(None)}]
@@ -70,6 +74,16 @@ def returns(path: Path, split: str, episodes: int) -> list[dict[str, Any]]:
     out.append({**base, 'freeze': 'train_mean',
                 'return': run([np.mean(means, axis=0) for _ in values])})
     out.append({**base, 'freeze': 'nearest_train', 'return': run([means[i] for i in nearest])})
+    low, high, stacked = np.min(means, axis=0), np.max(means, axis=0), np.stack(means)
+
+    def snap(psi: np.ndarray) -> np.ndarray:
+        if np.all((psi >= low) & (psi <= high)):
+            return psi
+        return stacked[int(np.argmin(np.sum((stacked - psi) ** 2, axis=1)))]
+
+    out.append({**base, 'freeze': 'train_box',
+                'return': run(None, lambda psi: np.clip(psi, low, high))})
+    out.append({**base, 'freeze': 'snap_outside', 'return': run(None, snap)})
     return out
 
 
@@ -112,11 +126,11 @@ def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4))
     methods = [e for e in table if 'voa_train_mean' in e]
-    for offset, freeze in zip((-0.15, 0.15), FREEZES[1:], strict=True):
+    for offset, freeze in zip((-0.3, -0.1, 0.1, 0.3), FREEZES[1:], strict=True):
         x = np.arange(len(methods)) + offset
-        ax.bar(x, [e.get(f'voa_{freeze}', np.nan) for e in methods], width=0.3,
+        ax.bar(x, [e.get(f'voa_{freeze}', np.nan) for e in methods], width=0.2,
                yerr=[e.get(f'voa_{freeze}_se', np.nan) for e in methods], capsize=3,
-               label=f'live minus frozen at {freeze.replace("_", " ")}')
+               label=f'live minus {freeze.replace("_", " ")}')
     ax.axhline(0, color='grey', lw=0.8)
     ax.set_xticks(np.arange(len(methods)), [e['method'] for e in methods])
     ax.set_ylabel('value of adaptation (return, mean ± s.e.)')
@@ -147,11 +161,13 @@ def main() -> None:
     write_csv(Path(f'{args.out}_runs.csv'), rows)
     print(f'{args.split} values | method | seeds | return | gain over no_context (paired) | '
           'share of headroom | live - frozen at train mean | live - frozen at nearest train '
-          'value |\n|---|---|---|---|---|---|---|')
+          'value | live - clipped to the train box | live - snapped outside the box |\n'
+          '|---|---|---|---|---|---|---|---|---|')
     for e in table:
         share = f'{e["share"]:.2f}' if 'share' in e else '-'
         print(f'| {e["method"]} | {e["seeds"]} | {_cell(e, "return")} | {_cell(e, "gain")} | '
-              f'{share} | {_cell(e, "voa_train_mean")} | {_cell(e, "voa_nearest_train")} |')
+              f'{share} | {_cell(e, "voa_train_mean")} | {_cell(e, "voa_nearest_train")} | '
+              f'{_cell(e, "voa_train_box")} | {_cell(e, "voa_snap_outside")} |')
     plot(table, args.out.with_suffix('.png'),
          f'{args.split} values: inferring the context vs assuming a training one')
     print(f'wrote {args.out}.csv, {args.out}_runs.csv and {args.out}.png')

@@ -470,3 +470,28 @@ def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any)
     assert [r['return'] for r in always] == [r['return'] for r in blind_all]
     with pytest.raises(ValueError, match='needs a frozen_context'):
         evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, blind_steps=2)
+
+
+def test_context_transform_maps_the_live_context_before_the_policy_acts(trained: Any) -> None:
+    """A transform sees every live psi; the identity changes nothing, a constant is a freeze."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
+
+    agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
+    values = [{'torso_length': 0.7}]
+    seen: list[np.ndarray] = []
+
+    def identity(psi: np.ndarray) -> np.ndarray:
+        seen.append(psi.copy())
+        return psi
+
+    live = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False)
+    same = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
+                             context_transform=identity)
+    assert [r['return'] for r in same] == [r['return'] for r in live] and len(seen) > 10
+    constant = np.full(agent.context_dim, 0.25, np.float32)
+    frozen = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
+                               frozen=[constant])
+    mapped = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
+                               context_transform=lambda psi: constant)
+    assert [r['return'] for r in mapped] == [r['return'] for r in frozen]

@@ -18,7 +18,7 @@ Reported, per split (train / interpolation / extrapolation value lists of the pa
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 import itertools
 from pathlib import Path
@@ -129,24 +129,28 @@ def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = ''
 
 
 def _policy(agent: Any, task: Any, seed: int, frozen: np.ndarray | None = None,
-            blind_steps: int = 0) -> Policy:
+            blind_steps: int = 0,
+            context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> Policy:
     if agent is None:
         return random_policy(task, seed)
     return AgentPolicy(agent, noise=0.0, seed=seed, frozen_context=frozen,
-                       blind_steps=blind_steps)
+                       blind_steps=blind_steps, context_transform=context_transform)
 
 
 def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episodes: int = 1,
                       seed: int = 0, task_name: str | None = None, progress: bool = True,
                       traces: list[Trace] | None = None,
                       frozen: Sequence[np.ndarray] | None = None,
-                      blind_steps: int = 0) -> list[dict[str, Any]]:
+                      blind_steps: int = 0,
+                      context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
+                      ) -> list[dict[str, Any]]:
     """Deterministic episodes at a constant context per value; one row per episode.
 
     `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
     The environment of value i is seeded with seed + i, so two calls with the same seed meet
     the same initial states (paired comparisons); `frozen[i]` replaces the live context of
-    value i at every step, or with `blind_steps` only in the first that many of each episode.
+    value i at every step, or with `blind_steps` only in the first that many of each episode;
+    `context_transform` maps the live context before the policy acts (AgentPolicy).
     """
     name = agent.task if agent is not None else task_name
     rows = []
@@ -154,7 +158,8 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
         env, task = _make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
         try:
             policy = _policy(agent, task, seed + index,
-                             None if frozen is None else frozen[index], blind_steps)
+                             None if frozen is None else frozen[index], blind_steps,
+                             context_transform)
             trace = run_steps(env, task, policy,
                               episodes * task.episode_length + 1, progress=False)
         finally:

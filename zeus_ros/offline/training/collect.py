@@ -216,7 +216,8 @@ class AgentPolicy:
 
     def __init__(self, agent: InferenceAgent, *, noise: float, seed: int,
                  stochastic: bool = False,
-                 frozen_context: np.ndarray | None = None, blind_steps: int = 0) -> None:
+                 frozen_context: np.ndarray | None = None, blind_steps: int = 0,
+                 context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         """Wrap `agent`; options for training collection and for diagnostics.
 
         `stochastic` samples the SAC policy (seeded torch RNG) instead of taking its mode;
@@ -224,7 +225,8 @@ class AgentPolicy:
         diagnostic: what the policy earns when it cannot follow the context), or with
         `blind_steps` > 0 only for that many steps after each episode start and each change of
         the true context (the inference-delay yardstick: an oracle that, like any estimator,
-        must first see a context before it knows it).
+        must first see a context before it knows it). `context_transform` maps the live context
+        before the policy acts on it (guards for contexts beyond the training range).
         """
         if blind_steps < 0 or (blind_steps > 0 and frozen_context is None):
             raise ValueError(f'blind_steps={blind_steps}: needs a frozen_context to act on '
@@ -241,6 +243,7 @@ class AgentPolicy:
         self.frozen_context = (None if frozen_context is None
                                else np.asarray(frozen_context, np.float32))
         self.blind_steps = int(blind_steps)
+        self.context_transform = context_transform
         self._seen: tuple[np.ndarray | None, int] = (None, 0)  # true context, steps known
         self.rng = np.random.default_rng(seed)
         self.history = agent.new_history()
@@ -267,6 +270,8 @@ class AgentPolicy:
         truth = es.observation.context
         true_ctx = np.asarray([truth[n] for n in self.agent.context_names], np.float32)
         psi = self.agent.context(self.history, true_context=true_ctx)
+        if self.context_transform is not None and psi is not None:
+            psi = np.asarray(self.context_transform(psi), np.float32)
         if self.frozen_context is not None and self._blind(true_ctx, es.observation.first):
             psi = self.frozen_context
         action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
