@@ -8,8 +8,9 @@ in lockstep, as separate processes (multi) and as nodes of one process on one ex
 without it, every message through DDS). A probe subscriber measures observation-to-action
 latency; /proc gives each node's resident memory. The probe is itself an outside subscriber:
 the container then publishes every step and action on DDS too. `single-quiet` runs the single
-mode with no outside subscriber on the loop's topics (10x the steps; the rate comes from
-sim_bridge's step count on /diagnostics, so it has no latency).
+mode with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step
+count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized from the
+round's in-process rate to last about QUIET_SECONDS, long enough for several counts).
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
 """
@@ -17,6 +18,7 @@ sim_bridge's step count on /diagnostics, so it has no latency).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 import subprocess
@@ -204,7 +206,8 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
         running = [entry for entry in counted if 0 < entry[1] < steps]
         if len(running) < 2:
             raise RuntimeError(f'sim_bridge reported its steps {len(running)} time(s) while '
-                               'running: raise --steps')
+                               f'running {steps} steps: raise QUIET_SECONDS; node logs in '
+                               f'{log_dir}')
         (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
         return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
                 'p50': float('nan'), 'p99': float('nan'), **memory_values}
@@ -228,6 +231,19 @@ RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8, ('state', 's
 """Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
 P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
 """Issue 14's observation -> action p99 targets."""
+QUIET_SECONDS = 10.0
+"""single-quiet runs this long at the in-process rate: sim_bridge counts its steps on
+/diagnostics once a second, and the rate needs two counts taken while the loop runs."""
+
+
+def quiet_steps(steps: int, in_process_rate: float) -> int:
+    """Steps of a single-quiet run: about QUIET_SECONDS at the round's in-process rate.
+
+    Why not a fixed multiple of --steps: at ~1200 steps/s, 10x400 steps ended in ~3 s, before
+    sim_bridge had reported its count twice. The live loop is no faster than the in-process
+    one (ratio targets <= 1), so it runs at least this long; --steps stays the floor.
+    """
+    return max(steps, math.ceil(in_process_rate * QUIET_SECONDS))
 
 
 def main() -> None:
@@ -262,8 +278,8 @@ def main() -> None:
                 if mode is None:  # each round against its own in-process rate
                     local, local_cpu = in_process_rate(checkpoint, steps)
                     continue
-                live = live_rate(checkpoint, steps * (10 if mode == 'single-quiet' else 1),
-                                 pixels=kind == 'pixels', mode=mode)
+                run_steps = quiet_steps(steps, local) if mode == 'single-quiet' else steps
+                live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()

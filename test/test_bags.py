@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -16,6 +18,7 @@ from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
 from zeus_ros.offline.data.schema import (
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
+    TOPIC_IMAGE,
     TOPIC_STATE,
     TOPIC_STEP,
     StepFeedbackFields,
@@ -43,11 +46,15 @@ VECTORS = {TOPIC_STATE: 'data', TOPIC_STEP: 'applied_action', TOPIC_CONTEXT_TRUT
 
 
 def _write_synthetic(path: Path, steps: int, faults: Faults | None = None,
-                     storage: str = 'mcap') -> Path:
-    """Write `steps` steps of a 2-d toy run (episodes of EP_LEN transitions) message by message."""
+                     storage: str = 'mcap', images: Sequence[tuple[int, bytes]] = ()) -> Path:
+    """Write `steps` steps of a 2-d toy run (episodes of EP_LEN transitions) message by message.
+
+    `images`: (stamp, CDR) of /zeus/observation/image messages, written after the steps in
+    that order (step k has stamp 1_000_000 * (k + 1)).
+    """
     faults = faults or Faults()
     c = codec()
-    with StepBagWriter(path, storage=storage, pixels=False) as w:
+    with StepBagWriter(path, storage=storage, pixels=bool(images)) as w:
         for k in range(steps):
             ep, es = divmod(k, EP_LEN + 1)
             stamp = 1_000_000 * (k + 1)
@@ -74,6 +81,8 @@ def _write_synthetic(path: Path, steps: int, faults: Faults | None = None,
                     msg.header.stamp.nanosec += 7
                 for _ in range(2 if (topic, k) in faults.dup else 1):
                     w.write_serialized(topic, stamp, c.serialize(msg))
+        for stamp, raw in images:
+            w.write_serialized(TOPIC_IMAGE, stamp, raw)
     return path
 
 
@@ -410,6 +419,91 @@ def test_batched_ingest_equals_one_by_one_decoding(tmp_path: Path, monkeypatch: 
     _run_collect(tmp_path / 'pixels', storage='mcap', pixels=True, steps=30)
     assert_ingests_as_one_by_one([tmp_path / 'state'], monkeypatch)
     assert_ingests_as_one_by_one([tmp_path / 'pixels'], monkeypatch)
+
+
+def _frame(k: int, shape: tuple[int, int] = (8, 6)) -> np.ndarray:
+    """A distinct HxWx3 uint8 frame per k."""
+    return np.random.default_rng(k).integers(0, 256, (*shape, 3), np.uint8)
+
+
+def test_image_batches_decode_as_rosbags_does() -> None:
+    """Images decode in batches to rosbags' fields; pixels stay views of the raw bytes."""
+    from zeus_ros.offline.data.cdr_columns import decode_messages
+
+    cdc, msgtype = codec(), 'sensor_msgs/msg/Image'
+    msgs = [cdc.image(1_000_000_000 * k + 7 * k, _frame(k, (8, 6) if k % 5 else (6, 8)))
+            for k in range(40)]
+    msgs.append(cdc.image(5, np.zeros((0, 0, 3), np.uint8)))  # no pixels at all
+    for k in (7, 8):  # another frame_id shifts every later field
+        msgs[k].header.frame_id = 'camera_optical'
+    raws = [cdc.serialize(m) for m in msgs]
+    raws.append(bytes(cdc.store.serialize_cdr(msgs[1], msgtype, little_endian=False)))
+    slow: list[int] = []
+
+    def one(i: int) -> Any:
+        slow.append(i)
+        return cdc.deserialize(raws[i], msgtype)
+
+    decoded = decode_messages(raws, msgtype, one)
+    for i, (raw, ours) in enumerate(zip(raws, decoded, strict=True)):
+        theirs = cdc.deserialize(raw, msgtype)
+        assert ours.stamp_ns == theirs.header.stamp.sec * 10**9 + theirs.header.stamp.nanosec
+        for name in ('height', 'width', 'encoding', 'is_bigendian', 'step'):
+            mine, ref = getattr(ours, name), getattr(theirs, name)
+            assert type(mine) is type(ref) and mine == ref, name
+        assert ours.data.dtype == np.uint8 and np.array_equal(ours.data, theirs.data)
+        if i not in slow:
+            assert ours.data.base is raw  # no copy of the pixels
+    assert len(raws) - 1 in slow and len(slow) < 8, slow
+
+
+def test_pixel_frames_exact_in_any_image_order(tmp_path: Path) -> None:
+    """Frames come back channel-first and exact: images in order, reversed, or of odd shape.
+
+    Episode 0's images are in step order, episode 1's reversed, and step 15 has a 6x8 image
+    before its 8x6 one (a duplicate; the first is used, read with the episode's 8x6 shape).
+    """
+    stamp = {k: 1_000_000 * (k + 1) for k in range(18)}
+    odd = _frame(99, (6, 8))
+    order = [*range(6), *reversed(range(6, 12)), *range(12, 18)]
+    images = [(stamp[k], codec().serialize(codec().image(stamp[k], _frame(k)))) for k in order]
+    images.insert(15, (stamp[15], codec().serialize(codec().image(stamp[15], odd))))
+    with pytest.warns(IngestWarning, match='2 images with stamp'):
+        ds = ingest_bags(_write_synthetic(tmp_path / 'pix', 18, images=images))
+    assert [(i.topic, i.step, i.kind) for i in ds.report.issues] == [(TOPIC_IMAGE, 15,
+                                                                     'duplicate')]
+    assert ds.has_frames and [e.steps.tolist() for e in ds.episodes] == [
+        list(range(0, 6)), list(range(6, 12)), list(range(12, 18))]
+    for ep in ds.episodes:
+        expected = [_frame(k) if k != 15 else odd.reshape(8, 6, 3) for k in ep.steps]
+        assert ep.frames is not None and ep.frames.flags.c_contiguous
+        assert ep.frames.dtype == np.uint8 and ep.frames.shape == (6, 3, 8, 6)
+        np.testing.assert_array_equal(ep.frames, np.stack([f.transpose(2, 0, 1)
+                                                           for f in expected]))
+
+
+def test_frame_store_grows_past_what_the_metadata_lists() -> None:
+    """More images than the bag's metadata lists: the store grows, no frame is lost."""
+    from zeus_ros.offline.data.ingest import _Frames
+
+    frames = [_frame(k) for k in range(5)]
+    store = _Frames(listed=1, bag_bytes=10**9)
+    rows = store.add([SimpleNamespace(height=8, width=6, data=f.reshape(-1)) for f in frames])
+    assert rows == list(range(5)) and store.read == 5
+    np.testing.assert_array_equal(store.stack(rows), np.stack([f.transpose(2, 0, 1)
+                                                               for f in frames]))
+
+
+def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
+    """A truncated image message is refused as corruption of its bag, as any bad message."""
+    images = [(1_000_000 * (k + 1), codec().serialize(codec().image(1_000_000 * (k + 1),
+                                                                  _frame(k))))
+              for k in range(12)]
+    images[4] = (images[4][0], images[4][1][:-40])
+    bag = _write_synthetic(tmp_path / 'bad_image', 12, images=images)
+    with pytest.raises(BagError, match='corrupt or truncated') as info:
+        ingest_bags(bag)
+    assert info.value.path == bag
 
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 import gc
+from operator import attrgetter
 from pathlib import Path
 import re
 import sys
@@ -44,7 +45,6 @@ from zeus_ros.offline.data.schema import (
     TOPIC_STATE,
     TOPIC_STEP,
     codec,
-    ns_from_stamp,
 )
 
 if TYPE_CHECKING:
@@ -56,6 +56,8 @@ __all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
 _MAX_LISTED = 20
+_IMAGE_BATCH = 64
+"""Images decoded at once: enough to batch, few enough that their bytes stay in cache."""
 _FIRST_STEPS = 5
 MAX_ABS = 1e9
 """Largest magnitude accepted in a float field: beyond it a value is no more usable than Inf
@@ -246,6 +248,64 @@ def _no_zeus_topics(path: Path, topics: list[str], namespace: str) -> BagError:
                           f'{", ".join(sorted(topics)) or "none"}){hint}')
 
 
+class _Frames:
+    """A bag's image pixels, channel-first, one row per image, copied in as they are read.
+
+    Why: holding every raw image until the episodes are built, then copying each frame out,
+    cost more than the read itself; copying each frame once, while its bytes are still in
+    cache, and handing episodes views of consecutive rows does not. An image whose height,
+    width or data length differ from the first image's is kept as its message instead, and an
+    episode holding one is built frame by frame with its first frame's shape (as before).
+    """
+
+    def __init__(self, listed: int, bag_bytes: int) -> None:
+        self._listed = listed
+        """Images the bag's metadata lists (the store's first size, if the file can hold them)."""
+        self._bag_bytes = bag_bytes
+        self.rows: np.ndarray | None = None
+        self.count = 0
+        self.read = 0
+        """Images added, stored or not."""
+
+    def add(self, messages: list[Any]) -> list[Any]:
+        """Store images' pixels: a row each, or the message itself if not of the first's shape."""
+        self.read += len(messages)
+        refs: list[Any] = []
+        for msg in messages:
+            height, width, data = int(msg.height), int(msg.width), msg.data
+            if self.rows is None:  # an uncompressed bag holds at most bag_bytes // frame bytes
+                size = min(self._listed, self._bag_bytes // max(3 * height * width, 1))
+                self.rows = np.empty((max(size, 1), 3, height, width), np.uint8)
+            rows = self.rows
+            if rows.shape[2:] != (height, width) or data.size != 3 * height * width:
+                refs.append(msg)
+                continue
+            if self.count == len(rows):  # more than listed: grow
+                rows = self.rows = np.concatenate([rows, np.empty_like(rows)])
+            rows[self.count] = data.reshape(height, width, 3).transpose(2, 0, 1)
+            refs.append(self.count)
+            self.count += 1
+        return refs
+
+    def stack(self, refs: list[Any]) -> np.ndarray:
+        """(len(refs), 3, H, W) frames of `refs` (rows or messages, from add)."""
+        rows = self.rows
+        if rows is not None and all(type(r) is int for r in refs):
+            start = refs[0]
+            if refs == list(range(start, start + len(refs))):
+                return rows[start:start + len(refs)]  # the usual case: no copy
+            return rows[refs]
+        datas = [r.data if type(r) is not int else rows[r].transpose(1, 2, 0).reshape(-1)
+                 for r in refs]
+        first = refs[0]
+        height, width = (rows.shape[2:] if type(first) is int
+                         else (int(first.height), int(first.width)))
+        pix = np.empty((len(refs), 3, height, width), np.uint8)
+        for i, data in enumerate(datas):
+            pix[i] = data.reshape(height, width, 3).transpose(2, 0, 1)
+        return pix
+
+
 @dataclass
 class _Topic:
     """Per-topic columns of one bag: step -> (stamp, message), first occurrence wins."""
@@ -284,20 +344,26 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            f"type hash {conn.digest} != this checkout's "
                                            f'{ours} for {expected}: written with another '
                                            'definition; decoding may fail'))
-        # Step topics are decoded in batches after the read (cdr_columns), images one by one
-        # (a batch of frames measured slower: it copies every frame more often).
-        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _STEP_TOPICS}
-        for conn, _, raw in reader.messages(connections=conns):
-            count += 1
-            read[conn.topic] += 1
+        # Messages are decoded in batches (cdr_columns), not one by one: the step topics after
+        # the read, images every _IMAGE_BATCH messages, their pixels copied into `frames` so
+        # that the raw messages can go.
+        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _READ_TOPICS}
+        keep = {c.id: raws[schema_topic[c.topic]].append for c in conns}
+        pending = raws[TOPIC_IMAGE]
+        frames = _Frames(sum(int(c.msgcount) for c in conns
+                             if schema_topic[c.topic] == TOPIC_IMAGE),
+                         sum(f.stat().st_size for f in _bag_files(path)))
+        # `count`: messages read so far, also when the read fails (then named in the error)
+        for count, (conn, _, raw) in enumerate(reader.messages(connections=conns), 1):
+            keep[conn.id]((count, raw))
+            if len(pending) == _IMAGE_BATCH:
+                _store_images(path, pending, frames, images)
+        _store_images(path, pending, frames, images)
+        for conn in conns:  # one bag topic per schema topic
             topic = schema_topic[conn.topic]
-            if topic != TOPIC_IMAGE:
-                raws[topic].append((count, raw))
-                continue
-            msg = cdc.deserialize(raw, conn.msgtype)
-            images[ns_from_stamp(msg.header.stamp)].append(msg)
-        for topic, entries in raws.items():
-            _decode_topic(path, topic, entries, topics[topic].by_step, report, namespace)
+            read[conn.topic] = frames.read if topic == TOPIC_IMAGE else len(raws[topic])
+        for topic in _STEP_TOPICS:
+            _decode_topic(path, topic, raws[topic], topics[topic].by_step, report, namespace)
     except BagError:
         raise
     except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
@@ -306,12 +372,11 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         reader.close()
     report.messages += count
     _check_counts(path, conns, read, report)
-    return {'topics': topics, 'images': images}
+    return {'topics': topics, 'images': images, 'frames': frames}
 
 
-def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
-                  col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
-    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
+def _decode(path: Path, topic: str, entries: list[tuple[int, bytes]]) -> list[Any]:
+    """Decode one topic's (read index, raw) messages in batches; a bad one raises BagError."""
     cdc = codec()
 
     def one(i: int) -> Any:
@@ -321,9 +386,28 @@ def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
             raise BagError(path, f'corrupt or truncated after {entries[i][0] - 1} messages: '
                                  f'{exc}') from exc
 
-    messages = decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
-    for msg in messages:
-        step = int(msg.step)
+    return decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
+
+
+def _store_images(path: Path, entries: list[tuple[int, bytes]], frames: _Frames,
+                  images: dict[int, list[Any]]) -> None:
+    """Decode a batch of images into `frames`, filed by stamp in `images`; empty `entries`."""
+    messages = _decode(path, TOPIC_IMAGE, entries)
+    for msg, ref in zip(messages, frames.add(messages), strict=True):
+        images[msg.stamp_ns].append(ref)
+    entries.clear()
+
+
+def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
+                  col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
+    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
+    messages = _decode(path, topic, entries)
+    steps = list(map(int, map(attrgetter('step'), messages)))
+    if not col and len(set(steps)) == len(steps):  # the usual bag: each step once
+        col.update(zip(steps, zip(map(attrgetter('stamp_ns'), messages), messages,
+                                  strict=True), strict=True))
+        return
+    for step, msg in zip(steps, messages, strict=True):
         if step in col:
             report.issues.append(Issue(str(path), bag_topic(topic, namespace), step,
                                        'duplicate', 'step seen again; keeping the first '
@@ -519,7 +603,7 @@ def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
 
 
 def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
-                   frames: dict[int, Any] | None, action_dim: int) -> Episode:
+                   frames: dict[int, Any] | None, store: _Frames, action_dim: int) -> Episode:
     fb = [topics[TOPIC_STEP].by_step[s][1] for s in piece]
     truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
     acts = topics[TOPIC_ACTION].by_step
@@ -531,13 +615,7 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
         with np.errstate(invalid='ignore'):
             usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
         policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
-    pix = None
-    if frames is not None:
-        first = frames[piece[0]]
-        h, w = int(first.height), int(first.width)
-        pix = np.empty((len(piece), 3, h, w), np.uint8)
-        for i, s in enumerate(piece):
-            pix[i] = frames[s].data.reshape(h, w, 3).transpose(2, 0, 1)
+    pix = store.stack([frames[s] for s in piece]) if frames is not None else None
     return Episode(
         source=str(path),
         episode=int(fb[0].episode),
@@ -604,7 +682,7 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
     if drop or cut:
         report.dropped += (sum(len(p) - 1 for p in before)
                            - sum(len(p) - 1 for p in pieces))
-    return [_build_episode(path, p, topics, frames, action_dim) for p in pieces]
+    return [_build_episode(path, p, topics, frames, read['frames'], action_dim) for p in pieces]
 
 
 def ingest_bags(
