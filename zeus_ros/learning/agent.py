@@ -120,10 +120,14 @@ class ZeusAgent:
             self.modules['psi'] = ContextEncoder(
                 cfg.feature_dim, a_dim, cfg.k, self.context_dim, cfg.aggregation,
                 cfg.transition_dim, cfg.context_hidden_dim, cfg.context_head)
+        target_dim = spec.obs_shape[0] if cfg.model_target == 'observation' else None
         for name in self.method_spec.models:
-            model_class = RewardModel if name == 'reward' else TransitionModel
-            self.modules[name] = model_class(cfg.feature_dim, a_dim, self.context_dim,
-                                             cfg.model_hidden_dim)
+            if name == 'reward':
+                self.modules[name] = RewardModel(cfg.feature_dim, a_dim, self.context_dim,
+                                                 cfg.model_hidden_dim)
+            else:
+                self.modules[name] = TransitionModel(cfg.feature_dim, a_dim, self.context_dim,
+                                                     cfg.model_hidden_dim, target_dim)
         policy_in = cfg.feature_dim + self.context_dim
         self.modules['actor'] = Actor(policy_in, a_dim, cfg.hidden_dim, cfg.actor_log_std_min,
                                       cfg.actor_log_std_max)
@@ -250,6 +254,18 @@ class ZeusAgent:
     def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
         """Task-bound actions -> [-1, 1] (what every network sees)."""
         return (action.float() - self._action_bias) / self._action_scale
+
+    def model_target(self, obs: torch.Tensor, next_obs: torch.Tensor,
+                     next_feat: torch.Tensor) -> torch.Tensor:
+        """What T predicts for the transition o -> o' (config.model_target), gradient stopped.
+
+        'latent': phi(o') (next_feat); 'observation': (o' - o) / obs_std, the state change in
+        the units phi's input is normalised to, so every state dimension weighs alike.
+        """
+        if self.config.model_target == 'observation':
+            std = self.modules['encoder'].obs_std
+            return ((next_obs.float() - obs.float()) / std).detach()
+        return next_feat.detach()
 
     def history_features(self, hist_obs: torch.Tensor, hist_action: torch.Tensor,
                          hist_reward: torch.Tensor, hist_next_obs: torch.Tensor,

@@ -25,6 +25,7 @@ __all__ = [
     'EXPLORATIONS',
     'LEGACY_CONFIG',
     'METHODS',
+    'MODEL_TARGETS',
     'REWARD_VARYING_TASKS',
     'ZeusConfig',
     'config_from_dict',
@@ -43,6 +44,8 @@ CONTEXT_LOSSES = ('paper', 'scale_free')
 
 EXPLORATIONS = ('stochastic', 'noise')
 """How a trained policy collects: sampling the SAC policy (Algorithm 1) or its mode + noise."""
+MODEL_TARGETS = ('latent', 'observation')
+"""What T predicts: the next latent phi(o') or the normalised change of the state vector."""
 
 LEGACY_CONFIG: dict[str, Any] = {'context_norm': 'none', 'context_loss': 'paper',
                                  'critic_context_grad': False, 'exploration': 'noise',
@@ -157,6 +160,12 @@ class ZeusConfig:
     """UP-OSI: fraction of num_updates during which the policy sees the true context."""
     dynamics_loss: str = 'gaussian_nll'
     """'gaussian_nll' (trains mu and sigma, so the W2 term of d is meaningful) or 'mse' on mu."""
+    model_target: str = 'latent'
+    """What the transition models (T, CaDM's backward model) predict: 'latent' phi(o') (the
+    paper, mtrl's DeepMDP) or 'observation', the change of the normalised state
+    (o' - o) / obs_std (state observations only, as CaDM). Why (session 9): on
+    Cheetah-Motor-v0 the motor gain explains 0.4-0.6 of the one-step state change a linear
+    model leaves, but psi stays flat under the latent target."""
     feature_dim: int = 50
     """Size of phi(o) (SAC-AE: 50)."""
     num_conv_layers: int = 4
@@ -230,6 +239,11 @@ class ZeusConfig:
         _check_choice('obs_kind', self.obs_kind, ('state', 'pixels'))
         _check_choice('aggregation', self.aggregation, AGGREGATIONS)
         _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
+        _check_choice('model_target', self.model_target, MODEL_TARGETS)
+        if self.model_target == 'observation' and self.obs_kind != 'state':
+            raise ConfigError("model_target 'observation' predicts the change of the state "
+                              f"vector; obs_kind is {self.obs_kind!r}: use model_target "
+                              "'latent' for pixels")
         _check_choice('context_loss', self.context_loss, CONTEXT_LOSSES)
         _check_choice('context_head', self.context_head, CONTEXT_HEADS)
         _check_choice('context_norm', self.context_norm, CONTEXT_NORMS)

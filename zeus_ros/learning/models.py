@@ -30,20 +30,25 @@ class Gaussian:
 
 
 class TransitionModel(nn.Module):
-    """T(phi(o), a, c) -> N(mu, sigma) over phi(o'); 1 hidden layer (paper), sigma as mtrl."""
+    """T(phi(o), a, c) -> N(mu, sigma) over phi(o'); 1 hidden layer (paper), sigma as mtrl.
+
+    `target_dim` (default feature_dim) is the size of what it predicts: the state vector's
+    size when config.model_target is 'observation'.
+    """
 
     def __init__(self, feature_dim: int, action_dim: int, context_dim: int,
-                 hidden_dim: int = 512) -> None:
+                 hidden_dim: int = 512, target_dim: int | None = None) -> None:
         super().__init__()
         self.trunk = nn.Sequential(
             nn.Linear(feature_dim + action_dim + context_dim, hidden_dim),
             nn.LayerNorm(hidden_dim), nn.ReLU(inplace=True))
-        self.mu = nn.Linear(hidden_dim, feature_dim)
-        self.sigma = nn.Linear(hidden_dim, feature_dim)
+        out = feature_dim if target_dim is None else target_dim
+        self.mu = nn.Linear(hidden_dim, out)
+        self.sigma = nn.Linear(hidden_dim, out)
 
     def forward(self, feat: torch.Tensor, action: torch.Tensor,
                 context: torch.Tensor) -> Gaussian:
-        """Predict the next latent's distribution."""
+        """Predict the distribution of the next latent (or of the state change)."""
         h = self.trunk(torch.cat([feat, action, context], dim=-1))
         sigma = SIGMA_MIN + (SIGMA_MAX - SIGMA_MIN) * torch.sigmoid(self.sigma(h))
         return Gaussian(mu=self.mu(h), sigma=sigma)

@@ -138,9 +138,9 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
     target_next = next_feat.detach()  # stopped phi(o'): no gradient from the dynamics loss
     # What T and R predict from psi(H_t): the next transition, or one further on
     # (config.model_horizon).
-    _, model_action, model_reward, _ = batch.model_transition()
-    model_feat, model_next = (model_feats[0], model_feats[1].detach()) if ahead \
-        else (feat, target_next)
+    model_obs, model_action, model_reward, model_next_obs = batch.model_transition()
+    model_feat, model_next_feat = (model_feats[0], model_feats[1]) if ahead else (feat, next_feat)
+    model_next = agent.model_target(model_obs, model_next_obs, model_next_feat)
     model_action = agent.normalize_action(model_action) if ahead else action
     total = zero
     if objective == 'zeus':
@@ -164,9 +164,9 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
     elif objective == 'cadm':
         forward = dynamics_loss(m['transition'](model_feat, model_action, psi1), model_next,
                                 cfg.dynamics_loss)
-        backward_from = model_feats[1] if ahead else next_feat
-        backward = dynamics_loss(m['backward'](backward_from, model_action, psi1),
-                                 model_feat.detach(), cfg.dynamics_loss)
+        backward = dynamics_loss(m['backward'](model_next_feat, model_action, psi1),
+                                 agent.model_target(model_next_obs, model_obs, model_feat),
+                                 cfg.dynamics_loss)
         total = forward + cfg.cadm_beta * backward
         metrics['loss/dynamics'], metrics['loss/backward_dynamics'] = forward, backward
     elif objective == 'up_osi':
@@ -218,7 +218,8 @@ def _true_context_losses(agent: ZeusAgent, batch: HistoryBatch,
     feat, next_feat = both.split(batch.batch_size)
     context = agent.policy_context(batch.context.float()).detach()
     action = agent.normalize_action(batch.action)
-    dyn = dynamics_loss(m['transition'](feat, action, context), next_feat.detach(),
+    dyn = dynamics_loss(m['transition'](feat, action, context),
+                        agent.model_target(batch.obs, batch.next_obs, next_feat),
                         cfg.dynamics_loss)
     rew = F.mse_loss(m['reward'](feat, action, context), batch.reward.float())
     total = dyn + rew
