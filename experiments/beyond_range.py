@@ -49,7 +49,7 @@ def _first(value: dict[str, float]) -> float:
 def returns(path: Path, split: str, episodes: int) -> list[dict[str, Any]]:
     """Mean episode return of one checkpoint on `split`, per way of setting its context."""
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.diagnostics import policy_contexts
+    from zeus_ros.offline.evaluation.diagnostics import mean_contexts
 
     match = _NAME.match(path.stem)
     if match is None:
@@ -69,7 +69,7 @@ def returns(path: Path, split: str, episodes: int) -> list[dict[str, Any]]:
     train = split_values(agent.task, 'train')
     traces: list = []
     evaluate_contexts(agent, train, episodes=episodes, seed=100, progress=False, traces=traces)
-    means = [policy_contexts(t, agent).mean(0) for t in traces]
+    means = mean_contexts(agent, traces)
     nearest = [int(np.argmin([abs(_first(t) - _first(v)) for t in train])) for v in values]
     out.append({**base, 'freeze': 'train_mean',
                 'return': run([np.mean(means, axis=0) for _ in values])})

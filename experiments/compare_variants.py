@@ -133,6 +133,8 @@ def variant_rows(tables: dict[str, Path], against: Sequence[str] = ()
                        'spread_noise': _cell(_floats(cells, 'spread_noise'), 2),
                        'adaptation_other': _cell(_floats(cells, 'adaptation_value_other')),
                        'adaptation_mean': _cell(_floats(cells, 'adaptation_value_mean')),
+                       'adaptation_train_mean': _cell(_floats(cells,
+                                                              'adaptation_value_train_mean')),
                        'spearman': _cell(_floats(cells, 'spearman'), 2),
                        'headroom': '-' if headroom is None
                        else f'{headroom[0]:.1f} ± {headroom[1]:.1f}'}
@@ -155,7 +157,9 @@ COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
            ('gain_over_se', 'gain / s.e.'), ('share', 'share of headroom'),
            ('sensitivity', 'context sensitivity'), ('spread_noise', 'spread / noise'),
            ('adaptation_other', 'value of adaptation (other extreme)'),
-           ('adaptation_mean', 'value of adaptation (mean)'), ('spearman', 'Spearman'))
+           ('adaptation_mean', 'value of adaptation (mean)'),
+           ('adaptation_train_mean', "value of adaptation (train values' mean)"),
+           ('spearman', 'Spearman'))
 
 
 def markdown(rows: list[dict[str, Any]], against: Sequence[str] = ()) -> str:

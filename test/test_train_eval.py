@@ -185,7 +185,8 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
     assert 'random' in summary
     contexts = read_csv(out / 'contexts.csv')
     assert {row['policy'] for row in contexts} == {'agent', 'random', 'frozen_other',
-                                                   'frozen_mean'}
+                                                   'frozen_mean', 'frozen_train_mean'}
+    assert np.isfinite(agent['adaptation_value_train_mean'])
     assert 'spearman' in printed
 
 
@@ -200,7 +201,7 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                  '--episodes', '2', '--probe-steps', '0', '--out', str(out), '--no-progress'])
     assert code == 0
     contexts = read_csv(out / 'contexts.csv')
-    for policy in ('agent', 'frozen_other', 'frozen_mean', 'random'):
+    for policy in ('agent', 'frozen_other', 'frozen_mean', 'frozen_train_mean', 'random'):
         mine = [row for row in contexts if row['policy'] == policy]
         assert sorted((row['context/torso_length'], row['episode']) for row in mine) == [
             (0.65, 0), (0.65, 1), (1.4, 0), (1.4, 1)], policy
@@ -210,6 +211,21 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
     live = np.mean([r['return'] for r in contexts if r['policy'] == 'agent'])
     frozen = np.mean([r['return'] for r in contexts if r['policy'] == 'frozen_mean'])
     assert summary['adaptation_value_mean'] == pytest.approx(live - frozen, abs=1e-3)
+    # off the train values: frozen at what psi reads on the train values (a deployed robot's
+    # question), the same episodes as a direct evaluation frozen there
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts, train_mean_context
+
+    agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
+    train_mean = train_mean_context(agent, episodes=2, seed=100)
+    values = [{'torso_length': 0.65}, {'torso_length': 1.4}]
+    direct = evaluate_contexts(agent, values, episodes=2, seed=100, progress=False,
+                               frozen=[train_mean, train_mean])
+    at_train_mean = [r['return'] for r in contexts if r['policy'] == 'frozen_train_mean']
+    assert sorted(at_train_mean) == pytest.approx(sorted(r['return'] for r in direct),
+                                                  abs=1e-4)  # the CSV's 6 digits
+    assert summary['adaptation_value_train_mean'] == pytest.approx(
+        live - np.mean(at_train_mean), abs=1e-3)
     printed = capsys.readouterr().out
     assert 'sensitivity' in printed and 'frozen_other' in printed
     assert main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.6,abc',

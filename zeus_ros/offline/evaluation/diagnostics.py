@@ -9,8 +9,11 @@ method alike ('context' below is psi(H), or the true context for the oracles):
     RMS deviation of the context from its value's mean within the episodes. Below ~1 the
     context cannot tell the values apart, whatever its absolute size;
   - value of adaptation: return with the context live minus return with it frozen (to the mean
-    context of the extreme value farthest from each value, and to the mean over all values),
-    on the same environment seeds, so every difference is paired.
+    context of the extreme value farthest from each value, to the mean over all values, and
+    to the mean over the *train* values), on the same environment seeds, so every difference
+    is paired. Off the train values the last one is the question a deployed robot meets: is
+    acting on the inferred context better than acting as in training? (The split's own mean
+    is itself an unseen context there; docs/results.md, session 8.)
 The headroom over seeds (oracle - no_context, and the share of it a method recovers) is in
 report.py, which sees every method of a task.
 """
@@ -27,9 +30,10 @@ if TYPE_CHECKING:
     from zeus_ros.offline.evaluation.evaluate import Trace
 
 __all__ = ['DIAGNOSTICS', 'context_sensitivity', 'extreme_indices', 'farthest_extreme',
-           'policy_contexts', 'spread_over_noise']
+           'frozen_contexts', 'mean_contexts', 'policy_contexts', 'spread_over_noise']
 
-DIAGNOSTICS = ('sensitivity', 'spread_noise', 'adaptation_value_other', 'adaptation_value_mean')
+DIAGNOSTICS = ('sensitivity', 'spread_noise', 'adaptation_value_other', 'adaptation_value_mean',
+               'adaptation_value_train_mean')
 """Diagnostic columns of an eval summary (NaN where the method has no context)."""
 
 
@@ -107,13 +111,28 @@ def spread_over_noise(contexts: Sequence[np.ndarray | None]) -> tuple[float, flo
     return spread, noise, ratio
 
 
-def frozen_contexts(agent: InferenceAgent, traces: Sequence[Trace],
-                    values: Sequence[dict[str, float]]) -> dict[str, list[Any]] | None:
-    """Per value, the context to freeze: 'other' (farthest extreme's mean) and 'mean'."""
+def mean_contexts(agent: InferenceAgent, traces: Sequence[Trace]) -> list[np.ndarray] | None:
+    """The mean context of each trace (one per value); None without a context."""
     contexts = [policy_contexts(t, agent) for t in traces]
     if any(c is None or not len(c) for c in contexts):
         return None
-    means = [c.mean(0) for c in contexts]
+    return [c.mean(0) for c in contexts]
+
+
+def frozen_contexts(agent: InferenceAgent, traces: Sequence[Trace],
+                    values: Sequence[dict[str, float]],
+                    train_mean: np.ndarray | None = None) -> dict[str, list[Any]] | None:
+    """Per value, the context to freeze: 'other', 'mean' and, when given, 'train_mean'.
+
+    'other': the mean context of the farthest extreme value; 'mean': over the split's values;
+    'train_mean': over the train values (computed by the caller).
+    """
+    means = mean_contexts(agent, traces)
+    if means is None:
+        return None
     overall = np.mean(means, axis=0)
-    return {'other': [means[farthest_extreme(values, i)] for i in range(len(values))],
-            'mean': [overall for _ in values]}
+    frozen = {'other': [means[farthest_extreme(values, i)] for i in range(len(values))],
+              'mean': [overall for _ in values]}
+    if train_mean is not None:
+        frozen['train_mean'] = [np.asarray(train_mean) for _ in values]
+    return frozen

@@ -303,6 +303,20 @@ def parse_values(text: str, names: Sequence[str]) -> list[dict[str, float]]:
     return values
 
 
+def train_mean_context(agent: Any, *, episodes: int, seed: int) -> np.ndarray | None:
+    """The agent's mean context over its task's train values: what it acts on in training.
+
+    Same protocol as the split's episodes (deterministic, `episodes` per value, `seed`).
+    """
+    from zeus_ros.offline.evaluation.diagnostics import mean_contexts
+
+    traces: list[Trace] = []
+    evaluate_contexts(agent, split_values(agent.task, 'train'), episodes=episodes, seed=seed,
+                      progress=False, traces=traces)
+    means = mean_contexts(agent, traces)
+    return None if means is None else np.mean(means, axis=0)
+
+
 def switching_order(values: Sequence[dict[str, float]], seed: int) -> list[dict[str, float]]:
     """The split's values in a seeded shuffled order (no neighbour-to-neighbour sweep)."""
     order = np.random.default_rng(seed).permutation(len(values))
@@ -370,8 +384,11 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         probe = probe_context([rollout], k=5, seed=seed, progress=progress)
     nan = float('nan')
     sensitivity, (_, _, spread_noise) = nan, (nan, nan, nan)
-    adaptation = {'other': nan, 'mean': nan}
-    frozen = frozen_contexts(agent, traces, values) if diagnostics else None
+    adaptation = {'other': nan, 'mean': nan, 'train_mean': nan}
+    train_mean = None
+    if diagnostics and split != 'train' and agent.context_dim:
+        train_mean = train_mean_context(agent, episodes=episodes, seed=seed)
+    frozen = frozen_contexts(agent, traces, values, train_mean) if diagnostics else None
     if diagnostics:
         sensitivity = context_sensitivity(agent, traces, values)
         spread_noise = spread_over_noise([policy_contexts(t, agent) for t in traces])[2]
@@ -381,6 +398,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                                         progress=False, frozen=contexts)
         rows += [{'policy': f'frozen_{kind}', **r} for r in frozen_rows]
         adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
+    if split == 'train':  # the split's mean is the train values' mean
+        adaptation['train_mean'] = adaptation['mean']
     agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
     random_ret = [r['return'] for r in rows if r['policy'] == 'random']
     recovered = [s['latency'] for s in judged if s['recovered']]
@@ -395,7 +414,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         'probe_mean_mse': probe.baseline_mse if probe else float('nan'),
         'sensitivity': sensitivity, 'spread_noise': spread_noise,
         'adaptation_value_other': adaptation['other'],
-        'adaptation_value_mean': adaptation['mean'], 'episodes': episodes},
+        'adaptation_value_mean': adaptation['mean'],
+        'adaptation_value_train_mean': adaptation['train_mean'], 'episodes': episodes},
         {'policy': 'random', 'method': 'uniform', 'split': split,
          'mean_return': float(np.mean(random_ret)), 'std_return': float(np.std(random_ret))}]
     write_csv(out / 'contexts.csv', rows)
@@ -491,9 +511,9 @@ def main(argv: list[str] | None = None) -> int:
                                            'mean_latency', 'spearman', 'probe_mse',
                                            'probe_mean_mse']))
     print()
-    print(format_table(result['summary'][:1], ['sensitivity', 'spread_noise',
-                                               'adaptation_value_other',
-                                               'adaptation_value_mean']))
+    from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
+
+    print(format_table(result['summary'][:1], list(DIAGNOSTICS)))
     print(f'\nwrote CSV and PNG to {result["out"]}')
     return 0
 
