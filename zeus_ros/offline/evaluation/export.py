@@ -72,7 +72,8 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         f'`{config.context_loss}`, critic_context_grad `{config.critic_context_grad}`, '
         f'context_target_tau {config.context_target_tau}, '
         f'context_consistency {config.context_consistency}, context_head '
-        f'`{config.context_head}`, model_horizon {config.model_horizon}, '
+        f'`{config.context_head}`, model_horizon {config.model_horizon}, model_target '
+        f'`{config.model_target}`, '
         f'context_noise {config.context_noise}, exploration `{config.exploration}`, '
         f'representation_frozen_from {config.representation_frozen_from} |',
         f'| observations | {obs} |',
