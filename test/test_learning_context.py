@@ -206,3 +206,26 @@ def test_models_predict_the_sampled_transition_ahead() -> None:
     representation_losses(agent, batch, None, moved)
     assert moved['loss/reward'] > plain['loss/reward'] + 50.0
     assert torch.allclose(moved['loss/dynamics'], plain['loss/dynamics'])
+
+
+def test_code_norm_keeps_psi_alive_where_the_tanh_saturates() -> None:
+    """Blown-up pre-activations (as in the collapsed Cheetah-Motor-v0 runs).
+
+    Without code_norm every code is +-1, psi is the same for different histories and no
+    gradient reaches the per-transition MLP; with it psi still tells them apart and learns.
+    """
+    full = torch.ones(B, K, dtype=torch.bool)
+    first, second = _history(full, seed=1), _history(full, seed=2)
+    for code_norm, alive in ((False, False), (True, True)):
+        torch.manual_seed(0)
+        psi = ContextEncoder(F, A, K, context_dim=3, transition_dim=8, hidden_dim=16,
+                             code_norm=code_norm)
+        with torch.no_grad():
+            last = psi.transition[-1]
+            last.weight.mul_(1e3)
+            last.bias.fill_(1e6)  # every history's pre-activations far out on the same side
+        gap = (psi(first) - psi(second)).abs().max()
+        psi(first).pow(2).sum().backward()
+        grad = last.weight.grad.abs().max()
+        assert (float(gap) > 1e-3) is alive, code_norm
+        assert (float(grad) > 1e-6) is alive, code_norm

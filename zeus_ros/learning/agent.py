@@ -119,7 +119,8 @@ class ZeusAgent:
         if source == 'psi':
             self.modules['psi'] = ContextEncoder(
                 cfg.feature_dim, a_dim, cfg.k, self.context_dim, cfg.aggregation,
-                cfg.transition_dim, cfg.context_hidden_dim, cfg.context_head)
+                cfg.transition_dim, cfg.context_hidden_dim, cfg.context_head,
+                cfg.context_code_norm)
         target_dim = spec.obs_shape[0] if cfg.model_target == 'observation' else None
         for name in self.method_spec.models:
             if name == 'reward':

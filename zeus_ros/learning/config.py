@@ -104,6 +104,11 @@ class ZeusConfig:
     """After the aggregation: 'linear' (psi a linear map of the aggregated codes, the paper's
     reading) or 'mlp' (Deep Sets' rho: a ReLU MLP of context_hidden_dim, so psi can combine what
     the transitions say instead of averaging it; measured in docs/results.md, session 5)."""
+    context_code_norm: bool = False
+    """True: psi's per-transition pre-activations are layer-normalised (no learned scale)
+    before the tanh, so the codes cannot saturate. Why (session 9): on Cheetah-Motor-v0 every
+    code of the collapsed psi runs was at +-1 (the tanh's gradient ~0, so psi could not
+    recover: a flat psi), against 0.1% in the run whose psi read the motor gain."""
     model_horizon: int = 1
     """Which transition the context-conditioned models (T and R of zeus, cadm's pair) predict
     from psi(H_t): one drawn uniformly from the `model_horizon` transitions that start at o_t,
@@ -267,9 +272,9 @@ class ZeusConfig:
             raise ConfigError(f'representation_frozen_from must be an integer >= 0 (0: never), '
                               f'got {self.representation_frozen_from!r}')
         _check_choice('exploration', self.exploration, EXPLORATIONS)
-        if not isinstance(self.critic_context_grad, bool):
-            raise ConfigError(f'critic_context_grad must be true or false, '
-                              f'got {self.critic_context_grad!r}')
+        for flag in ('critic_context_grad', 'context_code_norm'):
+            if not isinstance(getattr(self, flag), bool):
+                raise ConfigError(f'{flag} must be true or false, got {getattr(self, flag)!r}')
         for name in ('k', 'model_horizon', 'context_dim', 'transition_dim', 'context_hidden_dim',
                      'feature_dim',
                      'num_conv_layers', 'num_filters', 'encoder_hidden_dim', 'hidden_dim',

@@ -1,9 +1,11 @@
 """psi, the context encoder: encode each transition of H, aggregate the k codes, project.
 
 Each transition (phi(o), a, r, phi(o')) goes through an MLP with a tanh output; bounding the codes
-keeps `product` from overflowing and puts every operator on the same scale. Missing slots of a
-partial history (hist_mask False) are neutral for every operator, so their content never matters,
-and an all-empty history (the first step of an episode) gives a finite, defined psi.
+keeps `product` from overflowing and puts every operator on the same scale (with
+config.context_code_norm the pre-activations are layer-normalised first, so the tanh cannot
+saturate). Missing slots of a partial history (hist_mask False) are neutral for every
+operator, so their content never matters, and an all-empty history (the first step of an
+episode) gives a finite, defined psi.
 """
 
 from __future__ import annotations
@@ -92,7 +94,7 @@ class ContextEncoder(nn.Module):
 
     def __init__(self, feature_dim: int, action_dim: int, k: int, context_dim: int,
                  aggregation: str = 'mean', transition_dim: int = 64,
-                 hidden_dim: int = 128, head: str = 'linear') -> None:
+                 hidden_dim: int = 128, head: str = 'linear', code_norm: bool = False) -> None:
         super().__init__()
         if aggregation not in AGGREGATIONS:
             raise ValueError(f'aggregation must be one of {", ".join(AGGREGATIONS)}, '
@@ -104,6 +106,9 @@ class ContextEncoder(nn.Module):
         self.context_dim = context_dim
         in_dim = 2 * feature_dim + action_dim + 1
         self.transition = mlp(in_dim, (hidden_dim, hidden_dim), transition_dim)
+        # code_norm: unit-scale pre-activations, so the tanh cannot saturate (config.py)
+        self.code_norm = (nn.LayerNorm(transition_dim, elementwise_affine=False) if code_norm
+                          else nn.Identity())
         aggregated = transition_dim * (k if aggregation == 'concat' else 1)
         # 'linear': psi is a linear map of the aggregate (the paper's reading). 'mlp': Deep Sets'
         # rho, a nonlinear function of it, which can combine transitions (e.g. keep the target
@@ -117,7 +122,7 @@ class ContextEncoder(nn.Module):
         if history.feat.shape[1] != self.k:
             raise ValueError(f'history length {history.feat.shape[1]} does not match k={self.k}')
         x = torch.cat([history.feat, history.action, history.reward, history.next_feat], dim=-1)
-        codes = torch.tanh(self.transition(x))
+        codes = torch.tanh(self.code_norm(self.transition(x)))
         return self.head(aggregate(codes, history.mask, self.aggregation))
 
 
