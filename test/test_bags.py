@@ -484,14 +484,54 @@ def test_pixel_frames_exact_in_any_image_order(tmp_path: Path) -> None:
 
 def test_frame_store_grows_past_what_the_metadata_lists() -> None:
     """More images than the bag's metadata lists: the store grows, no frame is lost."""
-    from zeus_ros.offline.data.ingest import _Frames
+    from zeus_ros.offline.data.frames import FrameStore
 
     frames = [_frame(k) for k in range(5)]
-    store = _Frames(listed=1, bag_bytes=10**9)
-    rows = store.add([SimpleNamespace(height=8, width=6, data=f.reshape(-1)) for f in frames])
+    store = FrameStore(listed=1, bag_bytes=10**9)
+    rows = store.add([SimpleNamespace(height=8, width=6, data=f.reshape(-1), stamp_ns=k)
+                      for k, f in enumerate(frames)])
     assert rows == list(range(5)) and store.read == 5
     np.testing.assert_array_equal(store.stack(rows), np.stack([f.transpose(2, 0, 1)
                                                                for f in frames]))
+
+
+def test_image_batches_stored_from_raw_bytes_as_decoded(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Batches of images alike but for stamp and pixels skip decoding, with the same result.
+
+    1100 steps (stamps past one second), so most batches take FrameStore.add_raw; the first
+    (no model yet), one with another frame_id and one with an image of another shape are
+    decoded. One image repeats a stamp (a duplicate, reported as when decoded).
+    """
+    from zeus_ros.offline.data.frames import FrameStore
+
+    from live_fixtures import assert_ingests_as_one_by_one
+
+    steps = 1100
+    cdc = codec()
+    frames = {k: _frame(k) for k in range(steps)}
+    frames[700] = _frame(700, (6, 8))
+    msgs = {k: cdc.image(1_000_000 * (k + 1), frames[k]) for k in range(steps)}
+    msgs[300].header.frame_id = 'camera_optical'
+    order = [*range(0, 500), *reversed(range(500, 900)), *range(900, steps)]
+    images = [(1_000_000 * (k + 1), cdc.serialize(msgs[k])) for k in order]
+    images.insert(1001, (images[1000][0], cdc.serialize(cdc.image(images[1000][0], _frame(0)))))
+    bag = _write_synthetic(tmp_path / 'many', steps, images=images)
+    calls: list[bool] = []
+    add_raw = FrameStore.add_raw
+    monkeypatch.setattr(FrameStore, 'add_raw',
+                        lambda store, raws: calls.append(add_raw(store, raws)) or calls[-1])
+    with pytest.warns(IngestWarning, match='2 images with stamp'):
+        ds = ingest_bags(bag)
+    monkeypatch.undo()
+    assert len(calls) == 18 and calls.count(False) == 3, calls
+    assert ds.has_frames and ds.report.steps == steps
+    for ep in ds.episodes:
+        assert ep.frames is not None and ep.frames.dtype == np.uint8
+        assert ep.frames.flags.c_contiguous and ep.frames.shape == (len(ep.steps), 3, 8, 6)
+        np.testing.assert_array_equal(ep.frames, np.stack([
+            frames[int(k)].reshape(8, 6, 3).transpose(2, 0, 1) for k in ep.steps]))
+    assert_ingests_as_one_by_one([bag], monkeypatch)
 
 
 def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:

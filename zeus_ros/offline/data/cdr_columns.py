@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['FIELDS', 'PAYLOAD_FIELDS', 'decode_messages', 'stack_field']
+__all__ = ['FIELDS', 'PAYLOAD_FIELDS', 'decode_messages', 'payload_offset', 'stack_field']
 
 FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     'zeus_msgs/msg/StateVector': (('step', 'u8'), ('data', 'f8[]')),
@@ -105,6 +105,15 @@ def _layout(raw: bytes, spec: Sequence[tuple[str, str]]) -> tuple[list[_Item], l
             items.append((name, kind, pos, 1))
             pos += size
     return items, prefixes, pos
+
+
+def payload_offset(raw: bytes, msgtype: str) -> int | None:
+    """Offset of the trailing byte payload of `raw` (a PAYLOAD_FIELDS type); None if unreadable."""
+    try:
+        items, _prefixes, _end = _layout(raw, PAYLOAD_FIELDS[msgtype])
+    except struct.error:
+        return None
+    return int(items[-1][2])
 
 
 def _strings(block: np.ndarray, offset: int, length: int) -> list[str]:

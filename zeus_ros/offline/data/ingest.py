@@ -37,6 +37,7 @@ from rosbags.rosbag2 import Reader
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
 from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
+from zeus_ros.offline.data.frames import FrameStore
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -248,64 +249,6 @@ def _no_zeus_topics(path: Path, topics: list[str], namespace: str) -> BagError:
                           f'{", ".join(sorted(topics)) or "none"}){hint}')
 
 
-class _Frames:
-    """A bag's image pixels, channel-first, one row per image, copied in as they are read.
-
-    Why: holding every raw image until the episodes are built, then copying each frame out,
-    cost more than the read itself; copying each frame once, while its bytes are still in
-    cache, and handing episodes views of consecutive rows does not. An image whose height,
-    width or data length differ from the first image's is kept as its message instead, and an
-    episode holding one is built frame by frame with its first frame's shape (as before).
-    """
-
-    def __init__(self, listed: int, bag_bytes: int) -> None:
-        self._listed = listed
-        """Images the bag's metadata lists (the store's first size, if the file can hold them)."""
-        self._bag_bytes = bag_bytes
-        self.rows: np.ndarray | None = None
-        self.count = 0
-        self.read = 0
-        """Images added, stored or not."""
-
-    def add(self, messages: list[Any]) -> list[Any]:
-        """Store images' pixels: a row each, or the message itself if not of the first's shape."""
-        self.read += len(messages)
-        refs: list[Any] = []
-        for msg in messages:
-            height, width, data = int(msg.height), int(msg.width), msg.data
-            if self.rows is None:  # an uncompressed bag holds at most bag_bytes // frame bytes
-                size = min(self._listed, self._bag_bytes // max(3 * height * width, 1))
-                self.rows = np.empty((max(size, 1), 3, height, width), np.uint8)
-            rows = self.rows
-            if rows.shape[2:] != (height, width) or data.size != 3 * height * width:
-                refs.append(msg)
-                continue
-            if self.count == len(rows):  # more than listed: grow
-                rows = self.rows = np.concatenate([rows, np.empty_like(rows)])
-            rows[self.count] = data.reshape(height, width, 3).transpose(2, 0, 1)
-            refs.append(self.count)
-            self.count += 1
-        return refs
-
-    def stack(self, refs: list[Any]) -> np.ndarray:
-        """(len(refs), 3, H, W) frames of `refs` (rows or messages, from add)."""
-        rows = self.rows
-        if rows is not None and all(type(r) is int for r in refs):
-            start = refs[0]
-            if refs == list(range(start, start + len(refs))):
-                return rows[start:start + len(refs)]  # the usual case: no copy
-            return rows[refs]
-        datas = [r.data if type(r) is not int else rows[r].transpose(1, 2, 0).reshape(-1)
-                 for r in refs]
-        first = refs[0]
-        height, width = (rows.shape[2:] if type(first) is int
-                         else (int(first.height), int(first.width)))
-        pix = np.empty((len(refs), 3, height, width), np.uint8)
-        for i, data in enumerate(datas):
-            pix[i] = data.reshape(height, width, 3).transpose(2, 0, 1)
-        return pix
-
-
 @dataclass
 class _Topic:
     """Per-topic columns of one bag: step -> (stamp, message), first occurrence wins."""
@@ -317,7 +260,6 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     """Deserialize the zeus topics of one bag, reporting duplicates; raise BagError if broken."""
     cdc = codec()
     topics: dict[str, _Topic] = {t: _Topic() for t in _STEP_TOPICS}
-    images: dict[int, list[Any]] = defaultdict(list)
     if path.is_dir() and not (path / 'metadata.yaml').exists():
         raise _without_metadata(path)
     try:
@@ -350,15 +292,15 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _READ_TOPICS}
         keep = {c.id: raws[schema_topic[c.topic]].append for c in conns}
         pending = raws[TOPIC_IMAGE]
-        frames = _Frames(sum(int(c.msgcount) for c in conns
-                             if schema_topic[c.topic] == TOPIC_IMAGE),
-                         sum(f.stat().st_size for f in _bag_files(path)))
+        frames = FrameStore(sum(int(c.msgcount) for c in conns
+                                if schema_topic[c.topic] == TOPIC_IMAGE),
+                            sum(f.stat().st_size for f in _bag_files(path)))
         # `count`: messages read so far, also when the read fails (then named in the error)
         for count, (conn, _, raw) in enumerate(reader.messages(connections=conns), 1):
             keep[conn.id]((count, raw))
             if len(pending) == _IMAGE_BATCH:
-                _store_images(path, pending, frames, images)
-        _store_images(path, pending, frames, images)
+                _store_images(path, pending, frames)
+        _store_images(path, pending, frames)
         for conn in conns:  # one bag topic per schema topic
             topic = schema_topic[conn.topic]
             read[conn.topic] = frames.read if topic == TOPIC_IMAGE else len(raws[topic])
@@ -372,7 +314,7 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         reader.close()
     report.messages += count
     _check_counts(path, conns, read, report)
-    return {'topics': topics, 'images': images, 'frames': frames}
+    return {'topics': topics, 'frames': frames}
 
 
 def _decode(path: Path, topic: str, entries: list[tuple[int, bytes]]) -> list[Any]:
@@ -389,12 +331,11 @@ def _decode(path: Path, topic: str, entries: list[tuple[int, bytes]]) -> list[An
     return decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
 
 
-def _store_images(path: Path, entries: list[tuple[int, bytes]], frames: _Frames,
-                  images: dict[int, list[Any]]) -> None:
-    """Decode a batch of images into `frames`, filed by stamp in `images`; empty `entries`."""
-    messages = _decode(path, TOPIC_IMAGE, entries)
-    for msg, ref in zip(messages, frames.add(messages), strict=True):
-        images[msg.stamp_ns].append(ref)
+def _store_images(path: Path, entries: list[tuple[int, bytes]], frames: FrameStore) -> None:
+    """Store a batch of images in `frames` (decoded only if it must be); empty `entries`."""
+    raws = [raw for _, raw in entries]
+    if not frames.add_raw(raws):
+        frames.add(_decode(path, TOPIC_IMAGE, entries), raws)
     entries.clear()
 
 
@@ -471,14 +412,20 @@ def _runs(sorted_steps: list[int]) -> list[tuple[int, int]]:
     return runs
 
 
-def _match_images(
-    path: Path, steps: list[int], topics: dict[str, _Topic], images: dict[int, list[Any]],
-    report: IngestReport,
-) -> dict[int, Any]:
+def _match_images(path: Path, steps: list[int], topics: dict[str, _Topic], store: FrameStore,
+                  report: IngestReport) -> dict[int, Any]:
     """Give each step its frame by stamp (n-th image of a stamp -> n-th step of that stamp)."""
+    fb = topics[TOPIC_STEP].by_step
+    stamps = [fb[step][0] for step in steps]
+    if len(set(stamps)) == len(stamps) and len(set(store.stamps)) == len(store.stamps):
+        # the usual bag: one image per stamp, one step per stamp (refs are never None)
+        found = list(map(dict(zip(store.stamps, store.refs, strict=True)).get, stamps))
+        if None not in found:
+            return dict(zip(steps, found, strict=True))
+    images = store.by_stamp()
     by_stamp: dict[int, list[int]] = defaultdict(list)
-    for step in steps:
-        by_stamp[topics[TOPIC_STEP].by_step[step][0]].append(step)
+    for step, stamp in zip(steps, stamps, strict=True):
+        by_stamp[stamp].append(step)
     frames: dict[int, Any] = {}
     for stamp, stamp_steps in by_stamp.items():
         msgs = images.get(stamp, [])
@@ -603,7 +550,8 @@ def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
 
 
 def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
-                   frames: dict[int, Any] | None, store: _Frames, action_dim: int) -> Episode:
+                   frames: dict[int, Any] | None, store: FrameStore, action_dim: int
+                   ) -> Episode:
     fb = [topics[TOPIC_STEP].by_step[s][1] for s in piece]
     truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
     acts = topics[TOPIC_ACTION].by_step
@@ -665,8 +613,8 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
             raise IngestError(f'{path}: {TOPIC_CONTEXT_TRUTH} names {list(n)} differ from '
                               f'{list(meta["names"])} seen before')
     frames = None
-    if read['images']:
-        frames = _match_images(path, sorted(usable), topics, read['images'], report)
+    if read['frames'].read:
+        frames = _match_images(path, sorted(usable), topics, read['frames'], report)
         usable &= frames.keys()
     drop, cut = _check_values(path, topics, report, meta, namespace)
     before = _pieces(path, sorted(usable), fb, IngestReport()) if drop or cut else []
