@@ -20,6 +20,8 @@ from collections import defaultdict, namedtuple
 from collections.abc import Callable, Sequence
 from dataclasses import fields
 from functools import cache
+from itertools import repeat
+from operator import attrgetter
 import struct
 from types import SimpleNamespace
 from typing import Any
@@ -204,6 +206,9 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
     return out
 
 
+_GROUP, _ROW = attrgetter('group'), attrgetter('row')
+
+
 @cache
 def _record_type(names: tuple[str, ...]) -> Any:
     """A light read-only message: its fields, stamp_ns, and its group's matrices and row."""
@@ -220,14 +225,12 @@ def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
     group = getattr(messages[0], 'group', None) if messages else None
     if group is None or name not in group:
         return None
-    try:
-        rows = np.fromiter((m.row if m.group is group else -1 for m in messages), np.intp,
-                           len(messages))
+    try:  # map(attrgetter): no Python frame per message
+        if len(set(map(id, map(_GROUP, messages)))) != 1:  # another group among them
+            return None
     except AttributeError:  # a message decoded alone (the fallback) is among them
         return None
-    if (rows < 0).any():
-        return None
-    return group[name][rows]
+    return group[name][np.fromiter(map(_ROW, messages), np.intp, len(messages))]
 
 
 def _with_stamp(message: Any, stamp_ns: int) -> Any:
@@ -270,9 +273,13 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
                                for i in members]
     stamps = (np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nanosec, np.int64)).tolist()
     rows = zip(*(columns[name] for name in record._fields[:-3]), stamps,
-               [matrices] * len(members), range(len(members)), strict=True)
-    for index, row in zip(members, rows, strict=True):
-        out[index] = record._make(row)
+               repeat(matrices, len(members)), range(len(members)), strict=True)
+    records = map(tuple.__new__, repeat(record), rows)  # record._make without its frame
+    if every and len(members) == len(out):
+        out[:] = records
+    else:
+        for index, message in zip(members, records, strict=True):
+            out[index] = message
     if not _agrees(out[members[0]], fallback(members[0]), spec):
         for index in members:
             out[index] = None
