@@ -544,6 +544,8 @@ def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
     with pytest.raises(BagError, match='corrupt or truncated') as info:
         ingest_bags(bag)
     assert info.value.path == bag
+    # named by its read index: steps 0-3 (5 messages each) and step 4's 4 others came first
+    assert 'after 24 messages' in str(info.value)
 
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:

@@ -21,9 +21,11 @@ first steps; `strict` refuses the bag instead.
 from __future__ import annotations
 
 from collections import Counter, defaultdict
+from contextlib import suppress
 from dataclasses import dataclass, field
 import gc
-from operator import attrgetter
+from itertools import compress
+from operator import attrgetter, itemgetter
 from pathlib import Path
 import re
 import sys
@@ -60,6 +62,7 @@ _MAX_LISTED = 20
 _IMAGE_BATCH = 64
 """Images decoded at once: enough to batch, few enough that their bytes stay in cache."""
 _FIRST_STEPS = 5
+_MESSAGE = itemgetter(1)
 MAX_ABS = 1e9
 """Largest magnitude accepted in a float field: beyond it a value is no more usable than Inf
 (no simulator state, reward or applied action comes near; float32 loses the units digit)."""
@@ -268,6 +271,8 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
         raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}') from exc
     count = 0
+    raws: dict[str, list[bytes]] = {t: [] for t in _READ_TOPICS}
+    frames: FrameStore | None = None
     schema_topic = {bag_topic(t, namespace): t for t in _READ_TOPICS}
     read: Counter[str] = Counter()
     try:
@@ -288,27 +293,29 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            'definition; decoding may fail'))
         # Messages are decoded in batches (cdr_columns), not one by one: the step topics after
         # the read, images every _IMAGE_BATCH messages, their pixels copied into `frames` so
-        # that the raw messages can go.
-        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _READ_TOPICS}
+        # that the raw messages can go. Only raw bytes are kept, no read index each: a corrupt
+        # message's is found again (_Place).
         keep = {c.id: raws[schema_topic[c.topic]].append for c in conns}
         pending = raws[TOPIC_IMAGE]
         frames = FrameStore(sum(int(c.msgcount) for c in conns
                                 if schema_topic[c.topic] == TOPIC_IMAGE),
                             sum(f.stat().st_size for f in _bag_files(path)))
-        # `count`: messages read so far, also when the read fails (then named in the error)
-        for count, (conn, _, raw) in enumerate(reader.messages(connections=conns), 1):
-            keep[conn.id]((count, raw))
+        place = _Place(path, conns, schema_topic)
+        for conn, _, raw in reader.messages(connections=conns):
+            keep[conn.id](raw)
             if len(pending) == _IMAGE_BATCH:
-                _store_images(path, pending, frames)
-        _store_images(path, pending, frames)
+                _store_images(place, pending, frames)
+        _store_images(place, pending, frames)
         for conn in conns:  # one bag topic per schema topic
             topic = schema_topic[conn.topic]
             read[conn.topic] = frames.read if topic == TOPIC_IMAGE else len(raws[topic])
+        count = frames.read + sum(len(raws[topic]) for topic in _STEP_TOPICS)
         for topic in _STEP_TOPICS:
-            _decode_topic(path, topic, raws[topic], topics[topic].by_step, report, namespace)
+            _decode_topic(place, topic, raws[topic], topics[topic].by_step, report, namespace)
     except BagError:
         raise
-    except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
+    except Exception as exc:  # truncated chunk, sqlite errors: named after what was read
+        count = (frames.read if frames else 0) + sum(map(len, raws.values()))
         raise BagError(path, f'corrupt or truncated after {count} messages: {exc}') from exc
     finally:
         reader.close()
@@ -317,32 +324,55 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     return {'topics': topics, 'frames': frames}
 
 
-def _decode(path: Path, topic: str, entries: list[tuple[int, bytes]]) -> list[Any]:
-    """Decode one topic's (read index, raw) messages in batches; a bad one raises BagError."""
+@dataclass
+class _Place:
+    """Where a bag's messages were read from: names a corrupt one by its read index.
+
+    Why: keeping each message's read index cost more than finding it again, by reading the
+    bag's zeus topics up to that message, the one time a message turns out corrupt.
+    """
+
+    path: Path
+    conns: list[Any]
+    schema_topic: dict[str, str]
+
+    def error(self, topic: str, nth: int, exc: Exception) -> BagError:
+        """The BagError of the `nth` message of schema `topic` (0-based), which failed."""
+        ids = {c.id for c in self.conns if self.schema_topic[c.topic] == topic}
+        seen = 0
+        with suppress(Exception), Reader(self.path) as reader:  # else: no index, same error
+            for count, (conn, _, _) in enumerate(reader.messages(connections=self.conns)):
+                if conn.id in ids and (seen := seen + 1) > nth:
+                    return BagError(self.path, f'corrupt or truncated after {count} messages: '
+                                               f'{exc}')
+        return BagError(self.path, f'corrupt or truncated {topic} message: {exc}')
+
+
+def _decode(place: _Place, topic: str, raws: list[bytes], before: int = 0) -> list[Any]:
+    """Decode one topic's messages in batches (`before` read earlier); a bad one: BagError."""
     cdc = codec()
 
     def one(i: int) -> Any:
         try:
-            return cdc.deserialize(entries[i][1], MSGTYPES[topic])
+            return cdc.deserialize(raws[i], MSGTYPES[topic])
         except Exception as exc:  # bad CDR: named like a truncated read
-            raise BagError(path, f'corrupt or truncated after {entries[i][0] - 1} messages: '
-                                 f'{exc}') from exc
+            raise place.error(topic, before + i, exc) from exc
 
-    return decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
+    return decode_messages(raws, MSGTYPES[topic], one)
 
 
-def _store_images(path: Path, entries: list[tuple[int, bytes]], frames: FrameStore) -> None:
-    """Store a batch of images in `frames` (decoded only if it must be); empty `entries`."""
-    raws = [raw for _, raw in entries]
+def _store_images(place: _Place, raws: list[bytes], frames: FrameStore) -> None:
+    """Store a batch of images in `frames` (decoded only if it must be); empty `raws`."""
     if not frames.add_raw(raws):
-        frames.add(_decode(path, TOPIC_IMAGE, entries), raws)
-    entries.clear()
+        frames.add(_decode(place, TOPIC_IMAGE, raws, frames.read), raws)
+    raws.clear()
 
 
-def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
+def _decode_topic(place: _Place, topic: str, raws: list[bytes],
                   col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
-    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
-    messages = _decode(path, topic, entries)
+    """Decode one step topic's messages in batches into `col` by step."""
+    path = place.path
+    messages = _decode(place, topic, raws)
     steps = list(map(int, map(attrgetter('step'), messages)))
     if not col and len(set(steps)) == len(steps):  # the usual bag: each step once
         col.update(zip(steps, zip(map(attrgetter('stamp_ns'), messages), messages,
@@ -441,11 +471,10 @@ def _match_images(path: Path, steps: list[int], topics: dict[str, _Topic], store
     return frames
 
 
-def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
+def _bad_steps(steps: list[int], messages: list[Any], name: str, length: int | None
                ) -> dict[str, list[int]]:
     """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
     bad: dict[str, list[int]] = {}
-    messages = [msg for _, msg in checked]
     matrix = stack_field(messages, name) if length is not None else None
     if matrix is not None and matrix.shape[1] == length:  # one layout, all of that length
         rows = matrix.astype(np.float64)
@@ -453,7 +482,7 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
         values = [getattr(msg, name) for msg in messages]
         sized = np.fromiter((len(v) == length for v in values), bool, len(values))
         if not sized.all():
-            bad['length'] = [checked[i][0] for i in np.flatnonzero(~sized)]
+            bad['length'] = [steps[i] for i in np.flatnonzero(~sized)]
         rows = np.zeros((len(values), length))
         if sized.any():
             rows[sized] = np.stack([v for v, ok in zip(values, sized, strict=True) if ok])
@@ -462,7 +491,7 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
     with np.errstate(invalid='ignore', over='ignore'):
         wrong = ~(np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
     if wrong.any():
-        bad['nonfinite'] = [checked[i][0] for i in np.flatnonzero(wrong)]
+        bad['nonfinite'] = [steps[i] for i in np.flatnonzero(wrong)]
     return bad
 
 
@@ -494,19 +523,19 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
     drop: set[int] = set()
     cut: set[int] = set()
     lengths = meta.setdefault('lengths', {})
+    in_order = {topic: _in_order(topics[topic].by_step, topic == TOPIC_STEP)
+                for topic in _STEP_TOPICS}
     for topic, name, vector, cuts in _FIELDS:
-        by_step = topics[topic].by_step
-        checked = [(s, m) for s, (_, m) in sorted(by_step.items())
-                   if not (topic == TOPIC_STEP and m.first)]
-        if not checked:
+        steps, messages = in_order[topic]
+        if not steps:
             continue
-        length = len(getattr(checked[0][1], name)) if vector else None
+        length = len(getattr(messages[0], name)) if vector else None
         key = f'{topic} {name}'
         if length is not None and lengths.setdefault(key, length) != length:
             raise IngestError(f'{path}: {bag_topic(topic, namespace)} {name} has {length} '
                               f'values, earlier bags {lengths[key]}: recorded on another task '
                               'or robot; ingest them apart')
-        bad = _bad_steps(checked, name, length)
+        bad = _bad_steps(steps, messages, name, length)
         for why, steps in bad.items():
             if topic == TOPIC_ACTION:
                 effect = 'read as absent (the policy request is not trained on)'
@@ -524,6 +553,17 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
             report.issues.append(Issue(str(path), bag_topic(topic, namespace), steps[0], why,
                                        f'{name}: {detail} at steps {first}{more}; {effect}'))
     return drop, cut
+
+
+def _in_order(by_step: dict[int, tuple[int, Any]], skip_first: bool = False
+              ) -> tuple[list[int], list[Any]]:
+    """Steps of a topic in order and their messages (StepFeedback: not an episode's first)."""
+    steps = sorted(by_step)
+    messages = list(map(_MESSAGE, map(by_step.__getitem__, steps)))
+    if skip_first:
+        keep = [not m.first for m in messages]
+        return list(compress(steps, keep)), list(compress(messages, keep))
+    return steps, messages
 
 
 def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
