@@ -534,6 +534,55 @@ def test_image_batches_stored_from_raw_bytes_as_decoded(tmp_path: Path,
     assert_ingests_as_one_by_one([bag], monkeypatch)
 
 
+def test_pieces_split_as_step_by_step() -> None:
+    """Episode pieces (vectorised) split where the step-by-step rule of before splits them.
+
+    A new piece starts at a hole, an episode start, after a last step, at another episode,
+    before a cut step, and where episode_step skips (reported as an 'episode' issue).
+    """
+    from zeus_ros.offline.data.ingest import IngestReport, Issue, _pieces
+
+    def reference(steps: list[int], fb: dict, cut: set[int]) -> tuple[list, list]:
+        pieces: list[list[int]] = []
+        issues = []
+        prev = None
+        for step in steps:
+            msg = fb[step][1]
+            cont = (prev is not None and step == prev + 1 and not msg.first
+                    and step not in cut and not fb[prev][1].last
+                    and msg.episode == fb[prev][1].episode)
+            if cont and msg.episode_step != fb[prev][1].episode_step + 1:
+                issues.append(Issue('bag', TOPIC_STEP, step, 'episode',
+                                    f'episode_step {msg.episode_step} does not follow '
+                                    f'{fb[prev][1].episode_step}'))
+                cont = False
+            if cont:
+                pieces[-1].append(step)
+            else:
+                pieces.append([step])
+            prev = step
+        return [p for p in pieces if len(p) >= 2], issues
+
+    rng = np.random.default_rng(0)
+    reported = 0
+    for trial in range(30):
+        fb, episode, episode_step = {}, 0, 0
+        for step in range(200):
+            first = rng.random() < 0.05
+            episode, episode_step = (episode + 1, 0) if first else (
+                episode + (rng.random() < 0.02), episode_step + 1 + (rng.random() < 0.03))
+            fb[step] = (step, SimpleNamespace(first=first, last=rng.random() < 0.04,
+                                              episode=episode, episode_step=episode_step))
+        steps = sorted(int(s) for s in rng.choice(200, 180 - trial, replace=False))
+        cut = {int(s) for s in rng.choice(200, trial % 7, replace=False)}
+        report = IngestReport()
+        assert _pieces(Path('bag'), steps, fb, report, cut) == reference(steps, fb, cut)[0]
+        assert report.issues == reference(steps, fb, cut)[1]
+        reported += len(report.issues)
+    assert reported > 30
+    assert _pieces(Path('bag'), [], {}, IngestReport()) == []
+
+
 def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
     """A truncated image message is refused as corruption of its bag, as any bad message."""
     images = [(1_000_000 * (k + 1), codec().serialize(codec().image(1_000_000 * (k + 1),

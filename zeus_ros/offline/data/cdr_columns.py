@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import fields
 from functools import cache
 from itertools import repeat
-from operator import attrgetter
+from operator import attrgetter, is_
 import struct
 from types import SimpleNamespace
 from typing import Any
@@ -226,7 +226,7 @@ def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
     if group is None or name not in group:
         return None
     try:  # map(attrgetter): no Python frame per message
-        if len(set(map(id, map(_GROUP, messages)))) != 1:  # another group among them
+        if not all(map(is_, map(_GROUP, messages), repeat(group))):  # another group
             return None
     except AttributeError:  # a message decoded alone (the fallback) is among them
         return None

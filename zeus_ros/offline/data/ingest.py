@@ -51,7 +51,7 @@ from zeus_ros.offline.data.schema import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterable, Iterator, Sequence
 
 __all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_topic',
            'find_bags', 'ingest_bags', 'main']
@@ -62,7 +62,7 @@ _MAX_LISTED = 20
 _IMAGE_BATCH = 64
 """Images decoded at once: enough to batch, few enough that their bytes stay in cache."""
 _FIRST_STEPS = 5
-_MESSAGE = itemgetter(1)
+_STAMP, _MESSAGE = itemgetter(0), itemgetter(1)
 MAX_ABS = 1e9
 """Largest magnitude accepted in a float field: beyond it a value is no more usable than Inf
 (no simulator state, reward or applied action comes near; float32 loses the units digit)."""
@@ -421,8 +421,12 @@ def _check_alignment(path: Path, topics: dict[str, _Topic], report: IngestReport
             report.issues.append(Issue(src, topic, start, 'gap',
                                        f'steps {start}..{stop} missing on this topic only'))
     ref = topics[TOPIC_STEP].by_step
+    ref_steps, ref_stamps = list(ref), list(map(_STAMP, ref.values()))
     for topic in (TOPIC_STATE, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION):
-        for step, (stamp, _) in topics[topic].by_step.items():
+        by_step = topics[topic].by_step
+        if list(by_step) == ref_steps and list(map(_STAMP, by_step.values())) == ref_stamps:
+            continue  # the usual bag: the same steps with the same stamps
+        for step, (stamp, _) in by_step.items():
             if step in ref and ref[step][0] != stamp:
                 usable.discard(step)
                 report.issues.append(Issue(
@@ -555,11 +559,16 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
     return drop, cut
 
 
+def _messages(by_step: dict[int, tuple[int, Any]], steps: Iterable[int]) -> Iterator[Any]:
+    """The messages of `steps` (map chains: no Python frame per step)."""
+    return map(_MESSAGE, map(by_step.__getitem__, steps))
+
+
 def _in_order(by_step: dict[int, tuple[int, Any]], skip_first: bool = False
               ) -> tuple[list[int], list[Any]]:
     """Steps of a topic in order and their messages (StepFeedback: not an episode's first)."""
     steps = sorted(by_step)
-    messages = list(map(_MESSAGE, map(by_step.__getitem__, steps)))
+    messages = list(_messages(by_step, steps))
     if skip_first:
         keep = [not m.first for m in messages]
         return list(compress(steps, keep)), list(compress(messages, keep))
@@ -569,31 +578,35 @@ def _in_order(by_step: dict[int, tuple[int, Any]], skip_first: bool = False
 def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
             report: IngestReport, cut: set[int] | None = None) -> list[list[int]]:
     """Split usable steps into contiguous runs of one episode each (and before `cut` steps)."""
-    cut = cut or set()
-    pieces: list[list[int]] = []
-    prev: int | None = None
-    for step in steps:
-        msg = fb[step][1]
-        cont = (prev is not None and step == prev + 1 and not msg.first and step not in cut
-                and not fb[prev][1].last and msg.episode == fb[prev][1].episode)
-        if cont and msg.episode_step != fb[prev][1].episode_step + 1:
-            report.issues.append(Issue(str(path), TOPIC_STEP, step, 'episode',
-                                       f'episode_step {msg.episode_step} does not follow '
-                                       f'{fb[prev][1].episode_step}'))
-            cont = False
-        if cont:
-            pieces[-1].append(step)
-        else:
-            pieces.append([step])
-        prev = step
-    return [p for p in pieces if len(p) >= 2]
+    if not steps:
+        return []
+    msgs = list(_messages(fb, steps))
+    count = len(steps)
+    step = np.asarray(steps, np.int64)
+    episode, episode_step = (np.fromiter(map(attrgetter(name), msgs), np.int64, count)
+                             for name in ('episode', 'episode_step'))
+    first, last = (np.fromiter(map(attrgetter(name), msgs), bool, count)
+                   for name in ('first', 'last'))
+    cont = np.zeros(count, bool)  # step i continues step i - 1's piece
+    cont[1:] = ((step[1:] == step[:-1] + 1) & ~first[1:] & ~last[:-1]
+                & (episode[1:] == episode[:-1]))
+    if cut:
+        cont &= ~np.isin(step, np.fromiter(cut, np.int64, len(cut)))
+    skips = np.zeros(count, bool)
+    skips[1:] = cont[1:] & (episode_step[1:] != episode_step[:-1] + 1)
+    for i in np.flatnonzero(skips).tolist():
+        report.issues.append(Issue(str(path), TOPIC_STEP, steps[i], 'episode',
+                                   f'episode_step {episode_step[i]} does not follow '
+                                   f'{episode_step[i - 1]}'))
+    starts = np.flatnonzero(~(cont & ~skips)).tolist()
+    return [steps[a:b] for a, b in zip(starts, [*starts[1:], count], strict=True) if b - a >= 2]
 
 
 def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
                    frames: dict[int, Any] | None, store: FrameStore, action_dim: int
                    ) -> Episode:
-    fb = [topics[TOPIC_STEP].by_step[s][1] for s in piece]
-    truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
+    fb = list(_messages(topics[TOPIC_STEP].by_step, piece))
+    truth = list(_messages(topics[TOPIC_CONTEXT_TRUTH].by_step, piece))
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
     present = [(i, acts[s][1]) for i, s in enumerate(piece)
@@ -608,8 +621,9 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
         source=str(path),
         episode=int(fb[0].episode),
         steps=np.asarray(piece, np.int64),
-        stamps_ns=np.asarray([topics[TOPIC_STEP].by_step[s][0] for s in piece], np.int64),
-        obs=_stacked([topics[TOPIC_STATE].by_step[s][1] for s in piece], 'data'),
+        stamps_ns=np.fromiter(map(_STAMP, map(topics[TOPIC_STEP].by_step.__getitem__, piece)),
+                              np.int64, len(piece)),
+        obs=_stacked(list(_messages(topics[TOPIC_STATE].by_step, piece)), 'data'),
         frames=pix,
         action=_stacked(fb[1:], 'applied_action').astype(np.float32),
         action_status=np.asarray([m.action_status for m in fb[1:]], np.uint8),
@@ -642,12 +656,15 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
     topics: dict[str, _Topic] = read['topics']
     usable = _check_alignment(path, topics, report)
     fb = topics[TOPIC_STEP].by_step
-    for step in list(usable):
-        msg = fb[step][1]
-        if msg.task != meta.setdefault('task', msg.task):
-            raise IngestError(f'{path}: {TOPIC_STEP} step {step} is task {msg.task!r}, earlier '
-                              f'bags are {meta["task"]!r}; ingest one task at a time')
-    names = {tuple(m.names) for _, m in topics[TOPIC_CONTEXT_TRUTH].by_step.values()}
+    tasks = set(map(attrgetter('task'), _messages(fb, usable)))
+    if len(tasks) > 1 or (tasks and meta.setdefault('task', next(iter(tasks))) not in tasks):
+        for step in list(usable):  # name the first step of another task
+            msg = fb[step][1]
+            if msg.task != meta.setdefault('task', msg.task):
+                raise IngestError(f'{path}: {TOPIC_STEP} step {step} is task {msg.task!r}, '
+                                  f'earlier bags are {meta["task"]!r}; ingest one task at a time')
+    truth = topics[TOPIC_CONTEXT_TRUTH].by_step
+    names = set(map(tuple, map(attrgetter('names'), _messages(truth, truth))))
     for n in names:
         if n != meta.setdefault('names', n):
             raise IngestError(f'{path}: {TOPIC_CONTEXT_TRUTH} names {list(n)} differ from '
@@ -661,8 +678,8 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
     usable -= drop
     steps = sorted(usable)
     report.steps += len(steps)
-    action_dims = {m.applied_action.shape[0] for s in steps
-                   if not (m := fb[s][1]).first and s not in cut}
+    action_dims = {m.applied_action.shape[0] for m in _messages(fb, usable - cut)
+                   if not m.first}
     if len(action_dims) > 1:
         raise IngestError(f'{path}: {TOPIC_STEP} applied_action lengths differ: {action_dims}')
     action_dim = action_dims.pop() if action_dims else 0
