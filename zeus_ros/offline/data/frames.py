@@ -124,11 +124,10 @@ class FrameStore:
 
     def stack(self, refs: list[Any]) -> np.ndarray:
         """(len(refs), 3, H, W) frames of `refs` (rows or messages, from add)."""
-        rows = self.rows
+        rows, start = self.rows, refs[0]
+        if type(start) is int and refs == list(range(start, start + len(refs))):
+            return rows[start:start + len(refs)]  # the usual case: no copy (a message != int)
         if rows is not None and all(type(r) is int for r in refs):
-            start = refs[0]
-            if refs == list(range(start, start + len(refs))):
-                return rows[start:start + len(refs)]  # the usual case: no copy
             return rows[refs]
         datas = [r.data if type(r) is not int else rows[r].transpose(1, 2, 0).reshape(-1)
                  for r in refs]

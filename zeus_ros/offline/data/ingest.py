@@ -609,13 +609,20 @@ def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
     truth = list(_messages(topics[TOPIC_CONTEXT_TRUTH].by_step, piece))
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
-    present = [(i, acts[s][1]) for i, s in enumerate(piece)
-               if s in acts and len(acts[s][1].data) == action_dim]
-    if present:  # a request of another length or with a bad value stays absent (NaN)
-        rows = _stacked([msg for _, msg in present], 'data').astype(np.float64)
+    matrix = (stack_field(list(_messages(acts, piece)), 'data')
+              if all(map(acts.__contains__, piece)) else None)
+    if matrix is not None and matrix.shape[1] == action_dim:  # the usual bag: one at each step
+        where, rows = np.arange(len(piece)), matrix.astype(np.float64)
+    else:
+        present = [(i, acts[s][1]) for i, s in enumerate(piece)
+                   if s in acts and len(acts[s][1].data) == action_dim]
+        where = np.asarray([i for i, _ in present], np.intp)
+        rows = _stacked([msg for _, msg in present], 'data').astype(np.float64) \
+            if present else None
+    if rows is not None:  # a request of another length or with a bad value stays absent (NaN)
         with np.errstate(invalid='ignore'):
             usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
-        policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
+        policy[where[usable]] = rows[usable]
     pix = store.stack([frames[s] for s in piece]) if frames is not None else None
     return Episode(
         source=str(path),
