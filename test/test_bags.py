@@ -495,6 +495,28 @@ def test_frame_store_grows_past_what_the_metadata_lists() -> None:
                                                                for f in frames]))
 
 
+def test_frame_store_grows_from_raw_bytes_too() -> None:
+    """add_raw, past what the metadata lists, grows the store too; other stamps come out right."""
+    from zeus_ros.offline.data.cdr_columns import decode_messages
+    from zeus_ros.offline.data.frames import FrameStore
+
+    cdc, msgtype = codec(), 'sensor_msgs/msg/Image'
+    frames = [_frame(k) for k in range(40)]
+    stamps = [3_000_000_000 * k + 7 * k for k in range(40)]
+    raws = [cdc.serialize(cdc.image(stamp, f)) for stamp, f in zip(stamps, frames, strict=True)]
+    store = FrameStore(listed=2, bag_bytes=10**9)
+    assert not store.add_raw(raws[:4])  # nothing decoded yet: no model
+    store.add(decode_messages(raws[:4], msgtype, lambda i: cdc.deserialize(raws[i], msgtype)),
+              raws[:4])
+    assert store.add_raw(raws[4:20]) and store.add_raw(raws[20:])
+    assert store.stamps == stamps and store.refs == list(range(40)) and store.count == 40
+    assert store.rows is not None and len(store.rows) == 64
+    np.testing.assert_array_equal(store.stack(store.refs),
+                                  np.stack([f.transpose(2, 0, 1) for f in frames]))
+    assert not store.add_raw([cdc.serialize(cdc.image(5, _frame(0, (6, 8))))])  # another shape
+    assert store.read == 40
+
+
 def test_image_batches_stored_from_raw_bytes_as_decoded(tmp_path: Path,
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """Batches of images alike but for stamp and pixels skip decoding, with the same result.
