@@ -254,24 +254,25 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
     # are batched (its length prefix among them), and each message gets a view of its own.
     payload = items.pop() if items[-1][1] == 'u1[]' else None
     head = payload[2] if payload is not None else size
-    parts = (raws[i][:head] for i in indices) if payload is not None else \
-        (raws[i] for i in indices)
+    group = raws if len(indices) == len(raws) else list(map(raws.__getitem__, indices))
+    parts = (raw[:head] for raw in group) if payload is not None else group
     block = np.frombuffer(b''.join(parts), np.uint8).reshape(-1, head)
     fits = (block[:, 0] == 0) & (block[:, 1] == 1)
     for pos in prefixes:
         fits &= (block[:, pos:pos + 4] == block[0, pos:pos + 4]).all(axis=1)
-    matrices: dict[str, np.ndarray] = {}
-    columns = _columns(block[fits], items, matrices)
-    sec, nanosec = columns.pop('sec'), columns.pop('nanosec')
-    del columns['frame_id']
-    record = _record_type(tuple(name for name, _kind in spec))
     every = bool(fits.all())
+    block = block if every else block[fits]
+    matrices: dict[str, np.ndarray] = {}
+    columns = _columns(block, items[3:], matrices)  # after the header's sec, nanosec, frame_id
+    record = _record_type(tuple(name for name, _kind in spec))
     members = indices if every else [i for i, ok in zip(indices, fits.tolist(), strict=True)
                                      if ok]
     if payload is not None:
         columns[payload[0]] = [np.frombuffer(raws[i], np.uint8, payload[3], head)
                                for i in members]
-    stamps = (np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nanosec, np.int64)).tolist()
+    stamp = np.ascontiguousarray(block[:, 4:12])  # header.stamp: sec int32, nanosec uint32
+    stamps = (stamp[:, :4].copy().view('<i4').astype(np.int64) * 1_000_000_000
+              + stamp[:, 4:].copy().view('<u4')).ravel().tolist()
     rows = zip(*(columns[name] for name in record._fields[:-3]), stamps,
                repeat(matrices, len(members)), range(len(members)), strict=True)
     records = map(tuple.__new__, repeat(record), rows)  # record._make without its frame
