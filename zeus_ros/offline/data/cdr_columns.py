@@ -17,7 +17,7 @@ view of its own raw bytes (a copy of every frame measured slower than rosbags it
 from __future__ import annotations
 
 from collections import defaultdict, namedtuple
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import fields
 from functools import cache
 from itertools import repeat
@@ -131,14 +131,14 @@ def _strings(block: np.ndarray, offset: int, length: int) -> list[str]:
 
 
 def _columns(block: np.ndarray, items: list[_Item], matrices: dict[str, np.ndarray]
-             ) -> dict[str, list[Any]]:
+             ) -> dict[str, Iterable[Any]]:
     """Every field of every row of `block` (rows: messages of one layout).
 
     Each sequence of numbers is also put in `matrices` as one 2-D array (a row per message),
     which the per-message arrays are views of (stack_field).
     """
     rows = block.shape[0]
-    columns: dict[str, list[Any]] = {}
+    columns: dict[str, Iterable[Any]] = {}
     for name, kind, offset, count in items:
         if kind == 'str':
             columns[name] = _strings(block, offset, count)
@@ -150,7 +150,7 @@ def _columns(block: np.ndarray, items: list[_Item], matrices: dict[str, np.ndarr
             dtype = np.dtype(_DTYPES[kind[:-2]])
             values = np.ascontiguousarray(block[:, offset:offset + count * dtype.itemsize])
             matrices[name] = values.view(dtype).reshape(rows, count)
-            columns[name] = list(matrices[name])
+            columns[name] = repeat(None, rows)  # the record reads its row (_record_type)
         else:
             dtype = np.dtype(_DTYPES[kind])
             values = np.ascontiguousarray(block[:, offset:offset + dtype.itemsize])
@@ -182,10 +182,11 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
                     ) -> list[Any]:
     """Decode `raws` (CDR of `msgtype`) in order; `fallback(i)` decodes raws[i] alone.
 
-    Returns one object per message with the type's fields (sequences of numbers as numpy
-    arrays, as rosbags gives them) and `stamp_ns`, the header stamp in nanoseconds. Messages
-    the fallback decodes are rosbags' own objects, with `stamp_ns` added. Errors come from
-    `fallback` (a corrupt message).
+    Returns one object per message with the type's fields as attributes (sequences of
+    numbers as numpy arrays, as rosbags gives them) and `stamp_ns`, the header stamp in
+    nanoseconds; read them by name, not by unpacking. Messages the fallback decodes are
+    rosbags' own objects, with `stamp_ns` added. Errors come from `fallback` (a corrupt
+    message).
     """
     spec = _SPECS[msgtype]
     out: list[Any] = [None] * len(raws)
@@ -210,9 +211,16 @@ _GROUP, _ROW = attrgetter('group'), attrgetter('row')
 
 
 @cache
-def _record_type(names: tuple[str, ...]) -> Any:
-    """A light read-only message: its fields, stamp_ns, and its group's matrices and row."""
-    return namedtuple('CdrRecord', [*names, 'stamp_ns', 'group', 'row'])
+def _record_type(names: tuple[str, ...], rows: frozenset[str] = frozenset()) -> Any:
+    """A light read-only message: its fields, stamp_ns, and its group's matrices and row.
+
+    Fields in `rows` (sequences of numbers) are read from the group's matrix when asked for:
+    a view per message and field, made for all of them up front, cost more than the few reads.
+    """
+    record = namedtuple('CdrRecord', [*names, 'stamp_ns', 'group', 'row'])
+    views = {name: property(lambda self, name=name: self.group[name][self.row])
+             for name in rows}
+    return type('CdrRecord', (record,), {'__slots__': (), **views}) if views else record
 
 
 def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
@@ -264,7 +272,7 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
     block = block if every else block[fits]
     matrices: dict[str, np.ndarray] = {}
     columns = _columns(block, items[3:], matrices)  # after the header's sec, nanosec, frame_id
-    record = _record_type(tuple(name for name, _kind in spec))
+    record = _record_type(tuple(name for name, _kind in spec), frozenset(matrices))
     members = indices if every else [i for i, ok in zip(indices, fits.tolist(), strict=True)
                                      if ok]
     if payload is not None:

@@ -685,8 +685,10 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
     usable -= drop
     steps = sorted(usable)
     report.steps += len(steps)
-    action_dims = {m.applied_action.shape[0] for m in _messages(fb, usable - cut)
-                   if not m.first}
+    acting = [m for m in _messages(fb, usable - cut) if not m.first]
+    matrix = stack_field(acting, 'applied_action')  # one group: one length
+    action_dims = ({matrix.shape[1]} if matrix is not None
+                   else {m.applied_action.shape[0] for m in acting})
     if len(action_dims) > 1:
         raise IngestError(f'{path}: {TOPIC_STEP} applied_action lengths differ: {action_dims}')
     action_dim = action_dims.pop() if action_dims else 0
