@@ -484,14 +484,125 @@ def test_pixel_frames_exact_in_any_image_order(tmp_path: Path) -> None:
 
 def test_frame_store_grows_past_what_the_metadata_lists() -> None:
     """More images than the bag's metadata lists: the store grows, no frame is lost."""
-    from zeus_ros.offline.data.ingest import _Frames
+    from zeus_ros.offline.data.frames import FrameStore
 
     frames = [_frame(k) for k in range(5)]
-    store = _Frames(listed=1, bag_bytes=10**9)
-    rows = store.add([SimpleNamespace(height=8, width=6, data=f.reshape(-1)) for f in frames])
+    store = FrameStore(listed=1, bag_bytes=10**9)
+    rows = store.add([SimpleNamespace(height=8, width=6, data=f.reshape(-1), stamp_ns=k)
+                      for k, f in enumerate(frames)])
     assert rows == list(range(5)) and store.read == 5
     np.testing.assert_array_equal(store.stack(rows), np.stack([f.transpose(2, 0, 1)
                                                                for f in frames]))
+
+
+def test_frame_store_grows_from_raw_bytes_too() -> None:
+    """add_raw, past what the metadata lists, grows the store too; other stamps come out right."""
+    from zeus_ros.offline.data.cdr_columns import decode_messages
+    from zeus_ros.offline.data.frames import FrameStore
+
+    cdc, msgtype = codec(), 'sensor_msgs/msg/Image'
+    frames = [_frame(k) for k in range(40)]
+    stamps = [3_000_000_000 * k + 7 * k for k in range(40)]
+    raws = [cdc.serialize(cdc.image(stamp, f)) for stamp, f in zip(stamps, frames, strict=True)]
+    store = FrameStore(listed=2, bag_bytes=10**9)
+    assert not store.add_raw(raws[:4])  # nothing decoded yet: no model
+    store.add(decode_messages(raws[:4], msgtype, lambda i: cdc.deserialize(raws[i], msgtype)),
+              raws[:4])
+    assert store.add_raw(raws[4:20]) and store.add_raw(raws[20:])
+    assert store.stamps == stamps and store.refs == list(range(40)) and store.count == 40
+    assert store.rows is not None and len(store.rows) == 64
+    np.testing.assert_array_equal(store.stack(store.refs),
+                                  np.stack([f.transpose(2, 0, 1) for f in frames]))
+    assert not store.add_raw([cdc.serialize(cdc.image(5, _frame(0, (6, 8))))])  # another shape
+    assert store.read == 40
+
+
+def test_image_batches_stored_from_raw_bytes_as_decoded(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Batches of images alike but for stamp and pixels skip decoding, with the same result.
+
+    1100 steps (stamps past one second), so most batches take FrameStore.add_raw; the first
+    (no model yet), one with another frame_id and one with an image of another shape are
+    decoded. One image repeats a stamp (a duplicate, reported as when decoded).
+    """
+    from zeus_ros.offline.data.frames import FrameStore
+
+    from live_fixtures import assert_ingests_as_one_by_one
+
+    steps = 1100
+    cdc = codec()
+    frames = {k: _frame(k) for k in range(steps)}
+    frames[700] = _frame(700, (6, 8))
+    msgs = {k: cdc.image(1_000_000 * (k + 1), frames[k]) for k in range(steps)}
+    msgs[300].header.frame_id = 'camera_optical'
+    order = [*range(0, 500), *reversed(range(500, 900)), *range(900, steps)]
+    images = [(1_000_000 * (k + 1), cdc.serialize(msgs[k])) for k in order]
+    images.insert(1001, (images[1000][0], cdc.serialize(cdc.image(images[1000][0], _frame(0)))))
+    bag = _write_synthetic(tmp_path / 'many', steps, images=images)
+    calls: list[bool] = []
+    add_raw = FrameStore.add_raw
+    monkeypatch.setattr(FrameStore, 'add_raw',
+                        lambda store, raws: calls.append(add_raw(store, raws)) or calls[-1])
+    with pytest.warns(IngestWarning, match='2 images with stamp'):
+        ds = ingest_bags(bag)
+    monkeypatch.undo()
+    assert len(calls) == 18 and calls.count(False) == 3, calls
+    assert ds.has_frames and ds.report.steps == steps
+    for ep in ds.episodes:
+        assert ep.frames is not None and ep.frames.dtype == np.uint8
+        assert ep.frames.flags.c_contiguous and ep.frames.shape == (len(ep.steps), 3, 8, 6)
+        np.testing.assert_array_equal(ep.frames, np.stack([
+            frames[int(k)].reshape(8, 6, 3).transpose(2, 0, 1) for k in ep.steps]))
+    assert_ingests_as_one_by_one([bag], monkeypatch)
+
+
+def test_pieces_split_as_step_by_step() -> None:
+    """Episode pieces (vectorised) split where the step-by-step rule of before splits them.
+
+    A new piece starts at a hole, an episode start, after a last step, at another episode,
+    before a cut step, and where episode_step skips (reported as an 'episode' issue).
+    """
+    from zeus_ros.offline.data.ingest import IngestReport, Issue, _pieces
+
+    def reference(steps: list[int], fb: dict, cut: set[int]) -> tuple[list, list]:
+        pieces: list[list[int]] = []
+        issues = []
+        prev = None
+        for step in steps:
+            msg = fb[step][1]
+            cont = (prev is not None and step == prev + 1 and not msg.first
+                    and step not in cut and not fb[prev][1].last
+                    and msg.episode == fb[prev][1].episode)
+            if cont and msg.episode_step != fb[prev][1].episode_step + 1:
+                issues.append(Issue('bag', TOPIC_STEP, step, 'episode',
+                                    f'episode_step {msg.episode_step} does not follow '
+                                    f'{fb[prev][1].episode_step}'))
+                cont = False
+            if cont:
+                pieces[-1].append(step)
+            else:
+                pieces.append([step])
+            prev = step
+        return [p for p in pieces if len(p) >= 2], issues
+
+    rng = np.random.default_rng(0)
+    reported = 0
+    for trial in range(30):
+        fb, episode, episode_step = {}, 0, 0
+        for step in range(200):
+            first = rng.random() < 0.05
+            episode, episode_step = (episode + 1, 0) if first else (
+                episode + (rng.random() < 0.02), episode_step + 1 + (rng.random() < 0.03))
+            fb[step] = (step, SimpleNamespace(first=first, last=rng.random() < 0.04,
+                                              episode=episode, episode_step=episode_step))
+        steps = sorted(int(s) for s in rng.choice(200, 180 - trial, replace=False))
+        cut = {int(s) for s in rng.choice(200, trial % 7, replace=False)}
+        report = IngestReport()
+        assert _pieces(Path('bag'), steps, fb, report, cut) == reference(steps, fb, cut)[0]
+        assert report.issues == reference(steps, fb, cut)[1]
+        reported += len(report.issues)
+    assert reported > 30
+    assert _pieces(Path('bag'), [], {}, IngestReport()) == []
 
 
 def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
@@ -504,6 +615,8 @@ def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
     with pytest.raises(BagError, match='corrupt or truncated') as info:
         ingest_bags(bag)
     assert info.value.path == bag
+    # named by its read index: steps 0-3 (5 messages each) and step 4's 4 others came first
+    assert 'after 24 messages' in str(info.value)
 
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:

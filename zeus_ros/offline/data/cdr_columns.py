@@ -17,16 +17,18 @@ view of its own raw bytes (a copy of every frame measured slower than rosbags it
 from __future__ import annotations
 
 from collections import defaultdict, namedtuple
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import fields
 from functools import cache
+from itertools import repeat
+from operator import attrgetter, is_
 import struct
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-__all__ = ['FIELDS', 'PAYLOAD_FIELDS', 'decode_messages', 'stack_field']
+__all__ = ['FIELDS', 'PAYLOAD_FIELDS', 'decode_messages', 'payload_offset', 'stack_field']
 
 FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     'zeus_msgs/msg/StateVector': (('step', 'u8'), ('data', 'f8[]')),
@@ -107,6 +109,15 @@ def _layout(raw: bytes, spec: Sequence[tuple[str, str]]) -> tuple[list[_Item], l
     return items, prefixes, pos
 
 
+def payload_offset(raw: bytes, msgtype: str) -> int | None:
+    """Offset of the trailing byte payload of `raw` (a PAYLOAD_FIELDS type); None if unreadable."""
+    try:
+        items, _prefixes, _end = _layout(raw, PAYLOAD_FIELDS[msgtype])
+    except struct.error:
+        return None
+    return int(items[-1][2])
+
+
 def _strings(block: np.ndarray, offset: int, length: int) -> list[str]:
     """One string field of every row (decoded once per distinct value)."""
     if length <= 1:
@@ -120,14 +131,14 @@ def _strings(block: np.ndarray, offset: int, length: int) -> list[str]:
 
 
 def _columns(block: np.ndarray, items: list[_Item], matrices: dict[str, np.ndarray]
-             ) -> dict[str, list[Any]]:
+             ) -> dict[str, Iterable[Any]]:
     """Every field of every row of `block` (rows: messages of one layout).
 
     Each sequence of numbers is also put in `matrices` as one 2-D array (a row per message),
     which the per-message arrays are views of (stack_field).
     """
     rows = block.shape[0]
-    columns: dict[str, list[Any]] = {}
+    columns: dict[str, Iterable[Any]] = {}
     for name, kind, offset, count in items:
         if kind == 'str':
             columns[name] = _strings(block, offset, count)
@@ -139,7 +150,7 @@ def _columns(block: np.ndarray, items: list[_Item], matrices: dict[str, np.ndarr
             dtype = np.dtype(_DTYPES[kind[:-2]])
             values = np.ascontiguousarray(block[:, offset:offset + count * dtype.itemsize])
             matrices[name] = values.view(dtype).reshape(rows, count)
-            columns[name] = list(matrices[name])
+            columns[name] = repeat(None, rows)  # the record reads its row (_record_type)
         else:
             dtype = np.dtype(_DTYPES[kind])
             values = np.ascontiguousarray(block[:, offset:offset + dtype.itemsize])
@@ -171,10 +182,11 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
                     ) -> list[Any]:
     """Decode `raws` (CDR of `msgtype`) in order; `fallback(i)` decodes raws[i] alone.
 
-    Returns one object per message with the type's fields (sequences of numbers as numpy
-    arrays, as rosbags gives them) and `stamp_ns`, the header stamp in nanoseconds. Messages
-    the fallback decodes are rosbags' own objects, with `stamp_ns` added. Errors come from
-    `fallback` (a corrupt message).
+    Returns one object per message with the type's fields as attributes (sequences of
+    numbers as numpy arrays, as rosbags gives them) and `stamp_ns`, the header stamp in
+    nanoseconds; read them by name, not by unpacking. Messages the fallback decodes are
+    rosbags' own objects, with `stamp_ns` added. Errors come from `fallback` (a corrupt
+    message).
     """
     spec = _SPECS[msgtype]
     out: list[Any] = [None] * len(raws)
@@ -195,10 +207,20 @@ def decode_messages(raws: Sequence[bytes], msgtype: str, fallback: Callable[[int
     return out
 
 
+_GROUP, _ROW = attrgetter('group'), attrgetter('row')
+
+
 @cache
-def _record_type(names: tuple[str, ...]) -> Any:
-    """A light read-only message: its fields, stamp_ns, and its group's matrices and row."""
-    return namedtuple('CdrRecord', [*names, 'stamp_ns', 'group', 'row'])
+def _record_type(names: tuple[str, ...], rows: frozenset[str] = frozenset()) -> Any:
+    """A light read-only message: its fields, stamp_ns, and its group's matrices and row.
+
+    Fields in `rows` (sequences of numbers) are read from the group's matrix when asked for:
+    a view per message and field, made for all of them up front, cost more than the few reads.
+    """
+    record = namedtuple('CdrRecord', [*names, 'stamp_ns', 'group', 'row'])
+    views = {name: property(lambda self, name=name: self.group[name][self.row])
+             for name in rows}
+    return type('CdrRecord', (record,), {'__slots__': (), **views}) if views else record
 
 
 def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
@@ -211,14 +233,12 @@ def stack_field(messages: Sequence[Any], name: str) -> np.ndarray | None:
     group = getattr(messages[0], 'group', None) if messages else None
     if group is None or name not in group:
         return None
-    try:
-        rows = np.fromiter((m.row if m.group is group else -1 for m in messages), np.intp,
-                           len(messages))
+    try:  # map(attrgetter): no Python frame per message
+        if not all(map(is_, map(_GROUP, messages), repeat(group))):  # another group
+            return None
     except AttributeError:  # a message decoded alone (the fallback) is among them
         return None
-    if (rows < 0).any():
-        return None
-    return group[name][rows]
+    return group[name][np.fromiter(map(_ROW, messages), np.intp, len(messages))]
 
 
 def _with_stamp(message: Any, stamp_ns: int) -> Any:
@@ -242,28 +262,33 @@ def _decode_group(raws: Sequence[bytes], indices: list[int], size: int,
     # are batched (its length prefix among them), and each message gets a view of its own.
     payload = items.pop() if items[-1][1] == 'u1[]' else None
     head = payload[2] if payload is not None else size
-    parts = (raws[i][:head] for i in indices) if payload is not None else \
-        (raws[i] for i in indices)
+    group = raws if len(indices) == len(raws) else list(map(raws.__getitem__, indices))
+    parts = (raw[:head] for raw in group) if payload is not None else group
     block = np.frombuffer(b''.join(parts), np.uint8).reshape(-1, head)
     fits = (block[:, 0] == 0) & (block[:, 1] == 1)
     for pos in prefixes:
         fits &= (block[:, pos:pos + 4] == block[0, pos:pos + 4]).all(axis=1)
-    matrices: dict[str, np.ndarray] = {}
-    columns = _columns(block[fits], items, matrices)
-    sec, nanosec = columns.pop('sec'), columns.pop('nanosec')
-    del columns['frame_id']
-    record = _record_type(tuple(name for name, _kind in spec))
     every = bool(fits.all())
+    block = block if every else block[fits]
+    matrices: dict[str, np.ndarray] = {}
+    columns = _columns(block, items[3:], matrices)  # after the header's sec, nanosec, frame_id
+    record = _record_type(tuple(name for name, _kind in spec), frozenset(matrices))
     members = indices if every else [i for i, ok in zip(indices, fits.tolist(), strict=True)
                                      if ok]
     if payload is not None:
         columns[payload[0]] = [np.frombuffer(raws[i], np.uint8, payload[3], head)
                                for i in members]
-    stamps = (np.asarray(sec, np.int64) * 1_000_000_000 + np.asarray(nanosec, np.int64)).tolist()
+    stamp = np.ascontiguousarray(block[:, 4:12])  # header.stamp: sec int32, nanosec uint32
+    stamps = (stamp[:, :4].copy().view('<i4').astype(np.int64) * 1_000_000_000
+              + stamp[:, 4:].copy().view('<u4')).ravel().tolist()
     rows = zip(*(columns[name] for name in record._fields[:-3]), stamps,
-               [matrices] * len(members), range(len(members)), strict=True)
-    for index, row in zip(members, rows, strict=True):
-        out[index] = record._make(row)
+               repeat(matrices, len(members)), range(len(members)), strict=True)
+    records = map(tuple.__new__, repeat(record), rows)  # record._make without its frame
+    if every and len(members) == len(out):
+        out[:] = records
+    else:
+        for index, message in zip(members, records, strict=True):
+            out[index] = message
     if not _agrees(out[members[0]], fallback(members[0]), spec):
         for index in members:
             out[index] = None

@@ -21,9 +21,11 @@ first steps; `strict` refuses the bag instead.
 from __future__ import annotations
 
 from collections import Counter, defaultdict
+from contextlib import suppress
 from dataclasses import dataclass, field
 import gc
-from operator import attrgetter
+from itertools import compress
+from operator import attrgetter, itemgetter
 from pathlib import Path
 import re
 import sys
@@ -37,6 +39,7 @@ from rosbags.rosbag2 import Reader
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
 from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
+from zeus_ros.offline.data.frames import FrameStore
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -48,7 +51,7 @@ from zeus_ros.offline.data.schema import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterable, Iterator, Sequence
 
 __all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_topic',
            'find_bags', 'ingest_bags', 'main']
@@ -59,6 +62,7 @@ _MAX_LISTED = 20
 _IMAGE_BATCH = 64
 """Images decoded at once: enough to batch, few enough that their bytes stay in cache."""
 _FIRST_STEPS = 5
+_STAMP, _MESSAGE = itemgetter(0), itemgetter(1)
 MAX_ABS = 1e9
 """Largest magnitude accepted in a float field: beyond it a value is no more usable than Inf
 (no simulator state, reward or applied action comes near; float32 loses the units digit)."""
@@ -248,64 +252,6 @@ def _no_zeus_topics(path: Path, topics: list[str], namespace: str) -> BagError:
                           f'{", ".join(sorted(topics)) or "none"}){hint}')
 
 
-class _Frames:
-    """A bag's image pixels, channel-first, one row per image, copied in as they are read.
-
-    Why: holding every raw image until the episodes are built, then copying each frame out,
-    cost more than the read itself; copying each frame once, while its bytes are still in
-    cache, and handing episodes views of consecutive rows does not. An image whose height,
-    width or data length differ from the first image's is kept as its message instead, and an
-    episode holding one is built frame by frame with its first frame's shape (as before).
-    """
-
-    def __init__(self, listed: int, bag_bytes: int) -> None:
-        self._listed = listed
-        """Images the bag's metadata lists (the store's first size, if the file can hold them)."""
-        self._bag_bytes = bag_bytes
-        self.rows: np.ndarray | None = None
-        self.count = 0
-        self.read = 0
-        """Images added, stored or not."""
-
-    def add(self, messages: list[Any]) -> list[Any]:
-        """Store images' pixels: a row each, or the message itself if not of the first's shape."""
-        self.read += len(messages)
-        refs: list[Any] = []
-        for msg in messages:
-            height, width, data = int(msg.height), int(msg.width), msg.data
-            if self.rows is None:  # an uncompressed bag holds at most bag_bytes // frame bytes
-                size = min(self._listed, self._bag_bytes // max(3 * height * width, 1))
-                self.rows = np.empty((max(size, 1), 3, height, width), np.uint8)
-            rows = self.rows
-            if rows.shape[2:] != (height, width) or data.size != 3 * height * width:
-                refs.append(msg)
-                continue
-            if self.count == len(rows):  # more than listed: grow
-                rows = self.rows = np.concatenate([rows, np.empty_like(rows)])
-            rows[self.count] = data.reshape(height, width, 3).transpose(2, 0, 1)
-            refs.append(self.count)
-            self.count += 1
-        return refs
-
-    def stack(self, refs: list[Any]) -> np.ndarray:
-        """(len(refs), 3, H, W) frames of `refs` (rows or messages, from add)."""
-        rows = self.rows
-        if rows is not None and all(type(r) is int for r in refs):
-            start = refs[0]
-            if refs == list(range(start, start + len(refs))):
-                return rows[start:start + len(refs)]  # the usual case: no copy
-            return rows[refs]
-        datas = [r.data if type(r) is not int else rows[r].transpose(1, 2, 0).reshape(-1)
-                 for r in refs]
-        first = refs[0]
-        height, width = (rows.shape[2:] if type(first) is int
-                         else (int(first.height), int(first.width)))
-        pix = np.empty((len(refs), 3, height, width), np.uint8)
-        for i, data in enumerate(datas):
-            pix[i] = data.reshape(height, width, 3).transpose(2, 0, 1)
-        return pix
-
-
 @dataclass
 class _Topic:
     """Per-topic columns of one bag: step -> (stamp, message), first occurrence wins."""
@@ -317,7 +263,6 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     """Deserialize the zeus topics of one bag, reporting duplicates; raise BagError if broken."""
     cdc = codec()
     topics: dict[str, _Topic] = {t: _Topic() for t in _STEP_TOPICS}
-    images: dict[int, list[Any]] = defaultdict(list)
     if path.is_dir() and not (path / 'metadata.yaml').exists():
         raise _without_metadata(path)
     try:
@@ -326,6 +271,8 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
         raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}') from exc
     count = 0
+    raws: dict[str, list[bytes]] = {t: [] for t in _READ_TOPICS}
+    frames: FrameStore | None = None
     schema_topic = {bag_topic(t, namespace): t for t in _READ_TOPICS}
     read: Counter[str] = Counter()
     try:
@@ -346,62 +293,86 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
                                            'definition; decoding may fail'))
         # Messages are decoded in batches (cdr_columns), not one by one: the step topics after
         # the read, images every _IMAGE_BATCH messages, their pixels copied into `frames` so
-        # that the raw messages can go.
-        raws: dict[str, list[tuple[int, bytes]]] = {t: [] for t in _READ_TOPICS}
+        # that the raw messages can go. Only raw bytes are kept, no read index each: a corrupt
+        # message's is found again (_Place).
         keep = {c.id: raws[schema_topic[c.topic]].append for c in conns}
         pending = raws[TOPIC_IMAGE]
-        frames = _Frames(sum(int(c.msgcount) for c in conns
-                             if schema_topic[c.topic] == TOPIC_IMAGE),
-                         sum(f.stat().st_size for f in _bag_files(path)))
-        # `count`: messages read so far, also when the read fails (then named in the error)
-        for count, (conn, _, raw) in enumerate(reader.messages(connections=conns), 1):
-            keep[conn.id]((count, raw))
+        frames = FrameStore(sum(int(c.msgcount) for c in conns
+                                if schema_topic[c.topic] == TOPIC_IMAGE),
+                            sum(f.stat().st_size for f in _bag_files(path)))
+        place = _Place(path, conns, schema_topic)
+        for conn, _, raw in reader.messages(connections=conns):
+            keep[conn.id](raw)
             if len(pending) == _IMAGE_BATCH:
-                _store_images(path, pending, frames, images)
-        _store_images(path, pending, frames, images)
+                _store_images(place, pending, frames)
+        _store_images(place, pending, frames)
         for conn in conns:  # one bag topic per schema topic
             topic = schema_topic[conn.topic]
             read[conn.topic] = frames.read if topic == TOPIC_IMAGE else len(raws[topic])
+        count = frames.read + sum(len(raws[topic]) for topic in _STEP_TOPICS)
         for topic in _STEP_TOPICS:
-            _decode_topic(path, topic, raws[topic], topics[topic].by_step, report, namespace)
+            _decode_topic(place, topic, raws[topic], topics[topic].by_step, report, namespace)
     except BagError:
         raise
-    except Exception as exc:  # truncated chunk, bad CDR, sqlite errors
+    except Exception as exc:  # truncated chunk, sqlite errors: named after what was read
+        count = (frames.read if frames else 0) + sum(map(len, raws.values()))
         raise BagError(path, f'corrupt or truncated after {count} messages: {exc}') from exc
     finally:
         reader.close()
     report.messages += count
     _check_counts(path, conns, read, report)
-    return {'topics': topics, 'images': images, 'frames': frames}
+    return {'topics': topics, 'frames': frames}
 
 
-def _decode(path: Path, topic: str, entries: list[tuple[int, bytes]]) -> list[Any]:
-    """Decode one topic's (read index, raw) messages in batches; a bad one raises BagError."""
+@dataclass
+class _Place:
+    """Where a bag's messages were read from: names a corrupt one by its read index.
+
+    Why: keeping each message's read index cost more than finding it again, by reading the
+    bag's zeus topics up to that message, the one time a message turns out corrupt.
+    """
+
+    path: Path
+    conns: list[Any]
+    schema_topic: dict[str, str]
+
+    def error(self, topic: str, nth: int, exc: Exception) -> BagError:
+        """The BagError of the `nth` message of schema `topic` (0-based), which failed."""
+        ids = {c.id for c in self.conns if self.schema_topic[c.topic] == topic}
+        seen = 0
+        with suppress(Exception), Reader(self.path) as reader:  # else: no index, same error
+            for count, (conn, _, _) in enumerate(reader.messages(connections=self.conns)):
+                if conn.id in ids and (seen := seen + 1) > nth:
+                    return BagError(self.path, f'corrupt or truncated after {count} messages: '
+                                               f'{exc}')
+        return BagError(self.path, f'corrupt or truncated {topic} message: {exc}')
+
+
+def _decode(place: _Place, topic: str, raws: list[bytes], before: int = 0) -> list[Any]:
+    """Decode one topic's messages in batches (`before` read earlier); a bad one: BagError."""
     cdc = codec()
 
     def one(i: int) -> Any:
         try:
-            return cdc.deserialize(entries[i][1], MSGTYPES[topic])
+            return cdc.deserialize(raws[i], MSGTYPES[topic])
         except Exception as exc:  # bad CDR: named like a truncated read
-            raise BagError(path, f'corrupt or truncated after {entries[i][0] - 1} messages: '
-                                 f'{exc}') from exc
+            raise place.error(topic, before + i, exc) from exc
 
-    return decode_messages([raw for _, raw in entries], MSGTYPES[topic], one)
-
-
-def _store_images(path: Path, entries: list[tuple[int, bytes]], frames: _Frames,
-                  images: dict[int, list[Any]]) -> None:
-    """Decode a batch of images into `frames`, filed by stamp in `images`; empty `entries`."""
-    messages = _decode(path, TOPIC_IMAGE, entries)
-    for msg, ref in zip(messages, frames.add(messages), strict=True):
-        images[msg.stamp_ns].append(ref)
-    entries.clear()
+    return decode_messages(raws, MSGTYPES[topic], one)
 
 
-def _decode_topic(path: Path, topic: str, entries: list[tuple[int, bytes]],
+def _store_images(place: _Place, raws: list[bytes], frames: FrameStore) -> None:
+    """Store a batch of images in `frames` (decoded only if it must be); empty `raws`."""
+    if not frames.add_raw(raws):
+        frames.add(_decode(place, TOPIC_IMAGE, raws, frames.read), raws)
+    raws.clear()
+
+
+def _decode_topic(place: _Place, topic: str, raws: list[bytes],
                   col: dict[int, tuple[int, Any]], report: IngestReport, namespace: str) -> None:
-    """Decode one step topic's (read index, raw) messages in batches into `col` by step."""
-    messages = _decode(path, topic, entries)
+    """Decode one step topic's messages in batches into `col` by step."""
+    path = place.path
+    messages = _decode(place, topic, raws)
     steps = list(map(int, map(attrgetter('step'), messages)))
     if not col and len(set(steps)) == len(steps):  # the usual bag: each step once
         col.update(zip(steps, zip(map(attrgetter('stamp_ns'), messages), messages,
@@ -450,8 +421,12 @@ def _check_alignment(path: Path, topics: dict[str, _Topic], report: IngestReport
             report.issues.append(Issue(src, topic, start, 'gap',
                                        f'steps {start}..{stop} missing on this topic only'))
     ref = topics[TOPIC_STEP].by_step
+    ref_steps, ref_stamps = list(ref), list(map(_STAMP, ref.values()))
     for topic in (TOPIC_STATE, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION):
-        for step, (stamp, _) in topics[topic].by_step.items():
+        by_step = topics[topic].by_step
+        if list(by_step) == ref_steps and list(map(_STAMP, by_step.values())) == ref_stamps:
+            continue  # the usual bag: the same steps with the same stamps
+        for step, (stamp, _) in by_step.items():
             if step in ref and ref[step][0] != stamp:
                 usable.discard(step)
                 report.issues.append(Issue(
@@ -471,14 +446,20 @@ def _runs(sorted_steps: list[int]) -> list[tuple[int, int]]:
     return runs
 
 
-def _match_images(
-    path: Path, steps: list[int], topics: dict[str, _Topic], images: dict[int, list[Any]],
-    report: IngestReport,
-) -> dict[int, Any]:
+def _match_images(path: Path, steps: list[int], topics: dict[str, _Topic], store: FrameStore,
+                  report: IngestReport) -> dict[int, Any]:
     """Give each step its frame by stamp (n-th image of a stamp -> n-th step of that stamp)."""
+    fb = topics[TOPIC_STEP].by_step
+    stamps = [fb[step][0] for step in steps]
+    if len(set(stamps)) == len(stamps) and len(set(store.stamps)) == len(store.stamps):
+        # the usual bag: one image per stamp, one step per stamp (refs are never None)
+        found = list(map(dict(zip(store.stamps, store.refs, strict=True)).get, stamps))
+        if None not in found:
+            return dict(zip(steps, found, strict=True))
+    images = store.by_stamp()
     by_stamp: dict[int, list[int]] = defaultdict(list)
-    for step in steps:
-        by_stamp[topics[TOPIC_STEP].by_step[step][0]].append(step)
+    for step, stamp in zip(steps, stamps, strict=True):
+        by_stamp[stamp].append(step)
     frames: dict[int, Any] = {}
     for stamp, stamp_steps in by_stamp.items():
         msgs = images.get(stamp, [])
@@ -494,11 +475,10 @@ def _match_images(
     return frames
 
 
-def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
+def _bad_steps(steps: list[int], messages: list[Any], name: str, length: int | None
                ) -> dict[str, list[int]]:
     """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
     bad: dict[str, list[int]] = {}
-    messages = [msg for _, msg in checked]
     matrix = stack_field(messages, name) if length is not None else None
     if matrix is not None and matrix.shape[1] == length:  # one layout, all of that length
         rows = matrix.astype(np.float64)
@@ -506,7 +486,7 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
         values = [getattr(msg, name) for msg in messages]
         sized = np.fromiter((len(v) == length for v in values), bool, len(values))
         if not sized.all():
-            bad['length'] = [checked[i][0] for i in np.flatnonzero(~sized)]
+            bad['length'] = [steps[i] for i in np.flatnonzero(~sized)]
         rows = np.zeros((len(values), length))
         if sized.any():
             rows[sized] = np.stack([v for v, ok in zip(values, sized, strict=True) if ok])
@@ -515,7 +495,7 @@ def _bad_steps(checked: list[tuple[int, Any]], name: str, length: int | None
     with np.errstate(invalid='ignore', over='ignore'):
         wrong = ~(np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
     if wrong.any():
-        bad['nonfinite'] = [checked[i][0] for i in np.flatnonzero(wrong)]
+        bad['nonfinite'] = [steps[i] for i in np.flatnonzero(wrong)]
     return bad
 
 
@@ -547,19 +527,19 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
     drop: set[int] = set()
     cut: set[int] = set()
     lengths = meta.setdefault('lengths', {})
+    in_order = {topic: _in_order(topics[topic].by_step, topic == TOPIC_STEP)
+                for topic in _STEP_TOPICS}
     for topic, name, vector, cuts in _FIELDS:
-        by_step = topics[topic].by_step
-        checked = [(s, m) for s, (_, m) in sorted(by_step.items())
-                   if not (topic == TOPIC_STEP and m.first)]
-        if not checked:
+        steps, messages = in_order[topic]
+        if not steps:
             continue
-        length = len(getattr(checked[0][1], name)) if vector else None
+        length = len(getattr(messages[0], name)) if vector else None
         key = f'{topic} {name}'
         if length is not None and lengths.setdefault(key, length) != length:
             raise IngestError(f'{path}: {bag_topic(topic, namespace)} {name} has {length} '
                               f'values, earlier bags {lengths[key]}: recorded on another task '
                               'or robot; ingest them apart')
-        bad = _bad_steps(checked, name, length)
+        bad = _bad_steps(steps, messages, name, length)
         for why, steps in bad.items():
             if topic == TOPIC_ACTION:
                 effect = 'read as absent (the policy request is not trained on)'
@@ -579,49 +559,78 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
     return drop, cut
 
 
+def _messages(by_step: dict[int, tuple[int, Any]], steps: Iterable[int]) -> Iterator[Any]:
+    """The messages of `steps` (map chains: no Python frame per step)."""
+    return map(_MESSAGE, map(by_step.__getitem__, steps))
+
+
+def _in_order(by_step: dict[int, tuple[int, Any]], skip_first: bool = False
+              ) -> tuple[list[int], list[Any]]:
+    """Steps of a topic in order and their messages (StepFeedback: not an episode's first)."""
+    steps = sorted(by_step)
+    messages = list(_messages(by_step, steps))
+    if skip_first:
+        keep = [not m.first for m in messages]
+        return list(compress(steps, keep)), list(compress(messages, keep))
+    return steps, messages
+
+
 def _pieces(path: Path, steps: list[int], fb: dict[int, tuple[int, Any]],
             report: IngestReport, cut: set[int] | None = None) -> list[list[int]]:
     """Split usable steps into contiguous runs of one episode each (and before `cut` steps)."""
-    cut = cut or set()
-    pieces: list[list[int]] = []
-    prev: int | None = None
-    for step in steps:
-        msg = fb[step][1]
-        cont = (prev is not None and step == prev + 1 and not msg.first and step not in cut
-                and not fb[prev][1].last and msg.episode == fb[prev][1].episode)
-        if cont and msg.episode_step != fb[prev][1].episode_step + 1:
-            report.issues.append(Issue(str(path), TOPIC_STEP, step, 'episode',
-                                       f'episode_step {msg.episode_step} does not follow '
-                                       f'{fb[prev][1].episode_step}'))
-            cont = False
-        if cont:
-            pieces[-1].append(step)
-        else:
-            pieces.append([step])
-        prev = step
-    return [p for p in pieces if len(p) >= 2]
+    if not steps:
+        return []
+    msgs = list(_messages(fb, steps))
+    count = len(steps)
+    step = np.asarray(steps, np.int64)
+    episode, episode_step = (np.fromiter(map(attrgetter(name), msgs), np.int64, count)
+                             for name in ('episode', 'episode_step'))
+    first, last = (np.fromiter(map(attrgetter(name), msgs), bool, count)
+                   for name in ('first', 'last'))
+    cont = np.zeros(count, bool)  # step i continues step i - 1's piece
+    cont[1:] = ((step[1:] == step[:-1] + 1) & ~first[1:] & ~last[:-1]
+                & (episode[1:] == episode[:-1]))
+    if cut:
+        cont &= ~np.isin(step, np.fromiter(cut, np.int64, len(cut)))
+    skips = np.zeros(count, bool)
+    skips[1:] = cont[1:] & (episode_step[1:] != episode_step[:-1] + 1)
+    for i in np.flatnonzero(skips).tolist():
+        report.issues.append(Issue(str(path), TOPIC_STEP, steps[i], 'episode',
+                                   f'episode_step {episode_step[i]} does not follow '
+                                   f'{episode_step[i - 1]}'))
+    starts = np.flatnonzero(~(cont & ~skips)).tolist()
+    return [steps[a:b] for a, b in zip(starts, [*starts[1:], count], strict=True) if b - a >= 2]
 
 
 def _build_episode(path: Path, piece: list[int], topics: dict[str, _Topic],
-                   frames: dict[int, Any] | None, store: _Frames, action_dim: int) -> Episode:
-    fb = [topics[TOPIC_STEP].by_step[s][1] for s in piece]
-    truth = [topics[TOPIC_CONTEXT_TRUTH].by_step[s][1] for s in piece]
+                   frames: dict[int, Any] | None, store: FrameStore, action_dim: int
+                   ) -> Episode:
+    fb = list(_messages(topics[TOPIC_STEP].by_step, piece))
+    truth = list(_messages(topics[TOPIC_CONTEXT_TRUTH].by_step, piece))
     acts = topics[TOPIC_ACTION].by_step
     policy = np.full((len(piece), action_dim), np.nan, np.float32)
-    present = [(i, acts[s][1]) for i, s in enumerate(piece)
-               if s in acts and len(acts[s][1].data) == action_dim]
-    if present:  # a request of another length or with a bad value stays absent (NaN)
-        rows = _stacked([msg for _, msg in present], 'data').astype(np.float64)
+    matrix = (stack_field(list(_messages(acts, piece)), 'data')
+              if all(map(acts.__contains__, piece)) else None)
+    if matrix is not None and matrix.shape[1] == action_dim:  # the usual bag: one at each step
+        where, rows = np.arange(len(piece)), matrix.astype(np.float64)
+    else:
+        present = [(i, acts[s][1]) for i, s in enumerate(piece)
+                   if s in acts and len(acts[s][1].data) == action_dim]
+        where = np.asarray([i for i, _ in present], np.intp)
+        rows = _stacked([msg for _, msg in present], 'data').astype(np.float64) \
+            if present else None
+    if rows is not None:  # a request of another length or with a bad value stays absent (NaN)
         with np.errstate(invalid='ignore'):
             usable = (np.isfinite(rows) & (np.abs(rows) <= MAX_ABS)).all(axis=1)
-        policy[np.asarray([i for i, _ in present])[usable]] = rows[usable]
+        policy[where[usable]] = rows[usable]
     pix = store.stack([frames[s] for s in piece]) if frames is not None else None
     return Episode(
         source=str(path),
         episode=int(fb[0].episode),
         steps=np.asarray(piece, np.int64),
-        stamps_ns=np.asarray([topics[TOPIC_STEP].by_step[s][0] for s in piece], np.int64),
-        obs=_stacked([topics[TOPIC_STATE].by_step[s][1] for s in piece], 'data'),
+        stamps_ns=np.fromiter(map(_STAMP, map(topics[TOPIC_STEP].by_step.__getitem__, piece)),
+                              np.int64, len(piece)),
+        obs=_stacked(list(_messages(topics[TOPIC_STATE].by_step, piece)), 'data'),
         frames=pix,
         action=_stacked(fb[1:], 'applied_action').astype(np.float32),
         action_status=np.asarray([m.action_status for m in fb[1:]], np.uint8),
@@ -654,27 +663,32 @@ def _ingest_read(path: Path, report: IngestReport, meta: dict[str, Any],
     topics: dict[str, _Topic] = read['topics']
     usable = _check_alignment(path, topics, report)
     fb = topics[TOPIC_STEP].by_step
-    for step in list(usable):
-        msg = fb[step][1]
-        if msg.task != meta.setdefault('task', msg.task):
-            raise IngestError(f'{path}: {TOPIC_STEP} step {step} is task {msg.task!r}, earlier '
-                              f'bags are {meta["task"]!r}; ingest one task at a time')
-    names = {tuple(m.names) for _, m in topics[TOPIC_CONTEXT_TRUTH].by_step.values()}
+    tasks = set(map(attrgetter('task'), _messages(fb, usable)))
+    if len(tasks) > 1 or (tasks and meta.setdefault('task', next(iter(tasks))) not in tasks):
+        for step in list(usable):  # name the first step of another task
+            msg = fb[step][1]
+            if msg.task != meta.setdefault('task', msg.task):
+                raise IngestError(f'{path}: {TOPIC_STEP} step {step} is task {msg.task!r}, '
+                                  f'earlier bags are {meta["task"]!r}; ingest one task at a time')
+    truth = topics[TOPIC_CONTEXT_TRUTH].by_step
+    names = set(map(tuple, map(attrgetter('names'), _messages(truth, truth))))
     for n in names:
         if n != meta.setdefault('names', n):
             raise IngestError(f'{path}: {TOPIC_CONTEXT_TRUTH} names {list(n)} differ from '
                               f'{list(meta["names"])} seen before')
     frames = None
-    if read['images']:
-        frames = _match_images(path, sorted(usable), topics, read['images'], report)
+    if read['frames'].read:
+        frames = _match_images(path, sorted(usable), topics, read['frames'], report)
         usable &= frames.keys()
     drop, cut = _check_values(path, topics, report, meta, namespace)
     before = _pieces(path, sorted(usable), fb, IngestReport()) if drop or cut else []
     usable -= drop
     steps = sorted(usable)
     report.steps += len(steps)
-    action_dims = {m.applied_action.shape[0] for s in steps
-                   if not (m := fb[s][1]).first and s not in cut}
+    acting = [m for m in _messages(fb, usable - cut) if not m.first]
+    matrix = stack_field(acting, 'applied_action')  # one group: one length
+    action_dims = ({matrix.shape[1]} if matrix is not None
+                   else {m.applied_action.shape[0] for m in acting})
     if len(action_dims) > 1:
         raise IngestError(f'{path}: {TOPIC_STEP} applied_action lengths differ: {action_dims}')
     action_dim = action_dims.pop() if action_dims else 0
