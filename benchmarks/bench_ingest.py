@@ -78,16 +78,19 @@ DEFAULT_CASES: tuple[tuple[str, int, bool, str], ...] = (
 
 
 def measure(paths: list[Path], repeat: int) -> tuple[float, float]:
-    """Print plain-read and ingest MB/s and CPU seconds (best of `repeat`); their two ratios."""
+    """Print plain-read and ingest MB/s and CPU seconds (best of `repeat`); their two ratios.
+
+    The two contenders alternate (plain, ingest, plain, ...), so a burst of load on a busy
+    machine falls on both alike instead of skewing one side.
+    """
     size_mb = disk_bytes(paths) / 1e6
     plain_read(paths)  # warm the page cache for both contenders
     plain_s, plain_cpu, ingest_cpu = math.inf, math.inf, math.inf
+    best = None
     for _ in range(repeat):
         cpu = time.process_time()
         plain_s = min(plain_s, plain_read(paths)[0])
         plain_cpu = min(plain_cpu, time.process_time() - cpu)
-    best = None
-    for _ in range(repeat):
         cpu = time.process_time()
         ds = ingest_bags(paths)
         ingest_cpu = min(ingest_cpu, time.process_time() - cpu)
