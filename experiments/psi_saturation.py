@@ -8,8 +8,10 @@ psi encodes each transition with an MLP whose tanh output is averaged over the k
 A code at +-1 passes no gradient (tanh' ~ 0): if every code of every history is there, psi is
 the same for every context and no loss can change that. Per checkpoint, on its task's train
 values (`zeus eval`'s protocol: deterministic episodes, evaluation seed 100): the share of codes
-with |code| > 0.99, the share of code units that hardly move (std < 1e-3), and psi's spread
-between the values' means over its noise within episodes (as in `zeus eval`).
+with |code| > 0.99, the share of code units that hardly move (std < 1e-3), psi's spread
+between the values' means over its noise within episodes (as in `zeus eval`; scale-free, so a
+collapsed psi's leftover 1e-5 variations can still give ratios above 1) and the absolute gap
+between the mean psi of the two extreme values (what the actor, fed psi raw, can see).
 """
 
 from __future__ import annotations
@@ -33,7 +35,11 @@ SATURATED = 0.99
 def saturation(path: Path, episodes: int) -> dict[str, Any] | None:
     """Code statistics of one checkpoint on its train values; None for a method without psi."""
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.diagnostics import policy_contexts, spread_over_noise
+    from zeus_ros.offline.evaluation.diagnostics import (
+        extreme_indices,
+        policy_contexts,
+        spread_over_noise,
+    )
 
     agent = InferenceAgent.from_checkpoint(path)
     psi = agent.agent.modules.get('psi')
@@ -53,10 +59,13 @@ def saturation(path: Path, episodes: int) -> dict[str, Any] | None:
     finally:
         hook.remove()
     every = np.concatenate(codes)
+    contexts = [policy_contexts(t, agent) for t in traces]
+    low, high = extreme_indices(split_values(agent.task, 'train'))
     return {'checkpoint': os.path.relpath(path), 'codes': len(every),
             'saturated': float(np.mean(np.abs(every) > SATURATED)),
             'still_units': float(np.mean(every.std(0) < 1e-3)),
-            'spread_noise': spread_over_noise([policy_contexts(t, agent) for t in traces])[2]}
+            'spread_noise': spread_over_noise(contexts)[2],
+            'extreme_gap': float(np.linalg.norm(contexts[high].mean(0) - contexts[low].mean(0)))}
 
 
 def main() -> None:
@@ -70,11 +79,11 @@ def main() -> None:
     torch.set_num_threads(1)
     rows = [row for path in find_checkpoints(args.checkpoints)
             if (row := saturation(path, args.episodes)) is not None]
-    print('| checkpoint | codes at +-1 | code units that hardly move | psi spread / noise |\n'
-          '|---|---|---|---|')
+    print('| checkpoint | codes at +-1 | code units that hardly move | psi spread / noise | '
+          '|psi(lowest) - psi(highest)| |\n|---|---|---|---|---|')
     for row in rows:
         print(f'| {row["checkpoint"]} | {row["saturated"]:.3f} | {row["still_units"]:.2f} | '
-              f'{row["spread_noise"]:.2f} |')
+              f'{row["spread_noise"]:.2f} | {row["extreme_gap"]:.2g} |')
     if args.out is not None:
         write_csv(args.out, rows)
 
