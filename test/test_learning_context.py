@@ -224,7 +224,7 @@ def test_code_norm_keeps_psi_alive_where_the_tanh_saturates() -> None:
             last = psi.transition[-1]
             last.weight.mul_(1e3)
             last.bias.fill_(1e6)  # every history's pre-activations far out on the same side
-        gap = (psi(first) - psi(second)).abs().max()
+        gap = (psi(first) - psi(second)).abs().max().detach()
         psi(first).pow(2).sum().backward()
         grad = last.weight.grad.abs().max()
         assert (float(gap) > 1e-3) is alive, code_norm
