@@ -144,6 +144,9 @@ def test_deployment_export_acts_like_the_original_and_is_smaller(tmp_path: Path,
     stored = torch.load(small, weights_only=True)['state']
     assert set(stored['modules']) <= {'encoder', 'psi', 'context_norm', 'actor'}
     assert not stored['optimizers']
+    # exporting again, under another name, gives the same bytes (the card's sha256 holds)
+    again = export_for_deployment(path, tmp_path / 'other_name.pt')
+    assert again.read_bytes() == small.read_bytes()
 
 
 def test_acting_only_load_has_no_optimizers_and_refuses_to_train(tmp_path: Path) -> None:

@@ -132,10 +132,16 @@ def _payload(agent: ZeusAgent, *, step: int, extra: dict[str, Any]) -> dict[str,
 
 
 def _write(payload: dict[str, Any], path: Path) -> Path:
-    """torch.save to a temp file + rename, so a crash never leaves half a file."""
+    """torch.save to a temp file + rename, so a crash never leaves half a file.
+
+    Saved through a file handle, so the archive's inner folder is torch's fixed 'archive' and
+    not the temp file's name (which holds the pid): the same payload gives the same bytes, and
+    re-exporting a checkpoint leaves its sha256 (named on its card) unchanged.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f'.{path.name}.tmp{os.getpid()}')
-    torch.save(payload, tmp)
+    with tmp.open('wb') as handle:
+        torch.save(payload, handle)
     tmp.replace(path)
     return path
 
