@@ -10,8 +10,12 @@ from ros_harness import python_module
 TASK = 'Cheetah-Run-v0'
 
 
-def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus') -> Path:
-    """A real (untrained, small) checkpoint for the task: enough to exercise the nodes."""
+def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus',
+                    seed: int = 0) -> Path:
+    """A real (untrained, small) checkpoint for the task: enough to exercise the nodes.
+
+    The same arguments give the same bytes; another `seed` gives other weights.
+    """
     import numpy as np
 
     from sim_bridge.registry import make_task
@@ -30,7 +34,7 @@ def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus') -
         obs_std=np.ones(obs_shape, np.float32) if obs_kind == 'state' else None)
     config = ZeusConfig(method=method, obs_kind=obs_kind, hidden_dim=32, model_hidden_dim=32,
                         encoder_hidden_dim=32, context_hidden_dim=16, transition_dim=16,
-                        feature_dim=16, num_filters=8, batch_size=16, device='cpu')
+                        feature_dim=16, num_filters=8, batch_size=16, device='cpu', seed=seed)
     task.close()
     save_checkpoint(path, make_agent(config, spec), step=0, extra={'purpose': 'test'})
     return path

@@ -387,7 +387,7 @@ def test_live_checkpoint_redeploy_swaps_the_pair_and_never_mixes_it(
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.nodes.common import step_qos
 
-    old, new = tiny_checkpoint(tmp_path / 'old.pt'), tiny_checkpoint(tmp_path / 'new.pt')
+    old, new = tiny_checkpoint(tmp_path / 'old.pt'), tiny_checkpoint(tmp_path / 'new.pt', seed=1)
     sha = {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in (old, new)}
     assert sha[old] != sha[new]
     ros_processes.start('swap-sim_bridge', ros_node(
