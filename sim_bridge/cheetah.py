@@ -1,4 +1,4 @@
-"""Cheetah tasks: torso length (v0), target velocity (v1), motor strength (Cheetah-Motor-v0).
+"""Cheetah tasks: torso length (v0), target velocity (v1), motor strength and bias (ours).
 
 Torso length L is the half-length of the torso capsule (dm_control default 0.5, fromto
 "-L 0 0 L 0 0"). The legs and head are attached to the torso ends and move with them
@@ -22,13 +22,13 @@ from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
 from sim_bridge.model_edit import load_suite_spec
 
-__all__ = ['CheetahMotorTask', 'CheetahRunTask', 'CheetahVelocityTask']
+__all__ = ['CheetahBiasTask', 'CheetahMotorTask', 'CheetahRunTask', 'CheetahVelocityTask']
 
 _TOTAL_MASS = 14.0  # the suite's settotalmass
 _RUN_SPEED = 10.0  # dm_control cheetah: speed above which the run reward is 1
 _SETTLE_STEPS = 200  # dm_control cheetah: physics steps to settle before an episode
 _CTRL_COST = 0.01  # Cheetah-Run-v1 control cost weight (MELD cheetah_vel)
-_MOTOR_TARGET_SPEED = 2.0  # Cheetah-Motor-v0: the forward speed to match [m/s]
+_MOTOR_TARGET_SPEED = 2.0  # Cheetah-Motor-v0 and -Bias-v0: the forward speed to match [m/s]
 _HEAD_OFFSET = 0.1  # head capsule centre is 0.1 beyond the torso end (0.6 for L=0.5)
 
 _OBS_START = 1  # observation skips rootx (translation invariance), as the suite
@@ -156,5 +156,55 @@ class CheetahMotorTask(_Cheetah):
             actuator.gear = gear * gain
 
     def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
-        return (-abs(self._speed(data) - _MOTOR_TARGET_SPEED)
-                - _CTRL_COST * float(np.dot(action, action)))
+        return _track_target_speed(self._speed(data), action)
+
+
+class CheetahBiasTask(_Cheetah):
+    """Cheetah-Bias-v0: match 2 m/s while every motor adds a constant torque (dynamics only).
+
+    `motor_bias` is a torque each motor produces whatever it is commanded, in units of its full
+    command (0.3: 30% of its peak torque, added to what the policy asks for), as a motor driver
+    whose zero has drifted or a spring preload would. Our addition, not a paper family: where
+    Cheetah-Motor-v0 scales what a command does (a policy can partly ignore it by pushing hard),
+    here the command that does the right thing is shifted by the bias itself, so the best action
+    depends on the context by construction, as Cheetah-Run-v1's does on its target; and the bias
+    shows in every transition, even at rest. Episodes start from the pose the suite's cheetah
+    settles in (the bias held off while settling), so the context is read from transitions, not
+    from the first observation. Reward and episodes as Cheetah-Motor-v0.
+    """
+
+    name = 'Cheetah-Bias-v0'
+    episode_length = 40
+    specs = (
+        ContextSpec(
+            'motor_bias', 0.0, -1.0, 1.0,
+            'constant torque of every motor, in units of its full command (added to the command)',
+        ),
+    )
+    model_params = ('motor_bias',)
+
+    def _edit_spec(self, spec: mujoco.MjSpec, context: Mapping[str, float]) -> None:
+        super()._edit_spec(spec, context)
+        bias = context.get('motor_bias', 0.0)
+        for actuator in spec.actuators:  # force = gain * ctrl + biasprm[0] (affine, no gain terms)
+            actuator.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+            actuator.biasprm[0] = bias
+
+    def _initialize_episode(
+        self, model: mujoco.MjModel, data: mujoco.MjData, rng: np.random.Generator
+    ) -> None:
+        """Settle as the suite does, the bias held off: every context starts from the same pose.
+
+        Otherwise the settled pose would give the bias away before the first transition.
+        """
+        data.ctrl[:] = -model.actuator_biasprm[:, 0]
+        super()._initialize_episode(model, data, rng)
+        data.ctrl[:] = 0.0
+
+    def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
+        return _track_target_speed(self._speed(data), action)
+
+
+def _track_target_speed(speed: float, action: np.ndarray) -> float:
+    """Cheetah-Run-v1's reward with the target fixed at 2 m/s (the dynamics families)."""
+    return -abs(speed - _MOTOR_TARGET_SPEED) - _CTRL_COST * float(np.dot(action, action))

@@ -24,6 +24,7 @@ _TASKS: dict[str, tuple[str, str]] = {
     'Cheetah-Run-v0': ('sim_bridge.cheetah', 'CheetahRunTask'),
     'Cheetah-Run-v1': ('sim_bridge.cheetah', 'CheetahVelocityTask'),
     'Cheetah-Motor-v0': ('sim_bridge.cheetah', 'CheetahMotorTask'),
+    'Cheetah-Bias-v0': ('sim_bridge.cheetah', 'CheetahBiasTask'),
     'Walker-Walk-v0': ('sim_bridge.walker', 'WalkerFrictionTask'),
     'Walker-Walk-v1': ('sim_bridge.walker', 'WalkerFootTask'),
     'Finger-Spin-v0': ('sim_bridge.finger', 'FingerSpinTask'),

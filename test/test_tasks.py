@@ -18,8 +18,8 @@ from sim_bridge.registry import TASK_NAMES, make_task
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
 Build = Callable[..., DmcTask]
-DMC_TASKS = ('Cheetah-Run-v0', 'Cheetah-Run-v1', 'Cheetah-Motor-v0', 'Walker-Walk-v0',
-             'Walker-Walk-v1', 'Finger-Spin-v0')
+DMC_TASKS = ('Cheetah-Run-v0', 'Cheetah-Run-v1', 'Cheetah-Motor-v0', 'Cheetah-Bias-v0',
+             'Walker-Walk-v0', 'Walker-Walk-v1', 'Finger-Spin-v0')
 
 
 @pytest.fixture
@@ -248,11 +248,48 @@ def test_motor_reward_tracks_two_metres_per_second(build: Build) -> None:
         assert reward == pytest.approx(-2.0 * task.action_repeat, abs=0.1 + 4 * abs(speed_before))
 
 
+# --- Cheetah-Bias-v0: motor_bias ---------------------------------------------------------------
+
+@pytest.mark.parametrize('bias', [-0.3, 0.45])
+def test_motor_bias_is_a_command_offset_the_policy_can_cancel(build: Build, bias: float) -> None:
+    """Commands a under bias b move the body exactly as a + b without it (while |a + b| <= 1).
+
+    So the best command is shifted by the bias itself: the action depends on the context.
+    """
+    actions = np.random.default_rng(5).uniform(-0.4, 0.4, (8, 6))
+    biased, biased_rewards = _run(build('Cheetah-Bias-v0', motor_bias=bias), actions)
+    plain, _ = _run(build('Cheetah-Bias-v0', motor_bias=0.0), actions + bias)
+    np.testing.assert_allclose(np.array(biased), np.array(plain), atol=1e-9)
+    suite = build('Cheetah-Run-v0').model
+    model = build('Cheetah-Bias-v0', motor_bias=bias).model
+    np.testing.assert_array_equal(model.actuator_gear, suite.actuator_gear)
+    np.testing.assert_array_equal(model.body_mass, suite.body_mass)
+    cancelled, cancelled_rewards = _run(build('Cheetah-Bias-v0', motor_bias=bias), actions - bias)
+    unbiased, _ = _run(build('Cheetah-Bias-v0', motor_bias=0.0), actions)
+    np.testing.assert_allclose(np.array(cancelled), np.array(unbiased), atol=1e-9)
+    assert biased_rewards != cancelled_rewards
+
+
+def test_motor_bias_shows_at_rest_but_not_in_the_start_pose(build: Build) -> None:
+    """Every bias starts from the same pose; zero commands then turn the joints its way."""
+    zero = np.zeros((3, 6))
+    joint_speed, starts = {}, {}
+    for bias in (-0.3, 0.0, 0.3):
+        states, _ = _run(build('Cheetah-Bias-v0', motor_bias=bias), zero)
+        starts[bias] = states[0]
+        joint_speed[bias] = np.array(states)[1][-6:]  # joint velocities after one step
+    assert (joint_speed[-0.3] < joint_speed[0.0]).all()
+    assert (joint_speed[0.0] < joint_speed[0.3]).all()
+    np.testing.assert_array_equal(starts[-0.3], starts[0.0])
+    np.testing.assert_array_equal(starts[0.3], starts[0.0])
+
+
 # --- shared behaviour ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize(('name', 'parameter', 'value'), [
     ('Cheetah-Run-v0', 'torso_length', 1.2),
     ('Cheetah-Motor-v0', 'motor_gain', 0.3),
+    ('Cheetah-Bias-v0', 'motor_bias', -0.4),
     ('Walker-Walk-v1', 'foot_length', 0.18),
     ('Finger-Spin-v0', 'finger_size', 0.2),
 ])

@@ -66,6 +66,7 @@ ALPHA_PSI_BY_TASK: dict[str, float] = {
     'Cheetah-Run-v1': 1.0,
     'Sawyer-Peg-v0': 1.0,
     'Cheetah-Motor-v0': 1.0,  # ours, not in the paper: the value of both cheetah families
+    'Cheetah-Bias-v0': 1.0,  # ours, as Cheetah-Motor-v0
 }
 """alpha_psi per task from the paper's ZeUS hyper-parameter table (and our own families)."""
 
