@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 from pathlib import Path
 import shutil
 from typing import Any
@@ -226,6 +227,19 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                                                   abs=1e-4)  # the CSV's 6 digits
     assert summary['adaptation_value_train_mean'] == pytest.approx(
         live - np.mean(at_train_mean), abs=1e-3)
+    # computed once per checkpoint and protocol beside the evaluation folders; the train
+    # split's own episodes store the same context (so held-out splits do not roll them out again)
+    from zeus_ros.offline.evaluation.evaluate import TRAIN_MEAN_FILE, evaluate
+
+    stored = json.loads((tmp_path / TRAIN_MEAN_FILE).read_text())
+    np.testing.assert_allclose(stored['context'], train_mean, atol=1e-6)
+    assert (stored['key']['episodes'], stored['key']['seed']) == (2, 100)
+    run = tmp_path / 'run'
+    evaluate(trained.out / 'final.pt', split='train', episodes=2, seed=100, probe_steps=0,
+             out=run / 'eval_train', progress=False)
+    from_train_split = json.loads((run / TRAIN_MEAN_FILE).read_text())
+    assert from_train_split['key'] == stored['key']
+    np.testing.assert_allclose(from_train_split['context'], train_mean, atol=1e-6)
     printed = capsys.readouterr().out
     assert 'sensitivity' in printed and 'frozen_other' in printed
     assert main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.6,abc',

@@ -20,7 +20,10 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+import hashlib
 import itertools
+import json
+import os
 from pathlib import Path
 import sys
 from typing import Any
@@ -317,6 +320,46 @@ def train_mean_context(agent: Any, *, episodes: int, seed: int) -> np.ndarray | 
     return None if means is None else np.mean(means, axis=0)
 
 
+TRAIN_MEAN_FILE = 'train_mean_context.json'
+"""Beside a run's eval_<split> folders: the train-mean context, so each split needs it once."""
+
+
+def _train_mean_key(checkpoint: Path, episodes: int, seed: int) -> dict[str, Any]:
+    digest = hashlib.sha256(Path(checkpoint).read_bytes()).hexdigest()
+    return {'checkpoint_sha256': digest, 'episodes': episodes, 'seed': seed}
+
+
+def cached_train_mean_context(agent: Any, checkpoint: Path, folder: Path, *, episodes: int,
+                              seed: int) -> np.ndarray | None:
+    """train_mean_context, read from `folder` when this checkpoint and protocol stored it there.
+
+    `zeus eval --split all` evaluates every split in its own job and each held-out split needs
+    the train values' mean context: without this every split rolls the train values out again.
+    """
+    key = _train_mean_key(checkpoint, episodes, seed)
+    path = folder / TRAIN_MEAN_FILE
+    try:
+        stored = json.loads(path.read_text())
+        if stored['key'] == key:
+            return None if stored['context'] is None else np.asarray(stored['context'])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass  # missing, from another checkpoint or protocol, or unreadable: compute it
+    mean = train_mean_context(agent, episodes=episodes, seed=seed)
+    store_train_mean_context(mean, checkpoint, folder, episodes=episodes, seed=seed)
+    return mean
+
+
+def store_train_mean_context(mean: np.ndarray | None, checkpoint: Path, folder: Path, *,
+                             episodes: int, seed: int) -> None:
+    """Write the train-mean context for cached_train_mean_context (atomically: jobs share it)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    text = json.dumps({'key': _train_mean_key(checkpoint, episodes, seed),
+                       'context': None if mean is None else np.asarray(mean).tolist()})
+    partial = folder / f'.{TRAIN_MEAN_FILE}.{os.getpid()}'
+    partial.write_text(text)
+    partial.replace(folder / TRAIN_MEAN_FILE)
+
+
 def switching_order(values: Sequence[dict[str, float]], seed: int) -> list[dict[str, float]]:
     """The split's values in a seeded shuffled order (no neighbour-to-neighbour sweep)."""
     order = np.random.default_rng(seed).permutation(len(values))
@@ -338,6 +381,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     from zeus_ros.offline.evaluation.diagnostics import (
         context_sensitivity,
         frozen_contexts,
+        mean_contexts,
         policy_contexts,
         spread_over_noise,
     )
@@ -345,6 +389,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
 
     agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
     out = Path(out) if out is not None else Path(checkpoint).parent / f'eval_{split}'
+    values_given = values is not None
     values = split_values(agent.task, split) if values is None else list(values)
     name = agent.context_names[0]
     labels = [', '.join(f'{v:g}' for v in value.values()) for value in values]
@@ -386,8 +431,14 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     sensitivity, (_, _, spread_noise) = nan, (nan, nan, nan)
     adaptation = {'other': nan, 'mean': nan, 'train_mean': nan}
     train_mean = None
-    if diagnostics and split != 'train' and agent.context_dim:
-        train_mean = train_mean_context(agent, episodes=episodes, seed=seed)
+    on_train_values = split == 'train' and not values_given
+    if diagnostics and agent.context_dim and not on_train_values:
+        train_mean = cached_train_mean_context(agent, checkpoint, out.parent,
+                                               episodes=episodes, seed=seed)
+    elif diagnostics and agent.context_dim:  # the train split's own traces give it
+        means = mean_contexts(agent, traces)
+        store_train_mean_context(None if means is None else np.mean(means, axis=0), checkpoint,
+                                 out.parent, episodes=episodes, seed=seed)
     frozen = frozen_contexts(agent, traces, values, train_mean) if diagnostics else None
     if diagnostics:
         sensitivity = context_sensitivity(agent, traces, values)
@@ -398,7 +449,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                                         progress=False, frozen=contexts)
         rows += [{'policy': f'frozen_{kind}', **r} for r in frozen_rows]
         adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
-    if split == 'train':  # the split's mean is the train values' mean
+    if on_train_values:  # the split's mean is the train values' mean
         adaptation['train_mean'] = adaptation['mean']
     agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
     random_ret = [r['return'] for r in rows if r['policy'] == 'random']
