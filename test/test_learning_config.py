@@ -18,6 +18,36 @@ def test_shipped_configs_load(name: str) -> None:
     assert config.batch_size == 128 and config.alpha_psi == 1.0
 
 
+def test_every_variant_loads_and_a_base_chain_keeps_only_the_change() -> None:
+    """Variants name their `base:` and hold what they change; the chain resolves to the rest."""
+    variants = sorted((PARAMS / 'variants').glob('*.yaml'))
+    assert len(variants) > 20
+    for path in variants:
+        load_config(path)
+    mlp = load_config(PARAMS / 'variants' / 'k10_ahead10_mlp.yaml')  # -> k10_ahead10 -> k10
+    k10 = load_config(PARAMS / 'variants' / 'k10.yaml')
+    assert mlp == k10.replace(model_horizon=10, context_head='mlp')
+
+
+def test_base_overrides_and_bad_bases_are_named(tmp_path: Path) -> None:
+    """`base:` is relative to the file; later keys win; a missing or circular base is named."""
+    (tmp_path / 'sub').mkdir()
+    (tmp_path / 'base.yaml').write_text('method: zeus\nk: 7\nbatch_size: 64\n')
+    (tmp_path / 'sub' / 'variant.yaml').write_text('base: ../base.yaml\nk: 3\n')
+    config = load_config(tmp_path / 'sub' / 'variant.yaml')
+    assert (config.k, config.batch_size) == (3, 64)
+    (tmp_path / 'orphan.yaml').write_text('base: gone.yaml\nk: 3\n')
+    with pytest.raises(ConfigError, match=r'gone\.yaml \(base of .*orphan\.yaml\): cannot read'):
+        load_config(tmp_path / 'orphan.yaml')
+    (tmp_path / 'a.yaml').write_text('base: b.yaml\n')
+    (tmp_path / 'b.yaml').write_text('base: a.yaml\n')
+    with pytest.raises(ConfigError, match='leads back to itself'):
+        load_config(tmp_path / 'a.yaml')
+    (tmp_path / 'typo.yaml').write_text('base: [base.yaml]\n')
+    with pytest.raises(ConfigError, match='base must be the path'):
+        load_config(tmp_path / 'typo.yaml')
+
+
 def test_paper_config_matches_paper_table() -> None:
     """pixels_paper.yaml carries the paper's widths and rates."""
     config = load_config(PARAMS / 'pixels_paper.yaml')

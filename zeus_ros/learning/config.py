@@ -375,17 +375,37 @@ def upgrade_stored_config(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def load_config(path: str | Path) -> ZeusConfig:
-    """Read a YAML training config; unknown keys and bad values raise ConfigError."""
-    path = Path(path)
+    """Read a YAML training config; unknown keys and bad values raise ConfigError.
+
+    `base: other.yaml` (a path relative to the file) starts from that config and overrides
+    the keys given, so a variant holds only what it changes.
+    """
+    return config_from_dict(_read_config_data(Path(path), ()), source=str(path))
+
+
+def _read_config_data(path: Path, children: tuple[Path, ...]) -> Any:
+    """The YAML mapping of a config file with its `base:` chain resolved."""
     try:
         text = path.read_text()
     except OSError as error:
-        raise ConfigError(f'{path}: cannot read config ({error.strerror})') from None
+        via = f' (base of {children[-1]})' if children else ''
+        raise ConfigError(f'{path}{via}: cannot read config ({error.strerror})') from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.safe_load(text) or {}
     except yaml.YAMLError as error:
         raise ConfigError(f'{path}: not valid YAML ({error})') from None
-    return config_from_dict(data or {}, source=str(path))
+    if not isinstance(data, dict) or 'base' not in data:
+        return data
+    base = data.pop('base')
+    if not isinstance(base, str) or not base:
+        raise ConfigError(f'{path}: base must be the path of another config file '
+                          f'(relative to this one), got {base!r}')
+    base_path = path.parent / base
+    chain = (*children, path)
+    if base_path.resolve() in {p.resolve() for p in chain}:
+        raise ConfigError(f'{path}: base {base} leads back to itself '
+                          f'({" -> ".join(str(p) for p in (*chain, base_path))})')
+    return {**_read_config_data(base_path, chain), **data}
 
 
 def resolve_config(config: ZeusConfig, task: str) -> ZeusConfig:
