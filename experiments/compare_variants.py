@@ -135,6 +135,7 @@ def variant_rows(tables: dict[str, Path], against: Sequence[str] = ()
                        'adaptation_mean': _cell(_floats(cells, 'adaptation_value_mean')),
                        'adaptation_train_mean': _cell(_floats(cells,
                                                               'adaptation_value_train_mean')),
+                       'adaptation_steady': _cell(_floats(cells, 'adaptation_value_steady')),
                        'spearman': _cell(_floats(cells, 'spearman'), 2),
                        'headroom': '-' if headroom is None
                        else f'{headroom[0]:.1f} ± {headroom[1]:.1f}'}
@@ -159,6 +160,7 @@ COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
            ('adaptation_other', 'value of adaptation (other extreme)'),
            ('adaptation_mean', 'value of adaptation (mean)'),
            ('adaptation_train_mean', "value of adaptation (train values' mean)"),
+           ('adaptation_steady', 'value of adaptation (train mean, once the history is full)'),
            ('spearman', 'Spearman'))
 
 

@@ -84,10 +84,11 @@ def test_an_issue10_checkpoint_reproduces_its_card(tmp_path: Path) -> None:
     row = re.search(r'^\| train \| (\S+) \| \S+ \| \S+ \| \S+ \| \S+ \| (\S+) \| (\S+) \|$',
                     path.with_suffix('.md').read_text(), re.M)
     assert row, 'card without a train row'
-    summary = evaluate(path, split='train', probe_steps=0, seed=100, out=tmp_path,
+    summary = evaluate(path, split='train', probe_steps=0, seed=100, out=tmp_path / 'eval',
                        progress=False)['summary'][0]
     assert summary['mean_return'] == pytest.approx(float(row[1]), abs=0.15)
     assert summary['sensitivity'] == pytest.approx(float(row[2]), abs=2e-3)
     assert summary['adaptation_value_mean'] == pytest.approx(float(row[3]), abs=0.15)
     # on the train values their mean is the split's mean: the same number, no second rollout
     assert summary['adaptation_value_train_mean'] == summary['adaptation_value_mean']
+    assert np.isfinite(summary['adaptation_value_steady'])

@@ -186,8 +186,12 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
     assert 'random' in summary
     contexts = read_csv(out / 'contexts.csv')
     assert {row['policy'] for row in contexts} == {'agent', 'random', 'frozen_other',
-                                                   'frozen_mean', 'frozen_train_mean'}
+                                                   'frozen_mean', 'frozen_train_mean',
+                                                   'frozen_steady'}
     assert np.isfinite(agent['adaptation_value_train_mean'])
+    steady = np.mean([r['return'] for r in contexts if r['policy'] == 'frozen_steady'])
+    live = np.mean([r['return'] for r in contexts if r['policy'] == 'agent'])
+    assert agent['adaptation_value_steady'] == pytest.approx(live - steady, abs=1e-3)
     assert 'spearman' in printed
 
 
@@ -202,7 +206,8 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                  '--episodes', '2', '--probe-steps', '0', '--out', str(out), '--no-progress'])
     assert code == 0
     contexts = read_csv(out / 'contexts.csv')
-    for policy in ('agent', 'frozen_other', 'frozen_mean', 'frozen_train_mean', 'random'):
+    for policy in ('agent', 'frozen_other', 'frozen_mean', 'frozen_train_mean',
+                   'frozen_steady', 'random'):
         mine = [row for row in contexts if row['policy'] == policy]
         assert sorted((row['context/torso_length'], row['episode']) for row in mine) == [
             (0.65, 0), (0.65, 1), (1.4, 0), (1.4, 1)], policy
@@ -478,7 +483,10 @@ def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: P
 
 
 def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any) -> None:
-    """blind_steps d: the frozen context in the first d steps of every episode, live after."""
+    """blind_steps d: the frozen context in the first d steps of every episode, live after.
+
+    live_steps d: live in the first d steps, frozen after (the steady value of adaptation).
+    """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
 
@@ -500,6 +508,17 @@ def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any)
     assert [r['return'] for r in always] == [r['return'] for r in blind_all]
     with pytest.raises(ValueError, match='needs a frozen_context'):
         evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, blind_steps=2)
+    # live_steps d: the other way round, live in the first d steps, frozen after
+    traces.clear()
+    evaluate_contexts(agent, values, episodes=2, seed=3, progress=False, traces=traces,
+                      frozen=frozen, live_steps=4)
+    trace = traces[0]
+    for start in np.flatnonzero(trace.first)[:2]:
+        assert not np.allclose(trace.psi[start + 1:start + 4], 0.25)
+        assert np.allclose(trace.psi[start + 4:start + 8], 0.25)
+    with pytest.raises(ValueError, match='give one'):
+        evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, frozen=frozen,
+                          blind_steps=2, live_steps=2)
 
 
 def test_context_transform_maps_the_live_context_before_the_policy_acts(trained: Any) -> None:

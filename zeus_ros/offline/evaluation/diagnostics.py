@@ -13,7 +13,10 @@ method alike ('context' below is psi(H), or the true context for the oracles):
     to the mean over the *train* values), on the same environment seeds, so every difference
     is paired. Off the train values the last one is the question a deployed robot meets: is
     acting on the inferred context better than acting as in training? (The split's own mean
-    is itself an unseen context there; docs/results.md, session 8.)
+    is itself an unseen context there; docs/results.md, session 8.) 'steady' freezes at the
+    train values' mean only after the first k steps of each episode, so that what psi says
+    while its history fills (the start of an episode, alike in every context) is not counted
+    as adaptation.
 The headroom over seeds (oracle - no_context, and the share of it a method recovers) is in
 report.py, which sees every method of a task.
 """
@@ -33,7 +36,7 @@ __all__ = ['DIAGNOSTICS', 'context_sensitivity', 'extreme_indices', 'farthest_ex
            'frozen_contexts', 'mean_contexts', 'policy_contexts', 'spread_over_noise']
 
 DIAGNOSTICS = ('sensitivity', 'spread_noise', 'adaptation_value_other', 'adaptation_value_mean',
-               'adaptation_value_train_mean')
+               'adaptation_value_train_mean', 'adaptation_value_steady')
 """Diagnostic columns of an eval summary (NaN where the method has no context)."""
 
 

@@ -132,19 +132,20 @@ def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = ''
 
 
 def _policy(agent: Any, task: Any, seed: int, frozen: np.ndarray | None = None,
-            blind_steps: int = 0,
+            blind_steps: int = 0, live_steps: int = 0,
             context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> Policy:
     if agent is None:
         return random_policy(task, seed)
     return AgentPolicy(agent, noise=0.0, seed=seed, frozen_context=frozen,
-                       blind_steps=blind_steps, context_transform=context_transform)
+                       blind_steps=blind_steps, live_steps=live_steps,
+                       context_transform=context_transform)
 
 
 def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episodes: int = 1,
                       seed: int = 0, task_name: str | None = None, progress: bool = True,
                       traces: list[Trace] | None = None,
                       frozen: Sequence[np.ndarray] | None = None,
-                      blind_steps: int = 0,
+                      blind_steps: int = 0, live_steps: int = 0,
                       context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
                       ) -> list[dict[str, Any]]:
     """Deterministic episodes at a constant context per value; one row per episode.
@@ -152,8 +153,9 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
     `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
     The environment of value i is seeded with seed + i, so two calls with the same seed meet
     the same initial states (paired comparisons); `frozen[i]` replaces the live context of
-    value i at every step, or with `blind_steps` only in the first that many of each episode;
-    `context_transform` maps the live context before the policy acts (AgentPolicy).
+    value i at every step, or with `blind_steps` only in the first that many of each episode,
+    or with `live_steps` only after the first that many; `context_transform` maps the live
+    context before the policy acts (AgentPolicy).
     """
     name = agent.task if agent is not None else task_name
     rows = []
@@ -162,7 +164,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
         try:
             policy = _policy(agent, task, seed + index,
                              None if frozen is None else frozen[index], blind_steps,
-                             context_transform)
+                             live_steps, context_transform)
             trace = run_steps(env, task, policy,
                               episodes * task.episode_length + 1, progress=False)
         finally:
@@ -429,7 +431,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         probe = probe_context([rollout], k=5, seed=seed, progress=progress)
     nan = float('nan')
     sensitivity, (_, _, spread_noise) = nan, (nan, nan, nan)
-    adaptation = {'other': nan, 'mean': nan, 'train_mean': nan}
+    adaptation = {'other': nan, 'mean': nan, 'train_mean': nan, 'steady': nan}
     train_mean = None
     on_train_values = split == 'train' and not values_given
     if diagnostics and agent.context_dim and not on_train_values:
@@ -451,6 +453,13 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
     if on_train_values:  # the split's mean is the train values' mean
         adaptation['train_mean'] = adaptation['mean']
+    steady_anchor = (frozen or {}).get('mean' if on_train_values else 'train_mean')
+    if steady_anchor is not None:  # frozen there only once psi's history is full
+        steady_rows = evaluate_contexts(agent, values, episodes=episodes, seed=seed,
+                                        progress=False, frozen=steady_anchor, live_steps=agent.k)
+        rows += [{'policy': 'frozen_steady', **r} for r in steady_rows]
+        adaptation['steady'] = float(np.mean(live - np.asarray([r['return']
+                                                               for r in steady_rows])))
     agent_ret = [r['return'] for r in rows if r['policy'] == 'agent']
     random_ret = [r['return'] for r in rows if r['policy'] == 'random']
     recovered = [s['latency'] for s in judged if s['recovered']]
@@ -466,13 +475,15 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         'sensitivity': sensitivity, 'spread_noise': spread_noise,
         'adaptation_value_other': adaptation['other'],
         'adaptation_value_mean': adaptation['mean'],
-        'adaptation_value_train_mean': adaptation['train_mean'], 'episodes': episodes},
+        'adaptation_value_train_mean': adaptation['train_mean'],
+        'adaptation_value_steady': adaptation['steady'], 'episodes': episodes},
         {'policy': 'random', 'method': 'uniform', 'split': split,
          'mean_return': float(np.mean(random_ret)), 'std_return': float(np.std(random_ret))}]
     write_csv(out / 'contexts.csv', rows)
     write_csv(out / 'switches.csv', switches, columns=SWITCH_COLUMNS)
     write_csv(out / 'summary.csv', summary)
-    policies = ['agent', *(f'frozen_{kind}' for kind in frozen or {}), 'random']
+    policies = ['agent', *(f'frozen_{kind}' for kind in frozen or {}),
+                *(['frozen_steady'] if steady_anchor is not None else []), 'random']
     per_value = {policy: [float(np.mean([r['return'] for r in rows if r['policy'] == policy
                                          and r[f'context/{name}'] == v[name]]))
                           for v in values] for policy in policies}

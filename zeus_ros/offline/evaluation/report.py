@@ -202,13 +202,15 @@ def diagnostics_table(rows: list[dict[str, Any]]) -> str:
     lines = ['| method | split | seeds | context sensitivity (mean abs. delta action) | '
              'context spread / noise | value of adaptation (frozen to other extreme) | '
              'value of adaptation (frozen to mean) | value of adaptation (frozen to the train '
-             "values' mean) |", '|---|---|---|---|---|---|---|---|']
+             "values' mean) | value of adaptation (the same, frozen once the history is full) |",
+             '|---|---|---|---|---|---|---|---|---|']
     for row in rows:
         lines.append(f'| {row["method"]} | {row["split"]} | {row["seeds"]} | '
                      f'{_pm(row, "sensitivity", 3)} | {_pm(row, "spread_noise", 2)} | '
                      f'{_pm(row, "adaptation_value_other", 1)} | '
                      f'{_pm(row, "adaptation_value_mean", 1)} | '
-                     f'{_pm(row, "adaptation_value_train_mean", 1)} |')
+                     f'{_pm(row, "adaptation_value_train_mean", 1)} | '
+                     f'{_pm(row, "adaptation_value_steady", 1)} |')
     return '\n'.join(lines)
 
 

@@ -217,6 +217,7 @@ class AgentPolicy:
     def __init__(self, agent: InferenceAgent, *, noise: float, seed: int,
                  stochastic: bool = False,
                  frozen_context: np.ndarray | None = None, blind_steps: int = 0,
+                 live_steps: int = 0,
                  context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         """Wrap `agent`; options for training collection and for diagnostics.
 
@@ -225,12 +226,19 @@ class AgentPolicy:
         diagnostic: what the policy earns when it cannot follow the context), or with
         `blind_steps` > 0 only for that many steps after each episode start and each change of
         the true context (the inference-delay yardstick: an oracle that, like any estimator,
-        must first see a context before it knows it). `context_transform` maps the live context
-        before the policy acts on it (guards for contexts beyond the training range).
+        must first see a context before it knows it), or with `live_steps` > 0 only from that
+        many steps after each episode start on (the value of adaptation once psi's history is
+        full: what psi's start-of-episode signal earns is not counted as adaptation).
+        `context_transform` maps the live context before the policy acts on it (guards for
+        contexts beyond the training range).
         """
-        if blind_steps < 0 or (blind_steps > 0 and frozen_context is None):
-            raise ValueError(f'blind_steps={blind_steps}: needs a frozen_context to act on '
-                             'while blind, and must be >= 0')
+        for name, steps in (('blind_steps', blind_steps), ('live_steps', live_steps)):
+            if steps < 0 or (steps > 0 and frozen_context is None):
+                raise ValueError(f'{name}={steps}: needs a frozen_context to act on, and must '
+                                 'be >= 0')
+        if blind_steps and live_steps:
+            raise ValueError('blind_steps and live_steps: give one (frozen first, or frozen '
+                             'after)')
         import torch
 
         from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
@@ -243,6 +251,8 @@ class AgentPolicy:
         self.frozen_context = (None if frozen_context is None
                                else np.asarray(frozen_context, np.float32))
         self.blind_steps = int(blind_steps)
+        self.live_steps = int(live_steps)
+        self._episode_step = 0
         self.context_transform = context_transform
         self._seen: tuple[np.ndarray | None, int] = (None, 0)  # true context, steps known
         self.rng = np.random.default_rng(seed)
@@ -264,6 +274,7 @@ class AgentPolicy:
         obs = self._observation(es, rec)
         if es.observation.first or self._prev is None:
             self.history.clear()
+            self._episode_step = 0
         else:
             self.history.push(self._prev, es.applied_action, es.observation.reward, obs)
         self._prev = obs
@@ -274,6 +285,7 @@ class AgentPolicy:
             psi = np.asarray(self.context_transform(psi), np.float32)
         if self.frozen_context is not None and self._blind(true_ctx, es.observation.first):
             psi = self.frozen_context
+        self._episode_step += 1
         action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
                                 rng=self.rng)
         return PolicyDecision(action, None if self.agent.needs_true_context else psi,
@@ -281,7 +293,9 @@ class AgentPolicy:
 
 
     def _blind(self, true_ctx: np.ndarray, first: bool) -> bool:
-        """Whether this step acts on the frozen context (always, without blind_steps)."""
+        """Whether this step acts on the frozen context (always, without blind/live_steps)."""
+        if self.live_steps:
+            return self._episode_step >= self.live_steps
         if self.blind_steps == 0:
             return True
         known, steps = self._seen
