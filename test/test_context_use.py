@@ -219,6 +219,28 @@ def test_scale_free_context_loss_ignores_the_size_of_psi() -> None:
     assert np.isfinite(loss(1e-3, True))
 
 
+def test_bounded_scale_free_loss_has_the_same_target_and_a_gradient_at_psi_scale() -> None:
+    """scale_free's gradient into psi grows as psi shrinks (x1/s); the bounded form's shrinks."""
+    torch.manual_seed(0)
+    transition, reward = TransitionModel(6, 2, 4, 16), RewardModel(6, 2, 4, 16)
+    feat, action = torch.randn(32, 6), torch.rand(32, 2) * 2 - 1
+    base1, base2 = torch.randn(32, 4), torch.randn(32, 4)
+
+    def grad_norm(scale: float, bounded: bool) -> tuple[float, float, float]:
+        psi1 = (base1 * scale).requires_grad_()
+        out = context_loss(transition, reward, feat, action, psi1, base2 * scale,
+                           scale_free=True, bounded=bounded)
+        out.loss.backward()
+        return float(psi1.grad.norm()), float(out.loss), float(out.context_distance.mean())
+
+    free_big, free_small = grad_norm(1.0, False), grad_norm(1e-2, False)
+    bounded_big, bounded_small = grad_norm(1.0, True), grad_norm(1e-2, True)
+    assert free_small[0] > 10 * free_big[0]  # the amplification the bounded form removes
+    assert bounded_small[0] < 0.1 * bounded_big[0]
+    for free, bounded in ((free_big, bounded_big), (free_small, bounded_small)):
+        assert bounded[1] == pytest.approx(free[1] * (free[2] + 1e-8) ** 2, rel=1e-5)
+
+
 def test_critic_gradient_reaches_psi_only_when_configured() -> None:
     """Same seed and batch: psi moves differently when the TD error trains it too."""
     system = SyntheticSystem(k=3)

@@ -39,7 +39,7 @@ CONTEXT_NORMS = ('none', 'running', 'reliability')
 CONTEXT_INPUT_INITS = ('orthogonal', 'zero')
 """How the actor's and critic's first-layer weights on the context inputs start."""
 
-CONTEXT_LOSSES = ('paper', 'scale_free')
+CONTEXT_LOSSES = ('paper', 'scale_free', 'scale_free_bounded')
 """Form of eq. 1's context loss: as written, or distances matched up to a batch-wise scale."""
 
 EXPLORATIONS = ('stochastic', 'noise')
@@ -97,7 +97,12 @@ class ZeusConfig:
     context_loss: str = 'scale_free'
     """'paper': MSE(||psi1 - psi2||, d) as eq. 1 writes it, which psi can satisfy by shrinking
     towards a constant (d is computed at psi itself); 'scale_free': both distance vectors divided
-    by their batch mean before the MSE, so only the pattern of distances counts, not their size."""
+    by their batch mean before the MSE, so only the pattern of distances counts, not their size;
+    'scale_free_bounded': the same target, its gradient at the scale of psi's distances (the loss
+    times the detached mean psi distance squared). Why (session 10): dividing by the mean
+    multiplies the gradient by 1 / (mean psi distance), so a tight psi is driven by this loss
+    alone and the dynamics loss's signal is drowned; on Cheetah-Bias-v0 psi's codes then
+    saturate, while without the context loss psi reads the bias (Spearman 0.97)."""
     context_consistency: float = 0.0
     """Weight of the consistency loss (representation.consistency_loss): psi should drift little
     from one step to the next of an episode relative to its spread across the batch. 0: off."""

@@ -70,7 +70,8 @@ def dynamics_loss(pred: Gaussian, target: torch.Tensor, kind: str) -> torch.Tens
 
 def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.Tensor,
                  action: torch.Tensor, psi1: torch.Tensor, psi2: torch.Tensor, *,
-                 use_sigma: bool = True, scale_free: bool = False) -> ContextLoss:
+                 use_sigma: bool = True, scale_free: bool = False,
+                 bounded: bool = False) -> ContextLoss:
     """Eq. 1 context loss: distances in psi space should match d computed from T and R.
 
     d(c1, c2) = |R(s, a, psi1) - R(s, a, psi2)| + W2(T(s, a, psi1), T(s, a, psi2)) on the SAME
@@ -87,6 +88,10 @@ def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.T
         scale_free: divide both distance vectors by their batch mean first, so the loss asks
             for the pattern of distances and psi cannot satisfy it by shrinking (d is computed
             at psi, so the paper's form is solved by psi = constant, where both sides are 0).
+        bounded: with scale_free, multiply the loss by the detached mean psi distance squared:
+            the same minimum, but a gradient of the size eq. 1's would have at psi's scale
+            instead of 1 / (mean psi distance) times it, which outweighs the dynamics loss's
+            gradient into psi whenever psi is tight.
     """
     with torch.no_grad():
         feat, p1, p2 = feat.detach(), psi1.detach(), psi2.detach()
@@ -98,8 +103,10 @@ def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.T
     context_distance = safe_norm(psi1 - psi2, dim=-1)
     if scale_free:
         eps = 1e-8
-        loss = F.mse_loss(context_distance / (context_distance.mean() + eps),
-                          task_distance / (task_distance.mean() + eps))
+        scale = context_distance.mean() + eps
+        loss = F.mse_loss(context_distance / scale, task_distance / (task_distance.mean() + eps))
+        if bounded:
+            loss = loss * scale.detach() ** 2
     else:
         loss = F.mse_loss(context_distance, task_distance)
     return ContextLoss(loss=loss,
@@ -156,7 +163,8 @@ def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBa
             ctx = context_loss(m['transition'], m['reward'], feat, action, psi1,
                                m['psi'](pair_history),
                                use_sigma=cfg.dynamics_loss == 'gaussian_nll',
-                               scale_free=cfg.context_loss == 'scale_free')
+                               scale_free=cfg.context_loss.startswith('scale_free'),
+                               bounded=cfg.context_loss == 'scale_free_bounded')
             total = total + float(cfg.alpha_psi) * ctx.loss
             metrics['loss/context'] = ctx.loss
             metrics['train/task_distance'] = ctx.task_distance.mean()
