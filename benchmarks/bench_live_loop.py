@@ -11,8 +11,12 @@ the container then publishes every step and action on DDS too. `single-quiet` ru
 mode with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step
 count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized from the
 round's in-process rate to last about QUIET_SECONDS, long enough for several counts).
+`--executors single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
+nodes/common.py), alternately in each round, so a loaded machine weighs on both alike (a
+container with intra-process delivery spins on the single-threaded one whatever is asked).
 
-    source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400]
+    source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400] \
+        [--executors single,events]
 """
 
 from __future__ import annotations
@@ -111,12 +115,13 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
-def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
-              ) -> dict[str, float]:
+def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
+              executor: str | None = None) -> dict[str, float]:
     """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
 
     `mode` (MODES): a process per node, or the three nodes in one process on one executor
-    (zeus launch --single-process) with or without intra-process delivery.
+    (zeus launch --single-process) with or without intra-process delivery. `executor`: the
+    nodes' $ZEUS_EXECUTOR (None: as this process's environment says).
     """
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
@@ -125,10 +130,12 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi'
     from zeus_msgs.msg import Action, StepFeedback
 
     from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.common import EXECUTOR_ENV, TOPICS, step_qos
     from zeus_ros.processes import ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
+    if executor is not None:
+        env[EXECUTOR_ENV] = executor
     domain = int(env['ROS_DOMAIN_ID'])
     values = '[' + ','.join(str(v) for v in SCHEDULE['values']) + ']'
     quiet = mode == 'single-quiet'
@@ -258,28 +265,44 @@ def main() -> None:
     parser.add_argument('--kinds', default='state,pixels', help='observation kinds to run')
     parser.add_argument('--repeat', type=int, default=1,
                         help='rounds of in-process + every mode (A/B on a loaded machine)')
+    parser.add_argument('--executors', default='',
+                        help='executors the nodes spin on, each mode run once per executor '
+                        'in every round (e.g. single,events; default: as $ZEUS_EXECUTOR says)')
     args = parser.parse_args()
+    from zeus_ros.nodes.common import EXECUTORS, executor_kind
+
     modes = [m.strip() for m in args.modes.split(',') if m.strip()]
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
+    executors = [e.strip() for e in args.executors.split(',') if e.strip()]
     unknown = [m for m in modes if m not in MODES] + [k for k in kinds if k not in P99_TARGETS_MS]
+    unknown += [e for e in executors if e not in EXECUTORS]
     if unknown:
-        parser.error(f'unknown mode or kind {", ".join(unknown)}: modes are {", ".join(MODES)}, '
-                     f'kinds {", ".join(P99_TARGETS_MS)}')
+        parser.error(f'unknown mode, kind or executor {", ".join(unknown)}: modes are '
+                     f'{", ".join(MODES)}, kinds {", ".join(P99_TARGETS_MS)}, executors '
+                     f'{", ".join(EXECUTORS)}')
+    try:
+        executors = executors or [executor_kind()]
+    except ValueError as error:
+        parser.error(str(error))
     print(f'three-node lockstep loop vs in-process loop, {TASK} (targets in brackets; '
           'in-process = ScheduledEnv + the deployment code, no ROS)')
-    print(f'{"obs":<7} {"mode":<10} {"in-proc/s":>9} {"live/s":>8} {"ratio [target]":>15} '
-          f'{"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} {"p99 ms [target]":>16}  '
+    print(f'{"obs":<7} {"mode":<10} {"executor":<8} {"in-proc/s":>9} {"live/s":>8} '
+          f'{"ratio [target]":>15} {"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} '
+          f'{"p99 ms [target]":>16}  '
           'RSS MiB per process')
     with tempfile.TemporaryDirectory() as tmp:
         for kind in kinds:
             steps = args.steps if kind == 'state' else args.pixel_steps
             checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
-            for mode in [mode for _round in range(args.repeat) for mode in [None, *modes]]:
+            runs = [(mode, executor) for mode in modes for executor in executors]
+            for mode, executor in [run for _round in range(args.repeat)
+                                   for run in [(None, None), *runs]]:
                 if mode is None:  # each round against its own in-process rate
                     local, local_cpu = in_process_rate(checkpoint, steps)
                     continue
                 run_steps = quiet_steps(steps, local) if mode == 'single-quiet' else steps
-                live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode)
+                live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode,
+                                 executor=executor)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
@@ -288,7 +311,7 @@ def main() -> None:
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
                     '' if live['p99'] <= p99_target or np.isnan(live['p99']) else '!')
                 cpu_text = f'{local_cpu:.2f}/{live["cpu_ms"]:.2f}'
-                print(f'{kind:<7} {mode:<10} {local:>9.1f} {live["rate"]:>8.1f} '
+                print(f'{kind:<7} {mode:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
                       f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}', flush=True)
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "

@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import (
     HistoryPolicy,
     QoSProfile,
@@ -26,10 +26,13 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 
 if TYPE_CHECKING:
+    from rclpy.context import Context
     from rclpy.node import Node
     from rclpy.timer import Timer
 
 __all__ = [
+    'EXECUTORS',
+    'EXECUTOR_ENV',
     'TOPICS',
     'NodeFinished',
     'RateMeter',
@@ -39,8 +42,10 @@ __all__ = [
     'count_publishers',
     'count_subscribers',
     'diagnostics_message',
+    'executor_kind',
     'image_from_array',
     'image_qos',
+    'make_executor',
     'missing_peers',
     'publisher_qos',
     'run_node',
@@ -269,7 +274,11 @@ def diagnostics_message(
 
 
 class NodeFinished(Exception):  # noqa: N818 - a signal, not an error
-    """Raised from a callback when a node has done its job (e.g. max_steps reached)."""
+    """Raised from a callback when a node has done its job (e.g. max_steps reached).
+
+    Setting the node's `finished` attribute to True does the same without raising: the events
+    executor logs every exception a callback raises as FATAL before passing it on.
+    """
 
 
 def _exit_now(code: int) -> NoReturn:
@@ -320,13 +329,104 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None, drain: 
     run_nodes([factory], args, drain)
 
 
-def _spin_until_signal(executor: SingleThreadedExecutor, signals: list[int]) -> None:
-    """Spin until a stop signal (noted in `signals` by our handler) or a shutdown."""
-    while not signals and rclpy.ok():
+EXECUTOR_ENV = 'ZEUS_EXECUTOR'
+"""The environment variable that chooses the executor every node process spins on."""
+EXECUTORS = ('events', 'single')
+"""events: rclpy.experimental.EventsExecutor (rcl's event callbacks, dispatched in C++);
+single: rclpy's SingleThreadedExecutor (a wait set rebuilt in Python per turn). The first is
+the default: the three-node state loop measured 1.2-1.6x the steps/s on 25-40 % less CPU per
+step as processes (benchmarks/bench_live_loop.py --executors single,events; README)."""
+
+
+def executor_kind() -> str:
+    """The executor `$ZEUS_EXECUTOR` names (EXECUTORS; unset or empty: the default).
+
+    Raises ValueError (one line naming the variable, the value and the choices) for anything
+    else.
+    """
+    kind = os.environ.get(EXECUTOR_ENV, '').strip().lower() or EXECUTORS[0]
+    if kind not in EXECUTORS:
+        raise ValueError(f'{EXECUTOR_ENV}={os.environ[EXECUTOR_ENV]!r}: unknown executor; '
+                         f'choose from {", ".join(EXECUTORS)}')
+    return kind
+
+
+def _run_in_place(coroutine: Any) -> Any:
+    """Run a coroutine that never suspends to its end, without an event loop.
+
+    What the events executor runs a waitable's `execute()` with, in place of `asyncio.run`,
+    which builds and closes an event loop per call (~0.1 ms, twice per lockstep step: sim_bridge's
+    actions and the policy's contexts come through `SenderSubscription`s). The waitables of our
+    nodes (SenderSubscription, rclpy's QoS event handlers on plain callbacks) never suspend;
+    one that does is closed and reported, never left half-run.
+    """
+    try:
+        coroutine.send(None)
+    except StopIteration as done:
+        return done.value
+    coroutine.close()
+    raise RuntimeError(f'{coroutine!r} waits on something: the events executor of zeus_ros '
+                       'nodes runs waitables without an event loop (ZEUS_EXECUTOR=single does)')
+
+
+def _events_executor(context: Context | None) -> Executor:
+    """The EventsExecutor of rclpy, running waitables with `_run_in_place`.
+
+    It looks `asyncio.run` up once, when it is built: only this executor runs without it.
+    """
+    import asyncio
+
+    from rclpy.experimental import EventsExecutor
+
+    run = asyncio.run
+    asyncio.run = _run_in_place
+    try:
+        return EventsExecutor(context=context)
+    finally:
+        asyncio.run = run
+
+
+def make_executor(nodes: Sequence[Node], kind: str | None = None,
+                  context: Context | None = None) -> Executor:
+    """The executor the nodes of a process spin on (`kind`, default `executor_kind()`).
+
+    The events executor cannot serve guard conditions: a process with one (the container's
+    intra-process bus) spins on the single-threaded executor whatever was asked (and says so
+    where $ZEUS_EXECUTOR asked for events). The nodes are added to the executor returned (on
+    `context`, default rclpy's).
+    """
+    kind = kind or executor_kind()
+    guarded = [node.get_name() for node in nodes if list(node.guards)]
+    if kind == 'events' and guarded:
+        # Said where someone asked for events; the default just takes what works.
+        asked = os.environ.get(EXECUTOR_ENV, '').strip().lower() == 'events'
+        log = nodes[0].get_logger().info if asked else nodes[0].get_logger().debug
+        log(f'node(s) {", ".join(guarded)} hold a guard condition (intra-process delivery), '
+            'which the events executor cannot serve: spinning on the single-threaded executor')
+        kind = 'single'
+    executor = _events_executor(context) if kind == 'events' else \
+        SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    return executor
+
+
+def _finished(nodes: Sequence[Node]) -> bool:
+    """True once a node says it has done its job (its `finished` attribute)."""
+    return any(getattr(node, 'finished', False) for node in nodes)
+
+
+def _spin_until_signal(executor: Executor, signals: list[int], nodes: Sequence[Node] = ()
+                       ) -> None:
+    """Spin until a stop signal (noted in `signals` by our handler), a shutdown or a finish.
+
+    A finish: one of `nodes` has done its job (`_finished`).
+    """
+    while not signals and rclpy.ok() and not _finished(nodes):
         executor.spin_once(timeout_sec=0.1)
 
 
-def _drain(executor: SingleThreadedExecutor, nodes: Sequence[Node], quiet: float) -> None:
+def _drain(executor: Executor, nodes: Sequence[Node], quiet: float) -> None:
     """After a stop signal: spin on until no message came for `quiet` s (DRAIN_LIMIT_S).
 
     `zeus launch` stops a recorder after the nodes it records: what they published last may
@@ -349,8 +449,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     """`run_node` for several nodes in one process on one executor (a component container).
 
     The nodes are built in order (a ValueError from any stops them all: exit code 2), spin
-    together until a signal, an external shutdown or one of them finishes (NodeFinished), are
-    destroyed and closed in order, and the exit code is the first non-zero `exit_code`.
+    together on `make_executor`'s executor until a signal, an external shutdown or one of them
+    finishes (NodeFinished, or its `finished` attribute set), are destroyed and closed in
+    order, and the exit code is the first non-zero `exit_code`.
     """
     signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
@@ -360,6 +461,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Node] = []
     try:
+        kind = executor_kind()  # a bad $ZEUS_EXECUTOR stops the process as a bad parameter
         for factory in factories:
             nodes.append(factory())
     except ValueError as error:
@@ -368,11 +470,11 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
             node.destroy_node()
         rclpy.try_shutdown()
         _exit_now(2)
-    executor = SingleThreadedExecutor()
-    for node in nodes:
-        executor.add_node(node)
+    executor = make_executor(nodes, kind)
     try:
-        _spin_until_signal(executor, signals)
+        _spin_until_signal(executor, signals, nodes)
+        if _finished(nodes):
+            raise NodeFinished
         if drain:
             _drain(executor, nodes, drain)
         else:
@@ -389,6 +491,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     finally:
         for node in nodes:  # as rclpy.spin leaves its executor
             executor.remove_node(node)
+        if not isinstance(executor, SingleThreadedExecutor):
+            executor.shutdown()  # the events executor drops its rcl callbacks only here
         # Destroyed first, then closed (close() may log its summary after its node is gone).
         for node in nodes:
             node.destroy_node()

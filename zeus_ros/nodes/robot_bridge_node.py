@@ -32,7 +32,6 @@ from sim_bridge.rewards import JointObservation, load_reward
 from sim_bridge.robot import RobotSpec, parse_context
 from zeus_ros.nodes.common import (
     TOPICS,
-    NodeFinished,
     RateMeter,
     WaitReport,
     diagnostics_message,
@@ -132,6 +131,7 @@ class RobotBridgeNode(Node):
         self._segment = 0
         self._known_context = dict(self.spec.context)
         self._started = False
+        self.finished = False  # max_steps reached: run_nodes ends the spin (common.py)
         self._start_after = math.inf
 
         self.command = CommandPublisher(
@@ -264,6 +264,8 @@ class RobotBridgeNode(Node):
         return not missing
 
     def _on_tick(self) -> None:
+        if self.finished:
+            return
         now = time.monotonic()
         if not self._started:
             if math.isinf(self._start_after) and self._ready(now):
@@ -283,7 +285,8 @@ class RobotBridgeNode(Node):
             self._send_safe(ActionStatus.NONE)
             self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
             self._started = False
-            raise NodeFinished
+            self.finished = True  # not NodeFinished: the events executor logs what it raises
+            return
         max_age = self.params['stale_action_age'] or 3 * self.period
         if now - self._action_time > max_age:
             self.counts['stale'] += 1

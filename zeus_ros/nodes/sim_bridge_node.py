@@ -24,7 +24,6 @@ from sim_bridge.registry import TASK_NAMES, make_task
 from sim_bridge.schedules import schedule_from_config
 from zeus_ros.nodes.common import (
     TOPICS,
-    NodeFinished,
     RateMeter,
     WaitReport,
     diagnostics_message,
@@ -85,6 +84,7 @@ class SimBridgeNode(Node):
         self.env = ScheduledEnv(task, schedule)
         self.mode: str = self.params['mode']
         self.exit_code = 0
+        self.finished = False  # max_steps reached: run_nodes ends the spin (common.py)
         self.counts = dict.fromkeys(
             ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected', 'foreign'),
             0
@@ -164,6 +164,8 @@ class SimBridgeNode(Node):
         return not missing
 
     def _on_tick(self) -> None:
+        if self.finished:
+            return
         now = time.monotonic()
         if not self._started:
             if math.isinf(self._start_after) and self._peers_ready():
@@ -228,9 +230,11 @@ class SimBridgeNode(Node):
         max_steps = self.params['max_steps']
         if max_steps and self.counts['steps'] > max_steps:
             # Observation max_steps got its answer: the loop is complete, stop here.
-            self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
+            if not self.finished:
+                self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
             self._started = False  # said all there is to say
-            raise NodeFinished
+            self.finished = True  # not NodeFinished: the events executor logs what it raises
+            return
         result = self.env.step(action)
         if stale and result.status == ActionStatus.TIMEOUT:
             result = result.with_status(ActionStatus.STALE)
