@@ -313,11 +313,16 @@ def train_mean_context(agent: Any, *, episodes: int, seed: int) -> np.ndarray | 
 
     Same protocol as the split's episodes (deterministic, `episodes` per value, `seed`).
     """
-    from zeus_ros.offline.evaluation.diagnostics import mean_contexts
-
     traces: list[Trace] = []
     evaluate_contexts(agent, split_values(agent.task, 'train'), episodes=episodes, seed=seed,
                       progress=False, traces=traces)
+    return overall_mean_context(agent, traces)
+
+
+def overall_mean_context(agent: Any, traces: Sequence[Trace]) -> np.ndarray | None:
+    """The mean over values of each trace's mean context; None without a context."""
+    from zeus_ros.offline.evaluation.diagnostics import mean_contexts
+
     means = mean_contexts(agent, traces)
     return None if means is None else np.mean(means, axis=0)
 
@@ -347,15 +352,18 @@ def cached_train_mean_context(agent: Any, checkpoint: Path, folder: Path, *, epi
     except (OSError, ValueError, KeyError, TypeError):
         pass  # missing, from another checkpoint or protocol, or unreadable: compute it
     mean = train_mean_context(agent, episodes=episodes, seed=seed)
-    store_train_mean_context(mean, checkpoint, folder, episodes=episodes, seed=seed)
+    store_train_mean_context(mean, key, folder)
     return mean
 
 
-def store_train_mean_context(mean: np.ndarray | None, checkpoint: Path, folder: Path, *,
-                             episodes: int, seed: int) -> None:
-    """Write the train-mean context for cached_train_mean_context (atomically: jobs share it)."""
+def store_train_mean_context(mean: np.ndarray | None, key: dict[str, Any], folder: Path
+                             ) -> None:
+    """Write the train-mean context for cached_train_mean_context (atomically: jobs share it).
+
+    A temp name per process: two split jobs may store it at once (identical contents).
+    """
     folder.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({'key': _train_mean_key(checkpoint, episodes, seed),
+    text = json.dumps({'key': key,
                        'context': None if mean is None else np.asarray(mean).tolist()})
     partial = folder / f'.{TRAIN_MEAN_FILE}.{os.getpid()}'
     partial.write_text(text)
@@ -383,7 +391,6 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     from zeus_ros.offline.evaluation.diagnostics import (
         context_sensitivity,
         frozen_contexts,
-        mean_contexts,
         policy_contexts,
         spread_over_noise,
     )
@@ -438,9 +445,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
         train_mean = cached_train_mean_context(agent, checkpoint, out.parent,
                                                episodes=episodes, seed=seed)
     elif diagnostics and agent.context_dim:  # the train split's own traces give it
-        means = mean_contexts(agent, traces)
-        store_train_mean_context(None if means is None else np.mean(means, axis=0), checkpoint,
-                                 out.parent, episodes=episodes, seed=seed)
+        store_train_mean_context(overall_mean_context(agent, traces),
+                                 _train_mean_key(checkpoint, episodes, seed), out.parent)
     frozen = frozen_contexts(agent, traces, values, train_mean) if diagnostics else None
     if diagnostics:
         sensitivity = context_sensitivity(agent, traces, values)
