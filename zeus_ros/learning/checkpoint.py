@@ -12,7 +12,6 @@ run poisoned by bad data never reaches evaluation, export or a robot.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import os
 from pathlib import Path
 import pickle
 import re
@@ -20,6 +19,7 @@ from typing import Any
 
 import torch
 
+from zeus_ros.atomic_file import atomic_write
 from zeus_ros.learning.agent import ZeusAgent
 from zeus_ros.learning.config import ZeusConfig, config_from_dict, upgrade_stored_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
@@ -138,11 +138,8 @@ def _write(payload: dict[str, Any], path: Path) -> Path:
     not the temp file's name (which holds the pid): the same payload gives the same bytes, and
     re-exporting a checkpoint leaves its sha256 (named on its card) unchanged.
     """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f'.{path.name}.tmp{os.getpid()}')
-    with tmp.open('wb') as handle:
+    with atomic_write(path, 'wb') as handle:
         torch.save(payload, handle)
-    tmp.replace(path)
     return path
 
 

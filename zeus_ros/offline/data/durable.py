@@ -18,6 +18,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
+from zeus_ros.atomic_file import replace_text
 from zeus_ros.offline.data.bag_writer import (
     BAG_VERSION,
     ROS_DISTRO,
@@ -29,7 +30,7 @@ from zeus_ros.offline.data.bag_writer import (
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
-__all__ = ['STATE_KEY', 'DurableBagWriter', 'bag_metadata', 'replace_text']
+__all__ = ['STATE_KEY', 'DurableBagWriter', 'bag_metadata']
 
 STATE_KEY = 'zeus_bag_state'
 """custom_data key in metadata.yaml: 'provisional' while recording, then 'closed' / 'recovered'."""
@@ -70,13 +71,6 @@ def bag_metadata(storage: str, file_name: str, topics: Sequence[dict[str, Any]],
     text = StringIO()
     yaml.dump({'rosbag2_bagfile_information': info}, text)
     return text.getvalue()
-
-
-def replace_text(path: Path, text: str) -> None:
-    """Write a file atomically (tmp + rename): a kill never leaves half a metadata.yaml."""
-    tmp = path.with_suffix(path.suffix + '.tmp')
-    tmp.write_text(text, 'utf8')
-    tmp.replace(path)
 
 
 class DurableBagWriter(StepBagWriter):

@@ -20,10 +20,11 @@ from rosbags.rosbag2.storage_mcap import decompress, get_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
+from zeus_ros.atomic_file import replace_text
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.bag_writer import BAG_VERSION, JazzyWriter
-from zeus_ros.offline.data.durable import STATE_KEY, bag_metadata, replace_text
+from zeus_ros.offline.data.durable import STATE_KEY, bag_metadata
 from zeus_ros.offline.data.schema import MSGTYPES, typestore
 
 if TYPE_CHECKING:

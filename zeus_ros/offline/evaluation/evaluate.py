@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import hashlib
 import itertools
 import json
-import os
 from pathlib import Path
 import sys
 from typing import Any
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from zeus_ros.atomic_file import replace_text
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
 from zeus_ros.labels import context_label
 from zeus_ros.offline.evaluation.metrics import format_table, plot_heatmaps, write_csv
@@ -358,16 +358,12 @@ def cached_train_mean_context(agent: Any, checkpoint: Path, folder: Path, *, epi
 
 def store_train_mean_context(mean: np.ndarray | None, key: dict[str, Any], folder: Path
                              ) -> None:
-    """Write the train-mean context for cached_train_mean_context (atomically: jobs share it).
+    """Write the train-mean context for cached_train_mean_context, atomically.
 
-    A temp name per process: two split jobs may store it at once (identical contents).
+    Two split jobs may store it at once (with identical contents).
     """
-    folder.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({'key': key,
-                       'context': None if mean is None else np.asarray(mean).tolist()})
-    partial = folder / f'.{TRAIN_MEAN_FILE}.{os.getpid()}'
-    partial.write_text(text)
-    partial.replace(folder / TRAIN_MEAN_FILE)
+    replace_text(folder / TRAIN_MEAN_FILE, json.dumps(
+        {'key': key, 'context': None if mean is None else np.asarray(mean).tolist()}))
 
 
 def switching_order(values: Sequence[dict[str, float]], seed: int) -> list[dict[str, float]]:

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from zeus_ros.atomic_file import atomic_write
+
 __all__ = [
     'MetricsLog',
     'RunningMean',
@@ -56,15 +58,12 @@ def write_csv(path: str | Path, rows: Sequence[Mapping[str, Any]],
     rows' keys.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     columns = list(columns) if columns is not None else _columns(rows)
-    tmp = path.with_name(f'.{path.name}.tmp')
-    with tmp.open('w', newline='') as handle:
+    with atomic_write(path, 'w', newline='') as handle:
         writer = csv.DictWriter(handle, fieldnames=columns)
         writer.writeheader()
         for row in rows:
             writer.writerow({key: _cell(row.get(key)) for key in columns})
-    tmp.replace(path)
     return path
 
 

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from zeus_ros.atomic_file import atomic_write
+
 __all__ = [
     'EXTRA_KEY',
     'NOVELTY_KEY',
@@ -314,8 +316,6 @@ def store_readout(checkpoint: str | os.PathLike[str], readout: ContextReadout,
     payload = torch.load(source, map_location='cpu', weights_only=True)
     payload['extra'] = {**payload.get('extra', {}), EXTRA_KEY: readout.to_dict(),
                         **({NOVELTY_KEY: novelty.to_dict()} if novelty is not None else {})}
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f'.{target.name}.tmp{os.getpid()}')
-    torch.save(payload, tmp)
-    tmp.replace(target)
+    with atomic_write(target, 'wb') as handle:  # a handle: the archive's inner name is fixed
+        torch.save(payload, handle)
     return target

@@ -34,6 +34,8 @@ from pathlib import Path
 import sys
 from typing import Any
 
+from zeus_ros.atomic_file import replace_text
+
 __all__ = ['STATE_FILE', 'RunState', 'RunStateError', 'main', 'mark_continued',
            'mark_evaluated', 'mark_trained', 'read_state']
 
@@ -118,9 +120,6 @@ def _locked(folder: Path) -> Iterator[None]:
 
 
 def _update(folder: Path, change: Any) -> None:
-    from zeus_ros.offline.data.durable import (
-        replace_text,  # bag writing's atomic write (tmp + rename)
-    )
 
     with _locked(folder):
         data = _read_json(folder)
