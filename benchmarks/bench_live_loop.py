@@ -12,8 +12,7 @@ mode with no outside subscriber on the loop's topics (the rate comes from sim_br
 count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized from the
 round's in-process rate to last about QUIET_SECONDS, long enough for several counts).
 `--executors single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
-nodes/common.py), alternately in each round, so a loaded machine weighs on both alike (a
-container with intra-process delivery spins on the single-threaded one whatever is asked).
+nodes/common.py), alternately in each round, so a loaded machine weighs on both alike.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400] \
         [--executors single,events]

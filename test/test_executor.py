@@ -45,7 +45,7 @@ def test_the_executor_is_chosen_by_the_environment(monkeypatch: pytest.MonkeyPat
 
 
 def test_a_guard_condition_keeps_the_single_threaded_executor() -> None:
-    """A guard condition (the container's intra-process bus) keeps the single-threaded one.
+    """A node with a guard condition keeps the single-threaded executor.
 
     The events executor cannot serve guard conditions, also when it was asked for.
     """

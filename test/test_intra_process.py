@@ -21,10 +21,14 @@ TOPIC = 'zeus/observation/state'
 
 
 @contextlib.contextmanager
-def two_contexts(bus: bool = True) -> Iterator[tuple[Callable[..., Any], Callable[..., Any],
-                                                    Callable[[Callable[[], bool], float],
-                                                             bool]]]:
-    """(make a container node, make an outside node, spin both until a predicate or timeout)."""
+def two_contexts(bus: bool = True, executor: str = 'single'
+                 ) -> Iterator[tuple[Callable[..., Any], Callable[..., Any],
+                                     Callable[[Callable[[], bool], float], bool]]]:
+    """(make a container node, make an outside node, spin both until a predicate or timeout).
+
+    `executor`: what the container's context spins on ('single' or 'events', as
+    common.make_executor builds them; outside: single-threaded).
+    """
     require_ros()
     import os
 
@@ -33,6 +37,7 @@ def two_contexts(bus: bool = True) -> Iterator[tuple[Callable[..., Any], Callabl
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
+    from zeus_ros.nodes.common import make_executor
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
 
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -40,7 +45,8 @@ def two_contexts(bus: bool = True) -> Iterator[tuple[Callable[..., Any], Callabl
     contexts = [Context(), Context()]
     for context in contexts:
         rclpy.init(context=context, domain_id=domain)
-    executors = [SingleThreadedExecutor(context=context) for context in contexts]
+    executors = [make_executor([], executor, context=contexts[0]),
+                 SingleThreadedExecutor(context=contexts[1])]
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
     nodes: list[Any] = []
 
@@ -96,13 +102,19 @@ def publish_states(talker: Any, spin: Callable[..., bool], readers: int, count: 
     return sent
 
 
-def test_co_located_subscriber_gets_each_message_once_as_the_published_object() -> None:
-    """In process: the very objects, in order, once each; outside: every message via DDS."""
+@pytest.mark.parametrize('executor', ['single', 'events'])
+def test_co_located_subscriber_gets_each_message_once_as_the_published_object(
+        executor: str) -> None:
+    """In process: the very objects, in order, once each; outside: every message via DDS.
+
+    Under both executors (the bus runs as executor tasks: the events executor has no guard
+    conditions).
+    """
     from zeus_msgs.msg import StateVector
 
     from zeus_ros.nodes.common import step_qos
 
-    with two_contexts() as (inside, outside, spin):
+    with two_contexts(executor=executor) as (inside, outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
         local: list[Any] = []
         remote: list[int] = []
@@ -134,13 +146,14 @@ def test_without_the_bus_messages_between_nodes_of_a_process_go_through_dds() ->
         assert not any(got is msg for got, msg in zip(local, sent, strict=True))
 
 
-def test_keep_last_depth_drops_the_oldest_for_a_subscriber_that_lags() -> None:
+@pytest.mark.parametrize('executor', ['single', 'events'])
+def test_keep_last_depth_drops_the_oldest_for_a_subscriber_that_lags(executor: str) -> None:
     """20 messages before the executor runs: depth 5 keeps the newest 5, depth 50 all 20."""
     from zeus_msgs.msg import StateVector
 
     from zeus_ros.nodes.common import step_qos
 
-    with two_contexts() as (inside, _outside, spin):
+    with two_contexts(executor=executor) as (inside, _outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
         shallow: list[int] = []
         deep: list[int] = []

@@ -390,10 +390,10 @@ def make_executor(nodes: Sequence[Node], kind: str | None = None,
                   context: Context | None = None) -> Executor:
     """The executor the nodes of a process spin on (`kind`, default `executor_kind()`).
 
-    The events executor cannot serve guard conditions: a process with one (the container's
-    intra-process bus) spins on the single-threaded executor whatever was asked (and says so
-    where $ZEUS_EXECUTOR asked for events). The nodes are added to the executor returned (on
-    `context`, default rclpy's).
+    The events executor cannot serve guard conditions: a process with one spins on the
+    single-threaded executor whatever was asked (and says so where $ZEUS_EXECUTOR asked for
+    events); the container's intra-process bus holds none (it runs as executor tasks). The
+    nodes are added to the executor returned (on `context`, default rclpy's).
     """
     kind = kind or executor_kind()
     guarded = [node.get_name() for node in nodes if list(node.guards)]
@@ -401,13 +401,17 @@ def make_executor(nodes: Sequence[Node], kind: str | None = None,
         # Said where someone asked for events; the default just takes what works.
         asked = os.environ.get(EXECUTOR_ENV, '').strip().lower() == 'events'
         log = nodes[0].get_logger().info if asked else nodes[0].get_logger().debug
-        log(f'node(s) {", ".join(guarded)} hold a guard condition (intra-process delivery), '
+        log(f'node(s) {", ".join(guarded)} hold a guard condition, '
             'which the events executor cannot serve: spinning on the single-threaded executor')
         kind = 'single'
     executor = _events_executor(context) if kind == 'events' else \
         SingleThreadedExecutor(context=context)
     for node in nodes:
         executor.add_node(node)
+    for node in nodes:  # deliver what a container's nodes published while being built
+        bus = getattr(node, 'intra_process', None)
+        if bus is not None:
+            bus.wake()
     return executor
 
 

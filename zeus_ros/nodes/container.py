@@ -14,9 +14,8 @@ A node that stops (sim_bridge's max_steps) or a Ctrl-C stops them all (common.ru
 
 Messages between the nodes are handed over as Python objects (intra-process delivery,
 nodes/intra_process.py) and still published on DDS for everyone outside; `--no-intra-process`
-sends them through DDS only, as between processes. The bus runs on a guard condition, which
-rclpy's events executor cannot serve: with it the container spins on the single-threaded
-executor, without it on the one $ZEUS_EXECUTOR names (nodes/common.make_executor).
+sends them through DDS only, as between processes. The container spins on the executor
+$ZEUS_EXECUTOR names, as every node process does (nodes/common.make_executor).
 """
 
 from __future__ import annotations

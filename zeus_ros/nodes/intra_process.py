@@ -18,12 +18,14 @@ as for a DDS message. As with rclcpp's shared messages, a subscriber must not mo
 it receives (every co-located subscriber gets the same object) and a publisher must not modify
 one it has published. Our nodes build a new message per publish and only read what they get.
 
-Delivery runs on the executor (a guard condition), never inside `publish()`: the lockstep chain
+Delivery runs on the executor (a task of it), never inside `publish()`: the lockstep chain
 sim_bridge -> estimator -> policy -> sim_bridge would otherwise recurse without end. One turn
 delivers for up to `budget` seconds (messages that callbacks publish meanwhile included), then
-hands the executor back, so timers, parameter services and DDS get their turn. The bus assumes
-one single-threaded executor over its nodes (common.run_nodes) and lives as long as the first
-of them (its guard condition is that node's).
+hands the executor back, so timers, parameter services and DDS get their turn. A task, not a
+guard condition, so that rclpy's events executor (which serves no guard conditions) runs the
+container too. The bus assumes one executor thread over its nodes (common.run_nodes) and
+delivers on the executor of the first node attached; messages published before that node is
+on an executor wait for `wake()` (common.make_executor calls it).
 """
 
 from __future__ import annotations
@@ -41,7 +43,6 @@ from rclpy.serialization import deserialize_message
 from zeus_ros.nodes.senders import SenderSubscription, publisher_gid
 
 if TYPE_CHECKING:
-    from rclpy.guard_condition import GuardCondition
     from rclpy.node import Node
     from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
@@ -85,13 +86,21 @@ class IntraProcessBus:
         self._topics: dict[str, list[_Endpoint]] = {}
         self._endpoints: dict[int, _Endpoint] = {}
         self._order: deque[_Endpoint] = deque()  # one entry per queued message, publish order
-        self._guard: GuardCondition | None = None
+        self._host: Node | None = None  # the node whose executor runs the deliveries
+        self._scheduled = False  # a delivery task is on the executor
         self._version = 0  # changes with the subscriptions: publishers recompute whom they reach
 
     def attach(self, node: Node) -> None:
-        """Run the deliveries on `node`'s executor (the first node attached holds the guard)."""
-        if self._guard is None:
-            self._guard = node.create_guard_condition(self._drain)
+        """Run the deliveries on `node`'s executor (that of the first node attached)."""
+        if self._host is None:
+            self._host = node
+
+    def wake(self) -> None:
+        """Schedule a delivery turn on the host's executor if messages wait and none is due."""
+        executor = self._host.executor if self._host is not None else None
+        if self._order and not self._scheduled and executor is not None:
+            self._scheduled = True
+            executor.create_task(self._drain)
 
     def add_publisher(self, publisher: Publisher) -> None:
         """Deliver what `publisher` publishes to the bus's subscribers of its topic in process.
@@ -145,11 +154,12 @@ class IntraProcessBus:
         for endpoint in endpoints:
             endpoint.queue.append((gid, msg))  # a full keep-last queue drops its oldest
             self._order.append(endpoint)
-        if endpoints and self._guard is not None:
-            self._guard.trigger()
+        if endpoints:
+            self.wake()
 
     def _drain(self) -> None:
         """Deliver in publish order for up to `budget` seconds; then leave the rest for later."""
+        self._scheduled = False
         order = self._order
         deadline = time.monotonic() + self.budget
         while order:
@@ -162,8 +172,7 @@ class IntraProcessBus:
                     subscription.callback(msg)
             if time.monotonic() >= deadline:
                 break
-        if order and self._guard is not None:
-            self._guard.trigger()
+        self.wake()  # what is left (the budget ran out) gets the next turn
 
 
 class IntraProcessNode:
