@@ -36,3 +36,12 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     # (not on its own run) and the estimator publishes the estimate in m/s.
     assert 'context read-out (target_velocity RMSE' in done.stdout
     assert sum('estimated_target_velocity' in r for r in live) >= 50
+
+
+def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> None:
+    """The demo's schedule follows the task's episode length (no per-task special case)."""
+    from zeus_ros.demo import schedule_lengths
+
+    assert schedule_lengths('Cheetah-Run-v1') == (20, 400)  # 40-step episodes
+    assert schedule_lengths('Cheetah-Bias-v0') == (20, 400)
+    assert schedule_lengths('Cheetah-Run-v0') == (150, 2000)  # 500-step episodes

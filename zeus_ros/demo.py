@@ -82,6 +82,20 @@ def schedule_values(task: str) -> list[float]:
     return values
 
 
+def schedule_lengths(task: str) -> tuple[int, int]:
+    """(steps between switches, steps of the run) of the task's demo.
+
+    Short episodes (the 40-step cheetah families): a switch mid-episode, 10 episodes. Long
+    ones: every 150 steps, 2000 steps.
+    """
+    from sim_bridge.registry import task_class
+
+    episode = int(getattr(task_class(task), 'episode_length', 0) or 0)
+    if 0 < episode <= 100:
+        return episode // 2, 10 * episode
+    return 150, 2000
+
+
 def _start_args(name: str, group: Sequence[str]) -> list[str]:
     """`-p` overrides of launch_defaults.start_counts; the inspector also reads zeus/step."""
     counts = start_counts(name, group)
@@ -140,10 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-frozen', action='store_true',
                         help='skip the second run with the context frozen')
     args = parser.parse_args(argv)
-    if args.every is None:
-        args.every = 20 if args.task == 'Cheetah-Run-v1' else 150
-    if args.steps is None:
-        args.steps = 400 if args.task == 'Cheetah-Run-v1' else 2000
+    every, steps = schedule_lengths(args.task)
+    args.every = every if args.every is None else args.every
+    args.steps = steps if args.steps is None else args.steps
     checkpoint = None
     if not args.random_policy and args.checkpoint is None and args.task not in DEMO_CHECKPOINTS:
         print(f'zeus demo: --task {args.task}: no shipped checkpoint for {args.task}; pass '
