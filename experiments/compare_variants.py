@@ -4,6 +4,7 @@
         [--evals out/i10] [--out docs/results/issue10] [--export checkpoints/issue10]
         [--splits train extrapolation] [--episodes 3] [--jobs 1] [--updates 20000]
         [--shipped checkpoints/issue10] [--variants default k10 ...] [--against k10 [default]]
+        [--paired-with k10:zeus_no_context_loss]
 
 For each variant folder under --root (default, paper, norm_only, ...: one training config each,
 runs laid out by experiments/run_queue.sh as <root>/<variant>/<task>/<method>_s<seed>/), it
@@ -13,7 +14,9 @@ over `no_context` of the default protocol (same seeds), the share of the oracle'
 recovers, and the adaptation diagnostics. With --export, each finished run is also shipped as a
 deployment checkpoint with its card under <export>/<variant>/<group>/. --updates picks the budget:
 10,000 (runs in <task>/), or a longer one (runs in <task>_<N>k/, as run_one.sh lays them out with
-ROUNDS > 5); the tables of a longer budget are named <task>_<N>k. With --shipped, variants that
+ROUNDS > 5); the tables of a longer budget are named <task>_<N>k. --paired-with VARIANT:METHOD
+adds every row's difference to that one run set (return, value of adaptation against the train
+mean, Spearman), paired by seed: a config against the ablation, say. With --shipped, variants that
 have no runs under --root are evaluated from their shipped checkpoints instead (a fresh clone
 regenerates the tables from checkpoints/issue10 alone).
 """
@@ -97,14 +100,38 @@ def _floats(rows: list[dict[str, Any]], key: str) -> list[float]:
     return out
 
 
-def variant_rows(tables: dict[str, Path], against: Sequence[str] = ()
-                 ) -> list[dict[str, Any]]:
+PAIRED_METRICS = (('mean_return', 'return'),
+                  ('adaptation_value_train_mean', "value of adaptation (train values' mean)"),
+                  ('spearman', 'Spearman'))
+"""Metrics --paired-with compares, (CSV column, title)."""
+
+
+def paired_cells(runs: dict[str, list[dict[str, Any]]], variant: str, method: str, split: str,
+                 paired_with: tuple[str, str]) -> dict[str, str]:
+    """A row's runs minus the `paired_with` (variant, method) runs, per PAIRED_METRICS, by seed."""
+    other_variant, other_method = paired_with
+    if (variant, method) == paired_with:
+        return {f'vs_{metric}': '-' for metric, _ in PAIRED_METRICS}
+    theirs = [{**r, 'method': 'other'} for r in runs.get(other_variant, [])
+              if r['method'] == other_method]
+    mine = [{**r, 'method': 'mine'} for r in runs[variant] if r['method'] == method]
+    cells = {}
+    for metric, _ in PAIRED_METRICS:
+        paired = paired_difference([*mine, *theirs], 'mine', 'other', split, metric)
+        digits = 2 if metric == 'spearman' else 1
+        cells[f'vs_{metric}'] = '-' if paired is None else (
+            f'{paired[0]:.{digits}f} ± {paired[1]:.{digits}f} ({paired[2]})')
+    return cells
+
+
+def variant_rows(tables: dict[str, Path], against: Sequence[str] = (),
+                 paired_with: tuple[str, str] | None = None) -> list[dict[str, Any]]:
     """One row per (split, variant, method) with the numbers of the comparison table.
 
     `against`: variants whose runs of the same method each row is also compared with, paired
     by seed ('vs_against', e.g. a new option against the default config); the first of them
     that has runs of the row's method is used (`k10 default`: zeus against k10's, the
-    baselines against default's).
+    baselines against default's). `paired_with`: paired_cells' columns.
     """
     runs = {variant: per_run(folder) for variant, folder in tables.items()}
     reference = runs.get(REFERENCE_VARIANT, [])
@@ -149,6 +176,8 @@ def variant_rows(tables: dict[str, Path], against: Sequence[str] = ()
                         split)
                     row['vs_against'] = '-' if paired is None else \
                         f'{paired[0]:.1f} ± {paired[1]:.1f} ({paired[2]} seeds)'
+                if paired_with is not None:
+                    row.update(paired_cells(runs, variant, method, split, paired_with))
                 rows.append(row)
     return rows
 
@@ -164,11 +193,16 @@ COLUMNS = (('variant', 'config'), ('method', 'method'), ('seeds', 'seeds'),
            ('spearman', 'Spearman'))
 
 
-def markdown(rows: list[dict[str, Any]], against: Sequence[str] = ()) -> str:
+def markdown(rows: list[dict[str, Any]], against: Sequence[str] = (),
+             paired_with: tuple[str, str] | None = None) -> str:
     """One table per split, headroom in its heading."""
     columns = COLUMNS if not against else (
         *COLUMNS, ('vs_against', f'return vs the same method of {" or ".join(against)} '
                                  '(paired)'))
+    if paired_with is not None:
+        name = ':'.join(paired_with)
+        columns = (*columns, *((f'vs_{metric}', f'{title} vs {name} (paired, seeds)')
+                               for metric, title in PAIRED_METRICS))
     sections = []
     for split in SPLIT_ORDER:
         mine = [r for r in rows if r['split'] == split]
@@ -255,6 +289,10 @@ def main() -> None:
                         help='also compare each row with the same method of this variant, '
                              'paired by seed (e.g. k10, the default config); with several, the '
                              'first that has runs of the method (k10 default)')
+    parser.add_argument('--paired-with', metavar='VARIANT:METHOD',
+                        help='also give each row minus these runs (return, value of '
+                             'adaptation, Spearman), paired by seed, e.g. '
+                             'k10:zeus_no_context_loss')
     parser.add_argument('--splits', nargs='+', choices=SPLIT_ORDER,
                         help="default: every split the task's preset defines")
     parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
@@ -287,7 +325,14 @@ def main() -> None:
     missing = [v for v in args.against if v not in tables]
     if missing:
         parser.error(f'--against {" ".join(missing)}: no evaluated runs of that variant')
-    rows = variant_rows(tables, args.against)
+    paired_with = None
+    if args.paired_with:
+        variant, _, method = args.paired_with.partition(':')
+        if variant not in tables or not method:
+            parser.error(f'--paired-with {args.paired_with}: give VARIANT:METHOD of an evaluated '
+                         f'variant ({", ".join(tables)})')
+        paired_with = (variant, method)
+    rows = variant_rows(tables, args.against, paired_with)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / _task_folder(args.task, args.updates)
     walls = []
@@ -299,10 +344,10 @@ def main() -> None:
         'Seconds of training (`zeus loop`: collection + updates) + evaluation (all splits), '
         'two runs sharing the two cores:\n\n' + '\n\n'.join(walls) + '\n')
     write_csv(stem.with_suffix('.csv'), rows)
-    stem.with_suffix('.md').write_text(markdown(rows, args.against))
+    stem.with_suffix('.md').write_text(markdown(rows, args.against, paired_with))
     plot(rows, stem.with_suffix('.png'),
          f'{args.task}, {args.updates:,} updates: configs and methods')
-    print(markdown(rows, args.against))
+    print(markdown(rows, args.against, paired_with))
     print(f'wrote {stem}.csv, .md, .png and {stem.name}_wall_times.md')
 
 
