@@ -41,7 +41,7 @@ class Inspector:
         from rclpy.executors import SingleThreadedExecutor
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StepFeedback
 
-        from zeus_ros.nodes.common import TOPICS, step_qos
+        from zeus_ros.nodes.common import STEP_BACKLOG, TOPICS, step_qos
 
         rclpy.init()
         self.namespace = namespace
@@ -53,7 +53,10 @@ class Inspector:
         self.executor.add_node(self.node)
         self.log = StepLog()
         self.health: dict[str, dict[str, str]] = {}
-        qos = step_qos(depth=50)
+        # As deep as the publishers' history (and the recorder's): an inspector starved of CPU
+        # for a second (a busy machine) must not lose steps, or the demo's per-segment
+        # returns of the live and the frozen run stop being comparable.
+        qos = step_qos(depth=STEP_BACKLOG)
         node = self.node
         node.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, qos)
         node.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth, qos)
