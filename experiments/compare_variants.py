@@ -246,8 +246,12 @@ def plot(rows: list[dict[str, Any]], path: Path, title: str) -> None:
 
 
 def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path,
-                updates: int = BASE_UPDATES) -> None:
-    """Ship each finished run of the variant as a deployment checkpoint with its card."""
+                updates: int = BASE_UPDATES, overwrite: bool = False) -> None:
+    """Ship each finished run of the variant as a deployment checkpoint with its card.
+
+    A run already shipped is left as it is unless `overwrite`: its card names the numbers it
+    was shipped with, and a re-export would rewrite every committed checkpoint of the variant.
+    """
     from zeus_ros.learning.checkpoint import load_checkpoint
     from zeus_ros.offline.evaluation.export import export
 
@@ -258,8 +262,10 @@ def export_runs(root: Path, variant: str, task: str, target: Path, evals: Path,
         loaded = load_checkpoint(final, load_optimizers=False)
         group = group_name(task, loaded.step)
         name = f'{loaded.config.method}_s{loaded.config.seed}'
-        export(final, target / variant / group / f'{name}.pt',
-               evals=evals / variant / group / name)
+        shipped = target / variant / group / f'{name}.pt'
+        if shipped.is_file() and not overwrite:
+            continue
+        export(final, shipped, evals=evals / variant / group / name)
 
 
 def _with_train_seconds(runs: list[dict[str, Any]], folder: Path) -> list[dict[str, Any]]:
@@ -277,7 +283,10 @@ def main() -> None:
     parser.add_argument('--root', type=Path, default=Path('runs/i10'))
     parser.add_argument('--evals', type=Path, default=Path('out/i10'))
     parser.add_argument('--out', type=Path, default=Path('docs/results/issue10'))
-    parser.add_argument('--export', type=Path, help='ship finished runs here (with cards)')
+    parser.add_argument('--export', type=Path, help='ship finished runs here (with cards); '
+                        'runs shipped there already are kept unless --overwrite')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='with --export: ship again the runs already shipped')
     parser.add_argument('--shipped', type=Path, action='append', default=[],
                         help='a folder of shipped checkpoints (<variant>/<group>/*.pt, e.g. '
                              'checkpoints/issue10): variants with no runs under --root are '
@@ -321,7 +330,8 @@ def main() -> None:
         if folder is not None:
             tables[variant] = folder
             if args.export:
-                export_runs(args.root, variant, args.task, args.export, args.evals, args.updates)
+                export_runs(args.root, variant, args.task, args.export, args.evals, args.updates,
+                            overwrite=args.overwrite)
     missing = [v for v in args.against if v not in tables]
     if missing:
         parser.error(f'--against {" ".join(missing)}: no evaluated runs of that variant')
