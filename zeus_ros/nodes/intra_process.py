@@ -158,21 +158,27 @@ class IntraProcessBus:
             self.wake()
 
     def _drain(self) -> None:
-        """Deliver in publish order for up to `budget` seconds; then leave the rest for later."""
-        self._scheduled = False
+        """Deliver in publish order for up to `budget` seconds; then leave the rest for later.
+
+        Still marked scheduled while it runs: what the callbacks publish meanwhile is delivered
+        by this loop, not by a second task that would find the queue empty.
+        """
         order = self._order
         deadline = time.monotonic() + self.budget
-        while order:
-            endpoint = order.popleft()
-            if endpoint.queue:  # empty: that message was dropped (depth) or the sub is gone
-                gid, msg = endpoint.queue.popleft()
-                subscription = endpoint.subscription
-                if subscription.admit(gid):
-                    self.delivered += 1
-                    subscription.callback(msg)
-            if time.monotonic() >= deadline:
-                break
-        self.wake()  # what is left (the budget ran out) gets the next turn
+        try:
+            while order:
+                endpoint = order.popleft()
+                if endpoint.queue:  # empty: that message was dropped (depth) or the sub is gone
+                    gid, msg = endpoint.queue.popleft()
+                    subscription = endpoint.subscription
+                    if subscription.admit(gid):
+                        self.delivered += 1
+                        subscription.callback(msg)
+                if time.monotonic() >= deadline:
+                    break
+        finally:
+            self._scheduled = False
+            self.wake()  # what is left (the budget ran out, a callback raised) gets a turn
 
 
 class IntraProcessNode:
