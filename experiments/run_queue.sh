@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run the lines of a queue file through run_one.sh, at most JOBS training runs at a time
-# (default 2: one per core), counting every `zeus loop` on the machine:
+# (default 2: one per core), counting every run_one.sh on the machine:
 #   CONFIG TASK METHOD SEED OUT_ROOT [ROUNDS] [SCHEDULE]   (one run per line; '#' starts a
 #   comment; ROUNDS and SCHEDULE as in run_one.sh, default 5 = 10k updates and its schedule)
 # The file is read again before each start, so lines can be added or reordered while it runs;
@@ -27,7 +27,8 @@ next_line() {
   done
 }
 while true; do
-  while [ "$(pgrep -fc 'zeus loop')" -ge "$JOBS" ]; do sleep 5; done
+  # run_one.sh, not `zeus loop`: a run resuming from a shorter one prepares for a while first
+  while [ "$(pgrep -fc 'experiments/run_one.sh')" -ge "$JOBS" ]; do sleep 5; done
   line=$(next_line)
   if [ -z "$line" ]; then wait; echo "queue: nothing left in $QUEUE"; exit 0; fi
   read -r config task method seed root rounds schedule <<< "$line"

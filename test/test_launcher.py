@@ -74,6 +74,8 @@ def test_defaults_are_the_installed_params_and_checkpoint() -> None:
 def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: Path) -> None:
     """record:=true adds the recorder, counted in min_observers and expected_subscribers.
 
+    The recorder in turn expects the group's publishers of steps and answers.
+
     namespace, use_sim_time, checkpoint and log_level reach every node they concern.
     """
     from zeus_ros import launch_defaults as d
@@ -90,6 +92,9 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
     assert nodes['context_estimator']['expected_subscribers'] == 2
     assert nodes['policy']['expected_subscribers'] == 2
     assert 'expected_subscribers' not in nodes['recorder']
+    # and the recorder subscribes to the steps only once it hears steps, context and actions
+    assert nodes['recorder']['expected_publishers'] == ['/zeus/step', '/zeus/context',
+                                                        '/zeus/action']
     assert all(p['use_sim_time'] is True for p in nodes.values())
     assert nodes['policy']['checkpoint'] == nodes['context_estimator']['checkpoint'] == str(ckpt)
     assert (plan.namespace, plan.log_level) == ('/robot1', 'debug')
@@ -97,6 +102,12 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
     assert args[:2] == ['--params-file', str(plan.params_file)]
     assert args[2:4] == ['-r', '__ns:=/robot1'] and args[-2:] == ['--log-level', 'debug']
     assert f"checkpoint:='{ckpt}'" in args and 'use_sim_time:=true' in args
+    assert "expected_publishers:=['/zeus/step','/zeus/context','/zeus/action']" in \
+        plan.ros_args(plan.nodes[3])
+    # zeus launch's status line subscribes to zeus/step too: sim_bridge waits for it as well,
+    # or it would stand in for a node not subscribed yet
+    watched = d.plan(record=True, watchers=1)
+    assert watched.nodes[0].parameters['min_observers'] == 4
     for bad, match in (({'record': 'maybe'}, 'record'), ({'log_level': 'loud'}, 'log_level'),
                        ({'nope': '1'}, 'unknown launch argument')):
         with pytest.raises(ValueError, match=match):

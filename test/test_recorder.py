@@ -207,3 +207,46 @@ def test_bad_parameter_fails_at_start_naming_it(
     assert recorder.wait(timeout=20) == 2
     assert f'parameter {named}' in ros_processes.log_text(f'recorder-{tmp_path.name}')
     assert not out.exists()
+
+
+def test_the_steps_wait_until_the_expected_publishers_are_heard(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """expected_publishers: zeus/step (the loop's go-ahead) only once the recorder hears them.
+
+    A recorder that expects context and action publishers does not subscribe to the steps
+    while neither exists (so a step source waiting for it cannot start), nor with only the
+    context publisher; after publisher_timeout it names the topic still unheard and subscribes
+    anyway. A second recorder expecting only the context publisher, which exists, subscribes
+    at once. (A launch sets it: `zeus launch --record`, the demo.)
+    """
+    from zeus_msgs.msg import ContextEstimate
+
+    def step_readers(node: Any) -> list[str]:
+        return sorted(info.node_name for info in node.get_subscriptions_info_by_topic(
+            '/zeus/step'))
+
+    out = tmp_path / 'late' / 'bag'
+    start_recorder(ros_processes, out, "expected_publishers:=['/zeus/context','/zeus/action']",
+                   'publisher_timeout:=12.0')
+    with ros_node(ros_processes.domain_id) as node:
+        assert spin_until(node, lambda: node.count_subscribers('/zeus/context') == 1, 60.0)
+        started = time.monotonic()
+        assert not spin_until(node, lambda: bool(step_readers(node)), 2.0), step_readers(node)
+        node.create_publisher(ContextEstimate, '/zeus/context', 10)
+        assert not spin_until(node, lambda: bool(step_readers(node)), 2.0), step_readers(node)
+        assert spin_until(node, lambda: step_readers(node) == ['recorder'], 60.0)
+        assert time.monotonic() - started > 10.0  # the timeout, not a match, let it go on
+        log = ros_processes.log_text(f'recorder-{out.parent.name}')
+        assert 'publisher_timeout: 12 s passed waiting for /zeus/action (0 of 1 publishers ' \
+            'matched); subscribing to the steps anyway' in log, log
+        assert '/zeus/context (' not in log, log
+        other = tmp_path / 'heard' / 'bag'
+        ros_processes.start('recorder-heard', python_module(
+            'zeus_ros.nodes.recorder_node', '--ros-args', '-r', '__node:=recorder2', '-p',
+            f'output:={other}', '-p', "expected_publishers:=['/zeus/context']"))
+        assert spin_until(node, lambda: step_readers(node) == ['recorder', 'recorder2'], 30.0)
+    bad = start_recorder(ros_processes, tmp_path / 'bad' / 'bag',
+                         "expected_publishers:=['/zeus/novelty']")
+    assert bad.wait(timeout=60) == 2
+    assert "expected_publishers names ['/zeus/novelty'], which it does not record" in \
+        ros_processes.log_text('recorder-bad')

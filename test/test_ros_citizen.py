@@ -307,11 +307,13 @@ def test_one_sigint_stops_zeus_launch_record_cleanly(tmp_path: Path, single_proc
         output[-2000:]
     assert single_process or not lost, output[-2000:]
     # Every node's answer from step 0 (expected_subscribers: estimator and policy subscribe to
-    # the steps only once the recorder hears them); Ctrl-C may cut the last step's answers.
+    # the steps only once the recorder hears them; expected_publishers: the recorder only once
+    # it hears them); Ctrl-C may cut the last step's answers.
     assert '/zeus/step: first message at step 0' in output, output[-3000:]
     for topic in ('/zeus/context', '/zeus/action'):
         unanswered = set(recorded[:-1]) - set(steps[topic])
-        assert min(steps[topic]) == 0 and not unanswered, (topic, sorted(unanswered)[:10])
+        assert min(steps[topic]) == 0 and not unanswered, \
+            f'{topic}: steps {sorted(unanswered)[:10]} unanswered in the bag\n{output[-6000:]}'
 
 
 @pytest.mark.parametrize(('name', 'params'), [

@@ -26,7 +26,7 @@ import numpy as np
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import start_counts
+from zeus_ros.launch_defaults import ros_arg_value, start_counts
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
@@ -101,10 +101,9 @@ def schedule_lengths(task: str) -> tuple[int, int]:
 
 def _start_args(name: str, group: Sequence[str]) -> list[str]:
     """`-p` overrides of launch_defaults.start_counts; the inspector also reads zeus/step."""
-    counts = start_counts(name, group)
-    if 'min_observers' in counts:
-        counts['min_observers'] += 1  # this process's inspector: wait for it too
-    return [arg for key, value in counts.items() for arg in ('-p', f'{key}:={value}')]
+    counts = start_counts(name, group, watchers=1)  # this process's inspector
+    return [arg for key, value in counts.items()
+            for arg in ('-p', f'{key}:={ros_arg_value(value)}')]
 
 
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
@@ -131,7 +130,8 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
                              *_start_args('policy', group)])))
     if args.record:
         nodes.append(NodeProcess('recorder', node_argv(
-            'recorder', None, ['-p', f'output:={args.out / "bag"}'])))
+            'recorder', None, ['-p', f'output:={args.out / "bag"}',
+                               *_start_args('recorder', group)])))
     return nodes
 
 

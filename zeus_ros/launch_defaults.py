@@ -22,7 +22,8 @@ from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
            'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
-           'plan_from_arguments', 'resolve_path', 'share_dir', 'start_counts']
+           'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir',
+           'start_counts']
 
 PACKAGE = 'zeus_ros'
 NODES: dict[str, str] = {
@@ -41,6 +42,12 @@ ANSWER_READERS: dict[str, frozenset[str]] = {
     'policy': STEP_SOURCES | {'recorder'},  # zeus/action
 }
 """Who in a group subscribes to a node's answer to a step: its `expected_subscribers`."""
+RECORDED_ANSWERS: dict[str, str] = {
+    **dict.fromkeys(STEP_SOURCES, '/zeus/step'),
+    'context_estimator': '/zeus/context',
+    'policy': '/zeus/action',
+}
+"""The lockstep topic each node of a group publishes: the recorder's `expected_publishers`."""
 AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
@@ -147,12 +154,14 @@ class LaunchPlan:
         if self.namespace:
             args += ['-r', f'__ns:={self.namespace}']
         for key, value in node.parameters.items():
-            args += ['-p', f'{key}:={_ros_arg_value(value)}']
+            args += ['-p', f'{key}:={ros_arg_value(value)}']
         return [*args, '--log-level', self.log_level]
 
 
-def _ros_arg_value(value: Any) -> str:
-    """A parameter value as `-p key:=value` parses it back (YAML)."""
+def ros_arg_value(value: Any) -> str:
+    """A parameter value as `-p key:=value` parses it back (YAML; lists in flow style)."""
+    if isinstance(value, list | tuple):
+        return '[' + ','.join(ros_arg_value(item) for item in value) + ']'
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, str):
@@ -261,19 +270,27 @@ def _check_values(params: Mapping[str, Any], where: str, prefix: str = '') -> No
                              'string or list')
 
 
-def start_counts(name: str, group: Sequence[str]) -> dict[str, int]:
+def start_counts(name: str, group: Sequence[str],
+                 watchers: int = 0) -> dict[str, int | list[str]]:
     """How many subscribers node `name` waits for before step 0 in `group` (its parameters).
 
     The step source waits for every other node on zeus/step (`min_observers`); the estimator
     and the policy subscribe to the steps only once their answer (context, action) is matched
-    by its readers in the group (`expected_subscribers`), so the step source waits for them
-    too and a recorder's bag holds every topic from step 0.
+    by its readers in the group (`expected_subscribers`), and a recorder only once its readers
+    matched the group's publishers of the steps and answers (`expected_publishers`), so the
+    step source waits for them too and a recorder's bag holds every topic from step 0.
+    `watchers` counts the launcher's own subscribers of zeus/step (zeus launch's status line,
+    the demo's inspector): the step source counts subscriptions, so without them in
+    min_observers a watcher would stand in for a node that is not subscribed yet.
     """
-    if name in STEP_SOURCES:
-        return {'min_observers': len(group) - 1}
+    if name in STEP_SOURCES:  # a watcher's subscription counts as one too: wait for all
+        return {'min_observers': len(group) - 1 + watchers}
     if name in ANSWER_READERS:
         readers = sum(1 for other in group if other in ANSWER_READERS[name])
         return {'expected_subscribers': readers} if readers else {}
+    if name in RECORDS_OTHERS:
+        topics = [topic for node, topic in RECORDED_ANSWERS.items() if node in group]
+        return {'expected_publishers': topics} if topics else {}
     return {}
 
 
@@ -289,6 +306,7 @@ def plan(
     robot: bool = False,
     single_process: bool = False,
     intra_process: bool = True,
+    watchers: int = 0,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -299,7 +317,8 @@ def plan(
     recording is made by the random policy alone (no estimator), which reads the robot's shape
     from the params file. `single_process` changes only how the nodes are hosted (one process,
     see LaunchPlan.container_args), never their parameters; `intra_process` (single_process
-    only) whether the container's nodes hand each other messages in process.
+    only) whether the container's nodes hand each other messages in process. `watchers`:
+    the caller's own zeus/step subscribers (start_counts).
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -326,7 +345,7 @@ def plan(
     planned = []
     for name in names:
         overrides: dict[str, Any] = {}
-        overrides.update(start_counts(name, names))
+        overrides.update(start_counts(name, names, watchers))
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:
                 overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))

@@ -152,6 +152,25 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     return missing
 
 
+def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]]) -> list[str]:
+    """Which of this node's `(subscription, expected publishers)` cannot hear them all yet.
+
+    The start gates above count what the *writer* matched; a reader matches the writer on its
+    own side when its participant processes the writer's announcement, which on a loaded
+    machine can come later, and a volatile reader drops what arrives before that. A node that
+    gives the loop its go-ahead (subscribes to the steps) only once these readers have matched
+    every publisher the graph shows (and at least `expected`) loses nothing at step 0; a
+    reader created after its publishers were discovered matches them at once.
+    """
+    short = []
+    for reader, expected in readers:
+        needed = max(expected, node.count_publishers(reader.topic_name))
+        matched = reader.get_publisher_count()
+        if matched < needed:
+            short.append(f'{reader.topic_name} ({matched} of {needed} publishers matched)')
+    return short
+
+
 def step_qos(depth: int = 10) -> QoSProfile:
     """Reliable keep-last: in lockstep no step may silently vanish (a loss shows as a gap)."""
     return QoSProfile(

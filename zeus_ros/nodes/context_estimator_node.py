@@ -74,16 +74,18 @@ class ContextEstimatorNode(Node):
             extra_parts=['truth'] if self.agent.needs_true_context else [],
             subscribe=not expected)
         self.assembler = self.inputs.assembler
+        readers = []  # what must hear its publisher before the steps are subscribed
         if self.agent.needs_true_context:
-            self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
-                                     lambda m: self.assembler.add(m.step, 'truth', m), step_qos())
+            readers.append((self.create_subscription(
+                ContextTruth, TOPICS.CONTEXT_TRUTH,
+                lambda m: self.assembler.add(m.step, 'truth', m), step_qos()), 1))
         # Publisher last: a peer that sees it knows the subscriptions above already exist;
         # with expected_subscribers the steps are subscribed once the readers hear the context.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT,
                                           publisher_qos(self.params['mode']))
         if expected:
             self.inputs.subscribe_when_heard(self._pub, expected,
-                                             self.params['subscriber_timeout'])
+                                             self.params['subscriber_timeout'], readers)
         # The estimate in the context's units, for people and plotting tools (the policy never
         # reads it): published whenever the checkpoint holds a read-out; the publisher exists
         # only then, so a viewer can tell "no read-out" from "not arrived yet".

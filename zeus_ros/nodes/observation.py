@@ -20,6 +20,7 @@ from zeus_ros.nodes.common import (
     stamp_ns,
     steady_timer,
     step_qos,
+    unmatched_readers,
 )
 from zeus_ros.nodes.params import Spec
 
@@ -32,8 +33,9 @@ HEARD_SPECS: dict[str, Spec] = {
     'expected_subscribers': Spec(0, "subscribe to the steps only once this node's output has "
                                  'matched this many subscribers (launchers set it: readers + '
                                  'recorder), so none misses step 0; 0: do not wait', low=0),
-    'subscriber_timeout': Spec(20.0, 'seconds to wait for expected_subscribers; then log the '
-                               'topic still short of them and subscribe anyway', low=0.0),
+    'subscriber_timeout': Spec(20.0, 'seconds to wait for expected_subscribers (and for the '
+                               'step source and the inputs to match); then log what is still '
+                               'short and subscribe anyway', low=0.0),
 }
 """Start-up parameters of the nodes whose output answers a step (context_estimator, policy)."""
 
@@ -102,36 +104,54 @@ class StepInputs:
         else:
             node.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
 
-    def subscribe_when_heard(self, output: Any, expected: int, timeout: float) -> None:
-        """Subscribe once publisher `output` has matched `expected` subscribers (or `timeout`).
+    def subscribe_when_heard(self, output: Any, expected: int, timeout: float,
+                             readers: Sequence[tuple[Any, int]] = ()) -> None:
+        """Subscribe once the group can start without losing step 0 here (or after `timeout`).
 
         The step producer waits for its step subscribers (min_observers) before step 0, so a
-        node that subscribes only once its readers and the recorder can hear its answer makes
-        the whole group wait for them: a bag then holds this node's output from step 0. After
-        `timeout` seconds it says which topic is short of how many and subscribes anyway.
+        node that subscribes only once its readers and the recorder can hear its answer
+        (publisher `output` matched `expected` subscribers) makes the whole group wait for
+        them: a bag then holds this node's output from step 0. It also waits until the step
+        source's publishers are discovered, so the subscriptions made here match them at once,
+        and until its own `readers` (subscription, expected publishers) matched theirs
+        (`unmatched_readers`). After `timeout` seconds it says what is still short and
+        subscribes anyway.
         """
-        if output.get_subscription_count() >= expected:
+        if self.subscribed or not self._short_of(output, expected, readers):
             self.subscribe()
             return
         deadline = time.monotonic() + timeout
         report = WaitReport(self.node)
 
         def poll() -> None:
-            matched = output.get_subscription_count()
-            short = f'{expected} subscribers of {output.topic_name} (expected_subscribers; ' \
-                    f'{matched} matched so far)'
-            if matched < expected and time.monotonic() < deadline:
-                report.waiting(short)
+            short = self._short_of(output, expected, readers)
+            if short and time.monotonic() < deadline:
+                report.waiting('; '.join(short))
                 return
-            if matched < expected:
+            if short:
                 self.node.get_logger().warning(
-                    f'subscriber_timeout: {timeout:g} s passed waiting for {short}; subscribing '
-                    'to the steps anyway: a late subscriber misses the first steps')
+                    f'subscriber_timeout: {timeout:g} s passed waiting for {"; ".join(short)}; '
+                    'subscribing to the steps anyway: this node may miss the first steps')
             timer.cancel()
             self.node.destroy_timer(timer)
             self.subscribe()
 
         timer = steady_timer(self.node, 0.05, poll)
+
+    def _short_of(self, output: Any, expected: int,
+                  readers: Sequence[tuple[Any, int]]) -> list[str]:
+        """What subscribe_when_heard still waits for (empty: subscribe now)."""
+        short = []
+        matched = output.get_subscription_count()
+        if matched < expected:
+            short.append(f'{expected} subscribers of {output.topic_name} (expected_subscribers; '
+                         f'{matched} matched so far)')
+        observation = TOPICS.IMAGE if self.decoder.obs_kind == 'pixels' else TOPICS.STATE
+        sources = [self.node.resolve_topic_name(topic) for topic in (TOPICS.STEP, observation)]
+        unseen = [topic for topic in sources if self.node.count_publishers(topic) == 0]
+        if unseen:
+            short.append(f'the step source publishing on {", ".join(unseen)}')
+        return short + unmatched_readers(self.node, readers)
 
     def _on_feedback(self, msg: StepFeedback) -> None:
         self.assembler.add(msg.step, 'feedback', msg)

@@ -194,9 +194,11 @@ class PolicyNode(Node):
         self._ready_timer.cancel()
         self.destroy_timer(self._ready_timer)
         # With expected_subscribers: observations only once sim_bridge and the recorder hear
-        # the actions (sim_bridge then waits for this node as one of its step subscribers).
+        # the actions and this node hears the estimator (sim_bridge then waits for this node
+        # as one of its step subscribers), so step 0 gets its context here.
+        readers = [(self._sub_context, 1)] if self._sub_context is not None else []
         self.inputs.subscribe_when_heard(self._pub, self.params['expected_subscribers'],
-                                         self.params['subscriber_timeout'])
+                                         self.params['subscriber_timeout'], readers)
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_context(self, msg: ContextEstimate) -> None:

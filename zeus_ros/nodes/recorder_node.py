@@ -31,10 +31,12 @@ from rosbags.interfaces import (
 
 from zeus_ros.nodes.common import (
     TOPICS,
+    WaitReport,
     diagnostics_message,
     run_node,
     steady_timer,
     step_qos,
+    unmatched_readers,
 )
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.data.bag_errors import BagError
@@ -61,6 +63,12 @@ SPECS: dict[str, Spec] = {
     'flush_period_s': Spec(1.0, 'seconds between flushes; bounds what a crash loses',
                            low=0.001, high=MAX_FLUSH_PERIOD_S),
     'image_best_effort': Spec(False, 'subscribe to frames best effort (realtime only)'),
+    'expected_publishers': Spec([''], 'recorded topics (bag names) whose publishers must be '
+                                'matched before the recorder subscribes to /zeus/step, which '
+                                "lets the loop start: a bag then holds them from step 0 "
+                                "(launchers set it; '': none)"),
+    'publisher_timeout': Spec(20.0, 'seconds to wait for expected_publishers; then log what is '
+                              'short and subscribe to the steps anyway', low=0.0),
 }
 RECORD_DEPTH = 1000
 """Reliable keep-last depth: what arrives while the recorder is held up (a slow flush, no CPU
@@ -136,18 +144,16 @@ class RecorderNode(Node):
         """bag topic -> the name subscribed (relative: follows namespace and remaps)."""
 
         # zeus/step last: a step producer that sees this subscription (min_observers) knows the
-        # others exist, and it waits until its own publishers have matched them (step 0 kept).
-        for topic in sorted(self.topics, key=lambda name: name == TOPIC_STEP):
-            qos = step_qos(RECORD_DEPTH)
-            if topic == TOPIC_IMAGE and self.params['image_best_effort']:
-                qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing
-            # The bag keeps the schema name; the subscription follows namespace and remaps.
-            source = self._sources[topic] = topic if topic == TOPICS.CLOCK else topic.lstrip('/')
-            self.create_subscription(
-                _message_class(MSGTYPES[topic]), source, partial(self._on_message, topic), qos,
-                raw=True,
-            )
-        self._open_next_bag()  # last: a start-up failure above leaves no empty bag behind
+        # others exist, and it waits until its own publishers have matched them; this node
+        # makes it only once its own readers have matched the expected publishers (step 0 kept
+        # on both sides of every match).
+        self._readers = {topic: self._subscribe(topic) for topic in self.topics
+                         if topic != TOPIC_STEP}
+        self._open_next_bag()  # a start-up failure above leaves no empty bag behind
+        if TOPIC_STEP in self.topics and self.params['expected_publishers']:
+            self._subscribe_steps_when_heard()
+        elif TOPIC_STEP in self.topics:  # by hand: from whatever step it first hears
+            self._readers[TOPIC_STEP] = self._subscribe(TOPIC_STEP)
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         steady_timer(self, self.params['flush_period_s'], self._on_flush_timer)
         steady_timer(self, 1.0, self._publish_diagnostics)
@@ -161,11 +167,58 @@ class RecorderNode(Node):
             self.get_logger().info(f'zeus topics of namespace {self.get_namespace()} are written '
                                    'under their schema names (/zeus/...), so ingest reads them')
 
+    def _subscribe(self, topic: str) -> Any:
+        qos = step_qos(RECORD_DEPTH)
+        if topic == TOPIC_IMAGE and self.params['image_best_effort']:
+            qos = qos_profile_sensor_data  # realtime frames: a late frame is worth nothing
+        # The bag keeps the schema name; the subscription follows namespace and remaps.
+        source = self._sources[topic] = topic if topic == TOPICS.CLOCK else topic.lstrip('/')
+        return self.create_subscription(
+            _message_class(MSGTYPES[topic]), source, partial(self._on_message, topic), qos,
+            raw=True)
+
+    def _subscribe_steps_when_heard(self) -> None:
+        """Subscribe to /zeus/step once the expected publishers are matched (or on timeout)."""
+        deadline = time.monotonic() + self.params['publisher_timeout']
+        report = WaitReport(self)
+
+        def poll() -> None:
+            short = self._unheard()
+            if short and time.monotonic() < deadline:
+                report.waiting('; '.join(short))
+                return
+            if short:
+                self.get_logger().warning(
+                    f'publisher_timeout: {self.params["publisher_timeout"]:g} s passed waiting '
+                    f'for {"; ".join(short)}; subscribing to the steps anyway: the bag may miss '
+                    'the first steps of these topics')
+            timer.cancel()
+            self.destroy_timer(timer)
+            self._readers[TOPIC_STEP] = self._subscribe(TOPIC_STEP)
+
+        timer = steady_timer(self, 0.05, poll)
+        poll()
+
+    def _unheard(self) -> list[str]:
+        """What _subscribe_steps_when_heard still waits for (empty: subscribe now)."""
+        expected = self.params['expected_publishers']
+        short = unmatched_readers(self, [(reader, int(topic in expected))
+                                         for topic, reader in self._readers.items()])
+        steps = self.resolve_topic_name(TOPIC_STEP.lstrip('/'))
+        if TOPIC_STEP in expected and self.count_publishers(steps) == 0:
+            short.append(f'a publisher of {steps}')
+        return short
+
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
         """Declare every parameter with its default, then validate them all with clear errors."""
         params = declare_specs(self, SPECS)
         params['topics'] = self._check_topics(params['topics'])
+        params['expected_publishers'] = [t for t in params['expected_publishers'] if t]
+        unknown = sorted(set(params['expected_publishers']) - set(params['topics']))
+        if unknown:
+            raise ValueError(f'recorder: parameter expected_publishers names {unknown}, which '
+                             f'it does not record; recorded: {", ".join(params["topics"])}')
         self._check_output(params['output'])
         return params
 
