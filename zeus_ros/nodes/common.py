@@ -330,9 +330,11 @@ def _deliver_published(nodes: Sequence[Node], timeout: float = 2.0) -> None:
 
 DRAIN_LIMIT_S = 2.0
 """The longest a draining node goes on taking messages after a stop signal."""
-STOP_DELIVERY_S = 0.5
+STOP_DELIVERY_S = 1.5
 """The longest a node stopped by a signal waits for its reliable readers to take its last
-messages (a finished node waits 2 s: nothing else is stopping it)."""
+messages (a finished node waits 2 s: nothing else is stopping it). Usually they have: no wait.
+With 0.5 a recorder starved of CPU on an overloaded machine was 0.6 s (150 steps of the
+one-process loop) behind at Ctrl-C and lost them; the recorder drains for DRAIN_LIMIT_S."""
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None, drain: float = 0.0
