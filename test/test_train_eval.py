@@ -120,6 +120,24 @@ def test_resume_with_another_config_fails_clearly(trained: Any, bags: Path,
         train([bags], other, run, progress=False, log=lambda _m: None)
 
 
+def test_a_method_without_the_context_loss_resumes_whatever_its_weight() -> None:
+    """alpha_psi differs only where eq. 1's context loss applies (zeus), not for the others.
+
+    `alpha_psi: auto` changed its value on two tasks (session 11): their no_context and oracle
+    runs must continue, a zeus run must not.
+    """
+    from zeus_ros.offline.training.train import _config_differences
+
+    for method, differs in (('zeus', True), ('zeus_no_context_loss', False),
+                            ('no_context', False), ('oracle', False)):
+        stored, wanted = (load_config_from(CONFIG | {'method': method, 'alpha_psi': alpha})
+                          for alpha in (1.0, 0.0))
+        found = _config_differences(stored, wanted, 240)
+        assert found == (['alpha_psi: checkpoint 1.0, now 0.0'] if differs else []), method
+        wider = load_config_from(CONFIG | {'method': method, 'alpha_psi': 0.0, 'k': 3})
+        assert 'k: checkpoint 5, now 3' in _config_differences(stored, wider, 240)
+
+
 def test_resume_may_set_a_freeze_it_has_not_reached(trained: Any, bags: Path,
                                                      tmp_path: Path) -> None:
     """A resume at update 240 may set representation_frozen_from to 240 or later, not earlier.

@@ -215,15 +215,20 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig, step: int) -> li
 
     `representation_frozen_from` acts only from its update on, so a resume that has reached
     neither the stored nor the wanted value may change it (a frozen-from-10k variant continues
-    a finished 10k run).
+    a finished 10k run). `alpha_psi` weighs eq. 1's context loss, so a method without it
+    (methods.py) may change it: a no_context run trained while `alpha_psi: auto` meant 1.0
+    continues unchanged now that it means 0.
     """
+    from zeus_ros.learning.methods import method_spec
+
     old, new = stored.to_dict(), wanted.to_dict()
+    unread = set() if method_spec(stored.method).context_loss else {'alpha_psi'}
 
     def not_reached(value: int) -> bool:
         return value == 0 or value >= step
 
     return [f'{key}: checkpoint {old[key]!r}, now {new[key]!r}' for key in old
-            if key not in RUN_CONTROL_FIELDS and old[key] != new[key]
+            if key not in RUN_CONTROL_FIELDS and key not in unread and old[key] != new[key]
             and not (key == LATER_FIELD and not_reached(old[key]) and not_reached(new[key]))]
 
 
