@@ -37,9 +37,9 @@ DEMO_CHECKPOINTS = {
     'Walker-Walk-v1': 'comparison/walker_walk_v1_10k/zeus_s0.pt',
     'Finger-Spin-v0': 'comparison/finger_spin_v0_10k/zeus_s0.pt',
     'Cheetah-Run-v1': 'issue10_episodes/k10/cheetah_run_v1_50k/zeus_s0.pt',
-    # A dynamics family where the actor reads psi: seed 0 of the ablation (no context loss;
-    # the default's psi saturates there, docs/results.md sessions 10-11).
-    'Cheetah-Bias-v0': 'issue10_episodes/default/cheetah_bias_v0_10k/zeus_no_context_loss_s0.pt',
+    # A dynamics family where the actor reads psi: seed 0 of its default (no context loss
+    # since session 11; with it psi saturates there), trained for 20k updates (session 12).
+    'Cheetah-Bias-v0': 'issue10_episodes/default/cheetah_bias_v0_20k/zeus_no_context_loss_s0.pt',
 }
 DEFAULT_TASK = 'Cheetah-Run-v1'
 """The demo's family: where a ZeUS policy measurably gains from its context (docs/results.md);
