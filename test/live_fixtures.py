@@ -51,6 +51,22 @@ def _param_args(params: tuple[str, ...]) -> list[str]:
     return args
 
 
+LOOP_GROUP = ('sim_bridge', 'context_estimator', 'policy', 'recorder')
+"""The nodes of a recorded lockstep loop, as `zeus launch --record` starts them."""
+
+
+def start_gates(name: str, group: tuple[str, ...] = LOOP_GROUP) -> tuple[str, ...]:
+    """The start-up parameters a launcher gives node `name` in `group`, as 'key:=value'.
+
+    Nodes started one by one need them as much as a launch does: without them a reader whose
+    side of a match comes late (the recorder's, on a loaded machine) misses the first steps.
+    """
+    from zeus_ros.launch_defaults import ros_arg_value, start_counts
+
+    return tuple(f'{key}:={ros_arg_value(value)}'
+                 for key, value in start_counts(name, group).items())
+
+
 def node(name: str, *params: str) -> list[str]:
     """Build the argv of a zeus_ros node with `-p` parameters given as 'key:=value' strings."""
     return python_module(f'zeus_ros.nodes.{MODULES[name]}', '--ros-args', *_param_args(params))

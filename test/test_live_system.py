@@ -14,6 +14,7 @@ from live_fixtures import (
     check_lockstep_bag,
     container,
     node,
+    start_gates,
     tiny_checkpoint,
 )
 from ros_harness import ProcessGroup, driver_node, spin_until
@@ -35,14 +36,21 @@ def bridge(steps: int, *extra: str) -> list[str]:
 
 def test_three_nodes_act_on_every_step_and_the_bag_trains(
         ros_processes: ProcessGroup, tmp_path) -> None:
-    """300+ lockstep steps: an action per step, stamps match, the recorded bag trains."""
+    """300+ lockstep steps: an action per step, stamps match, the recorded bag trains.
+
+    The nodes get the start-up parameters a launcher gives them (start_gates): the bag then
+    holds every topic from step 0 however late a reader's side of a match comes.
+    """
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
-    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
-    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
-    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
-    ros_processes.wait_for_log('recorder', 'recording ')  # subscribed before step 0
-    sim = ros_processes.start('sim_bridge', bridge(STEPS, 'min_observers:=3'))
+    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}',
+                                                    *start_gates('recorder')))
+    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}',
+                                          *start_gates('context_estimator')))
+    ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
+                                       *start_gates('policy')))
+    ros_processes.wait_for_log('recorder', 'recording ')
+    sim = ros_processes.start('sim_bridge', bridge(STEPS, *start_gates('sim_bridge')))
     assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
@@ -60,12 +68,13 @@ def test_one_process_acts_on_every_step_and_the_bag_trains(
     """
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'bag'
-    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
+    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}',
+                                                    *start_gates('recorder')))
     ros_processes.wait_for_log('recorder', 'recording ')
     loop = ros_processes.start('container', container({
-        'sim_bridge': bridge_params(STEPS, 'min_observers:=3'),
-        'context_estimator': (f'checkpoint:={checkpoint}',),
-        'policy': (f'checkpoint:={checkpoint}',)}, *switch))
+        'sim_bridge': bridge_params(STEPS, *start_gates('sim_bridge')),
+        'context_estimator': (f'checkpoint:={checkpoint}', *start_gates('context_estimator')),
+        'policy': (f'checkpoint:={checkpoint}', *start_gates('policy'))}, *switch))
     assert loop.wait(timeout=180) == 0, ros_processes.log_text('container')[-3000:]
     time.sleep(1.5)
     assert ros_processes.stop(recorder, signal.SIGINT) == 0, ros_processes.log_text('recorder')
@@ -175,16 +184,18 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'live'
-    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}'))
-    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
+    recorder = ros_processes.start('recorder', node('recorder', f'output:={bag_dir}',
+                                                    *start_gates('recorder')))
+    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}',
+                                          *start_gates('context_estimator')))
     # A generous context deadline: under CPU load a late context must be waited for, not
     # replaced by the newest one, or the two runs would (legitimately) act differently.
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
-                                       'context_deadline:=10.0'))
-    ros_processes.wait_for_log('recorder', 'recording ')  # subscribed before step 0
+                                       'context_deadline:=10.0', *start_gates('policy')))
+    ros_processes.wait_for_log('recorder', 'recording ')
     sim = ros_processes.start('sim_bridge', node(
         'sim_bridge', f'task:={TASK}', 'max_steps:=260', 'seed:=5', 'schedule.kind:=switch',
-        'schedule.every:=100', 'schedule.values:=train', 'min_observers:=3'))
+        'schedule.every:=100', 'schedule.values:=train', *start_gates('sim_bridge')))
     assert sim.wait(timeout=180) == 0, ros_processes.log_text('sim_bridge')[-3000:]
     time.sleep(1.5)
     ros_processes.stop(recorder, signal.SIGINT)
