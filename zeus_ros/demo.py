@@ -26,7 +26,7 @@ import numpy as np
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import ros_arg_value, start_counts
+from zeus_ros.launch_defaults import start_args
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
@@ -99,13 +99,6 @@ def schedule_lengths(task: str) -> tuple[int, int]:
     return 150, 2000
 
 
-def _start_args(name: str, group: Sequence[str]) -> list[str]:
-    """`-p` overrides of launch_defaults.start_counts; the inspector also reads zeus/step."""
-    counts = start_counts(name, group, watchers=1)  # this process's inspector
-    return [arg for key, value in counts.items()
-            for arg in ('-p', f'{key}:={ros_arg_value(value)}')]
-
-
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
                 frozen: str = '') -> list[NodeProcess]:
     """The node processes of the demo with their parameters (`frozen`: policy frozen_context)."""
@@ -115,23 +108,27 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
     group = ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
              'policy', *(['recorder'] if args.record else [])]
+
+    def gates(name: str) -> list[str]:  # this process's inspector reads zeus/step too
+        return start_args(name, group, watchers=1)
+
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None,
-                                                 bridge + _start_args('sim_bridge', group)))]
+                                                 bridge + gates('sim_bridge')))]
     if checkpoint is not None:
         ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', f'task:={args.task}']
         nodes.append(NodeProcess('context_estimator', node_argv(
-            'context_estimator', None, ckpt + _start_args('context_estimator', group))))
+            'context_estimator', None, ckpt + gates('context_estimator'))))
         frozen_param = ['-p', f'frozen_context:={frozen}'] if frozen else []
         nodes.append(NodeProcess('policy', node_argv(
-            'policy', None, ckpt + frozen_param + _start_args('policy', group))))
+            'policy', None, ckpt + frozen_param + gates('policy'))))
     else:
         nodes.append(NodeProcess('policy', node_argv(
             'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}',
-                             *_start_args('policy', group)])))
+                             *gates('policy')])))
     if args.record:
         nodes.append(NodeProcess('recorder', node_argv(
             'recorder', None, ['-p', f'output:={args.out / "bag"}',
-                               *_start_args('recorder', group)])))
+                               *gates('recorder')])))
     return nodes
 
 

@@ -21,8 +21,8 @@ from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
            'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
-           'LaunchPlan', 'NodePlan', 'default_params_file', 'parse_bool', 'plan',
-           'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir',
+           'LaunchPlan', 'NodePlan', 'default_params_file', 'param_args', 'parse_bool', 'plan',
+           'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir', 'start_args',
            'start_counts']
 
 PACKAGE = 'zeus_ros'
@@ -153,9 +153,13 @@ class LaunchPlan:
         args = ['--params-file', str(self.params_file)]
         if self.namespace:
             args += ['-r', f'__ns:={self.namespace}']
-        for key, value in node.parameters.items():
-            args += ['-p', f'{key}:={ros_arg_value(value)}']
-        return [*args, '--log-level', self.log_level]
+        return [*args, *param_args(node.parameters), '--log-level', self.log_level]
+
+
+def param_args(values: Mapping[str, Any]) -> list[str]:
+    """Parameter values as `--ros-args` arguments: `-p key:=value` each."""
+    return [arg for key, value in values.items()
+            for arg in ('-p', f'{key}:={ros_arg_value(value)}')]
 
 
 def ros_arg_value(value: Any) -> str:
@@ -292,6 +296,11 @@ def start_counts(name: str, group: Sequence[str],
         topics = [topic for node, topic in RECORDED_ANSWERS.items() if node in group]
         return {'expected_publishers': topics} if topics else {}
     return {}
+
+
+def start_args(name: str, group: Sequence[str], watchers: int = 0) -> list[str]:
+    """start_counts as `-p` arguments: for nodes started one by one (the demo, tests)."""
+    return param_args(start_counts(name, group, watchers))
 
 
 def plan(

@@ -39,6 +39,7 @@ __all__ = [
     'WaitReport',
     'action_qos',
     'array_from_image',
+    'call_when_ready',
     'count_publishers',
     'count_subscribers',
     'diagnostics_message',
@@ -115,6 +116,36 @@ class WaitReport:
             self._last = now
             self._node.get_logger().warning(
                 f'still waiting after {now - self._start:.0f} s: {what}')
+
+
+def call_when_ready(node: Node, short_of: Callable[[], list[str]], then: Callable[[], None],
+                    timeout: float, timeout_name: str, consequence: str) -> None:
+    """Call `then` once `short_of()` names nothing, or after `timeout` seconds in any case.
+
+    The one start-up gate of the nodes that give the loop its go-ahead by subscribing to the
+    steps (estimator, policy, recorder): polled on the steady clock (no busy wait, runs before
+    /clock moves), quiet for a normal start, then naming what is short (WaitReport); on
+    timeout it warns with the parameter's name and what the late start may cost.
+    """
+    if not short_of():
+        then()
+        return
+    deadline = time.monotonic() + timeout
+    report = WaitReport(node)
+
+    def poll() -> None:
+        short = short_of()
+        if short and time.monotonic() < deadline:
+            report.waiting('; '.join(short))
+            return
+        if short:
+            node.get_logger().warning(f'{timeout_name}: {timeout:g} s passed waiting for '
+                                      f'{"; ".join(short)}; {consequence}')
+        timer.cancel()
+        node.destroy_timer(timer)
+        then()
+
+    timer = steady_timer(node, 0.05, poll)
 
 
 def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int,

@@ -14,11 +14,10 @@ from zeus_ros.learning.frames import FrameStack
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
-    WaitReport,
     array_from_image,
+    call_when_ready,
     image_qos,
     stamp_ns,
-    steady_timer,
     step_qos,
     unmatched_readers,
 )
@@ -117,26 +116,11 @@ class StepInputs:
         (`unmatched_readers`). After `timeout` seconds it says what is still short and
         subscribes anyway.
         """
-        if self.subscribed or not self._short_of(output, expected, readers):
-            self.subscribe()
+        if self.subscribed:
             return
-        deadline = time.monotonic() + timeout
-        report = WaitReport(self.node)
-
-        def poll() -> None:
-            short = self._short_of(output, expected, readers)
-            if short and time.monotonic() < deadline:
-                report.waiting('; '.join(short))
-                return
-            if short:
-                self.node.get_logger().warning(
-                    f'subscriber_timeout: {timeout:g} s passed waiting for {"; ".join(short)}; '
-                    'subscribing to the steps anyway: this node may miss the first steps')
-            timer.cancel()
-            self.node.destroy_timer(timer)
-            self.subscribe()
-
-        timer = steady_timer(self.node, 0.05, poll)
+        call_when_ready(self.node, lambda: self._short_of(output, expected, readers),
+                        self.subscribe, timeout, 'subscriber_timeout',
+                        'subscribing to the steps anyway: this node may miss the first steps')
 
     def _short_of(self, output: Any, expected: int,
                   readers: Sequence[tuple[Any, int]]) -> list[str]:

@@ -31,7 +31,7 @@ from rosbags.interfaces import (
 
 from zeus_ros.nodes.common import (
     TOPICS,
-    WaitReport,
+    call_when_ready,
     diagnostics_message,
     run_node,
     steady_timer,
@@ -179,25 +179,12 @@ class RecorderNode(Node):
 
     def _subscribe_steps_when_heard(self) -> None:
         """Subscribe to /zeus/step once the expected publishers are matched (or on timeout)."""
-        deadline = time.monotonic() + self.params['publisher_timeout']
-        report = WaitReport(self)
-
-        def poll() -> None:
-            short = self._unheard()
-            if short and time.monotonic() < deadline:
-                report.waiting('; '.join(short))
-                return
-            if short:
-                self.get_logger().warning(
-                    f'publisher_timeout: {self.params["publisher_timeout"]:g} s passed waiting '
-                    f'for {"; ".join(short)}; subscribing to the steps anyway: the bag may miss '
-                    'the first steps of these topics')
-            timer.cancel()
-            self.destroy_timer(timer)
+        def subscribe_steps() -> None:
             self._readers[TOPIC_STEP] = self._subscribe(TOPIC_STEP)
 
-        timer = steady_timer(self, 0.05, poll)
-        poll()
+        call_when_ready(self, self._unheard, subscribe_steps, self.params['publisher_timeout'],
+                        'publisher_timeout', 'subscribing to the steps anyway: the bag may miss '
+                        'the first steps of these topics')
 
     def _unheard(self) -> list[str]:
         """What _subscribe_steps_when_heard still waits for (empty: subscribe now)."""
