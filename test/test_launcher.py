@@ -61,7 +61,8 @@ def test_defaults_are_the_installed_params_and_checkpoint() -> None:
     assert plan.params_file == share / 'params' / 'zeus.yaml' and plan.params_file.is_file()
     assert [n.name for n in plan.nodes] == ['sim_bridge', 'context_estimator', 'policy']
     nodes = {n.name: n.parameters for n in plan.nodes}
-    assert nodes['sim_bridge'] == {'min_observers': 2}
+    assert nodes['sim_bridge'] == {'min_observers': 2,
+                                   'observers': ['context_estimator', 'policy']}
     assert nodes['context_estimator']['expected_subscribers'] == 1  # the policy
     assert nodes['policy']['expected_subscribers'] == 1  # sim_bridge
     for name in d.AGENT_NODES:
@@ -104,10 +105,11 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
     assert f"checkpoint:='{ckpt}'" in args and 'use_sim_time:=true' in args
     assert "expected_publishers:=['/zeus/step','/zeus/context','/zeus/action']" in \
         plan.ros_args(plan.nodes[3])
-    # zeus launch's status line subscribes to zeus/step too: sim_bridge waits for it as well,
-    # or it would stand in for a node not subscribed yet
-    watched = d.plan(record=True, watchers=1)
-    assert watched.nodes[0].parameters['min_observers'] == 4
+    # zeus launch's status line subscribes to zeus/step too: sim_bridge waits for the group's
+    # nodes by name, so that subscriber cannot stand in for one not subscribed yet
+    assert plan.nodes[0].parameters['observers'] == ['context_estimator', 'policy', 'recorder']
+    assert "observers:=['context_estimator','policy','recorder']" in \
+        plan.ros_args(plan.nodes[0])
     for bad, match in (({'record': 'maybe'}, 'record'), ({'log_level': 'loud'}, 'log_level'),
                        ({'nope': '1'}, 'unknown launch argument')):
         with pytest.raises(ValueError, match=match):

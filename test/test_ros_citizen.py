@@ -130,6 +130,40 @@ def test_a_remapped_action_topic_runs_the_loop_and_a_wait_says_why(
     assert counts['ok'] == 100 and counts['unexpected'] == 0 and counts['timeouts'] == 0
 
 
+def test_the_loop_waits_for_its_named_observers_not_for_any_subscriber(
+        ros_processes: ProcessGroup) -> None:
+    """`observers`: a bystander on zeus/step (`ros2 topic echo`, a status line) is no stand-in.
+
+    min_observers (2) is met by the policy and the bystander, yet no step is published until
+    the node named in `observers` subscribes; then the loop runs and the bystander sees step 0.
+    """
+    from zeus_msgs.msg import StepFeedback
+
+    from zeus_ros.nodes.common import step_qos
+
+    bridge = ros_processes.start('observers-sim_bridge', ros_node(
+        'sim_bridge', '-p', f'task:={TASK}', '-p', 'max_steps:=50', '-p', 'min_observers:=2',
+        '-p', "observers:=['policy','watcher']"))
+    ros_processes.start('observers-policy', ros_node('policy', '-p', f'task:={TASK}'))
+    seen: list[int] = []
+    with driver_node(ros_processes.domain_id, name='bystander') as bystander:
+        bystander.create_subscription(StepFeedback, '/zeus/step', lambda m: seen.append(m.step),
+                                      step_qos(100))
+        assert spin_until(bystander, lambda: bystander.count_subscribers('/zeus/step') >= 2,
+                          timeout=60), 'the policy never subscribed to /zeus/step'
+        spin_until(bystander, lambda: bool(seen), timeout=4.0)  # longer than peer_grace
+        assert not seen, f'steps {seen[:5]} published before the named observer subscribed'
+        assert 'watcher subscribed to /zeus/step (observers)' in \
+            ros_processes.log_text('observers-sim_bridge')
+        with driver_node(ros_processes.domain_id, name='watcher') as watcher:
+            watcher.create_subscription(StepFeedback, '/zeus/step', lambda m: None, step_qos())
+            assert spin_until(bystander, lambda: bridge.poll() is not None, timeout=120), \
+                ros_processes.log_text('observers-sim_bridge')[-2000:]
+    assert bridge.returncode == 0, ros_processes.log_text('observers-sim_bridge')[-2000:]
+    assert seen and seen[0] == 0, seen[:5]
+    assert final_counts(ros_processes.log_text('observers-sim_bridge'))['ok'] == 50
+
+
 def call(node: Any, future: Any, timeout: float = 20.0) -> Any:
     """Spin until a parameter-service future is done; its result."""
     assert spin_until(node, future.done, timeout), 'no answer from the parameter service'

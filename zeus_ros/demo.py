@@ -109,8 +109,8 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
     group = ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
              'policy', *(['recorder'] if args.record else [])]
 
-    def gates(name: str) -> list[str]:  # this process's inspector reads zeus/step too
-        return start_args(name, group, watchers=1)
+    def gates(name: str) -> list[str]:
+        return start_args(name, group)
 
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None,
                                                  bridge + gates('sim_bridge')))]

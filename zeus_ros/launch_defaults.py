@@ -23,7 +23,7 @@ __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CON
            'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'param_args', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir', 'start_args',
-           'start_counts']
+           'start_parameters']
 
 PACKAGE = 'zeus_ros'
 NODES: dict[str, str] = {
@@ -274,21 +274,21 @@ def _check_values(params: Mapping[str, Any], where: str, prefix: str = '') -> No
                              'string or list')
 
 
-def start_counts(name: str, group: Sequence[str],
-                 watchers: int = 0) -> dict[str, int | list[str]]:
-    """How many subscribers node `name` waits for before step 0 in `group` (its parameters).
+def start_parameters(name: str, group: Sequence[str]) -> dict[str, int | list[str]]:
+    """What node `name` waits for before step 0 in `group` (its parameters).
 
-    The step source waits for every other node on zeus/step (`min_observers`); the estimator
-    and the policy subscribe to the steps only once their answer (context, action) is matched
-    by its readers in the group (`expected_subscribers`), and a recorder only once its readers
+    The step source waits for every other node of the group on zeus/step, by name
+    (`observers`; `min_observers` their number): a count alone could be met by a launcher's
+    own step subscriber (zeus launch's status line, the demo's inspector) or a user's
+    `ros2 topic echo` while a node of the group is still starting. The estimator and the
+    policy subscribe to the steps only once their answer (context, action) is matched by its
+    readers in the group (`expected_subscribers`), and a recorder only once its readers
     matched the group's publishers of the steps and answers (`expected_publishers`), so the
     step source waits for them too and a recorder's bag holds every topic from step 0.
-    `watchers` counts the launcher's own subscribers of zeus/step (zeus launch's status line,
-    the demo's inspector): the step source counts subscriptions, so without them in
-    min_observers a watcher would stand in for a node that is not subscribed yet.
     """
-    if name in STEP_SOURCES:  # a watcher's subscription counts as one too: wait for all
-        return {'min_observers': len(group) - 1 + watchers}
+    if name in STEP_SOURCES:
+        others = [other for other in group if other != name]
+        return {'min_observers': len(others), 'observers': others or ['']}
     if name in ANSWER_READERS:
         readers = sum(1 for other in group if other in ANSWER_READERS[name])
         return {'expected_subscribers': readers} if readers else {}
@@ -298,9 +298,9 @@ def start_counts(name: str, group: Sequence[str],
     return {}
 
 
-def start_args(name: str, group: Sequence[str], watchers: int = 0) -> list[str]:
-    """start_counts as `-p` arguments: for nodes started one by one (the demo, tests)."""
-    return param_args(start_counts(name, group, watchers))
+def start_args(name: str, group: Sequence[str]) -> list[str]:
+    """start_parameters as `-p` arguments: for nodes started one by one (the demo, tests)."""
+    return param_args(start_parameters(name, group))
 
 
 def plan(
@@ -315,19 +315,17 @@ def plan(
     robot: bool = False,
     single_process: bool = False,
     intra_process: bool = True,
-    watchers: int = 0,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
     sim_bridge waits for every other node of the group (the recorder included) on zeus/step,
-    and estimator and policy for the readers of their answers (`start_counts`), so none of
+    and estimator and policy for the readers of their answers (`start_parameters`), so none of
     them misses step 0; a relative checkpoint becomes an absolute path. With
     `robot`, robot_bridge takes sim_bridge's place; without any checkpoint the robot's first
     recording is made by the random policy alone (no estimator), which reads the robot's shape
     from the params file. `single_process` changes only how the nodes are hosted (one process,
     see LaunchPlan.container_args), never their parameters; `intra_process` (single_process
-    only) whether the container's nodes hand each other messages in process. `watchers`:
-    the caller's own zeus/step subscribers (start_counts).
+    only) whether the container's nodes hand each other messages in process.
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -354,7 +352,7 @@ def plan(
     planned = []
     for name in names:
         overrides: dict[str, Any] = {}
-        overrides.update(start_counts(name, names, watchers))
+        overrides.update(start_parameters(name, names))
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:
                 overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))

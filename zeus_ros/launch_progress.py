@@ -1,9 +1,9 @@
 """`zeus launch`'s status line: steps, rate, episode and the current context segment's return.
 
 A subscriber in the launcher process listens to zeus/step and zeus/context_truth (it never
-publishes). sim_bridge counts it among the step subscribers it waits for, so the launcher adds
-it to min_observers (launch_defaults.plan, `watchers`): otherwise it would stand in for a node
-not yet subscribed, which then missed the first steps. On a terminal the status is one line
+publishes). sim_bridge waits for the group's nodes by name (`observers`,
+launch_defaults.start_parameters), so this subscriber cannot stand in for a node not yet
+subscribed, which would then miss the first steps. On a terminal the status is one line
 rewritten in place under the nodes' output; into a file or pipe it is a plain line every
 `every` seconds.
 """

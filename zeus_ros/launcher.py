@@ -292,8 +292,7 @@ def main(argv: list[str] | None = None) -> int:
             namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
             checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
-            intra_process=not args.no_intra_process,
-            watchers=0 if args.no_progress else 1)  # the status line reads zeus/step
+            intra_process=not args.no_intra_process)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2

@@ -149,7 +149,7 @@ def call_when_ready(node: Node, short_of: Callable[[], list[str]], then: Callabl
 
 
 def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int,
-                  others: Sequence[Any] = ()) -> list[str]:
+                  others: Sequence[Any] = (), named: Sequence[str] = ()) -> list[str]:
     """What a step producer still waits for before step 0 (empty: start).
 
     `outputs` are its publishers, the StepFeedback one first, then the observations; `others`
@@ -160,8 +160,10 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     would miss it in the bag). `min_observers` names how many step subscribers a launch
     expects (estimator, policy, recorder, ...), so a peer that is still starting up is waited
     for rather than missed; a recorder subscribes to the steps last, so once it counts here its
-    other subscriptions are known too. Counted on the names as the node resolved them:
-    namespace and remaps applied.
+    other subscriptions are known too. `named` (parameter `observers`) names the nodes that
+    must be among the step subscribers (a launcher's group): a count alone can be met by a
+    bystander (a status line, `ros2 topic echo`) while a node of the group is still starting.
+    Counted on the names as the node resolved them: namespace and remaps applied.
     """
     step_pub, observations = outputs[0], outputs[1:]
     observers = sum(node.count_subscribers(pub.topic_name) for pub in observations)
@@ -178,6 +180,13 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     if listening < min_observers:
         missing.append(f'{min_observers} subscribers of {step_pub.topic_name} (min_observers; '
                        f'{listening} so far)')
+    if named:
+        present = {info.node_name
+                   for info in node.get_subscriptions_info_by_topic(step_pub.topic_name)}
+        absent = [name for name in named if name not in present]
+        if absent:
+            missing.append(f'{", ".join(absent)} subscribed to {step_pub.topic_name} '
+                           '(observers)')
     if unmatched or action_sub.get_publisher_count() < actions:
         missing.append(f'DDS to match the endpoints of {unmatched or [action_topic]}')
     return missing

@@ -95,6 +95,8 @@ SPECS: dict[str, Spec] = {
                        live=True, low=0.0),
     'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
                           live=True, low=0),
+    'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
+                      '(launchers: the group; empty: min_observers alone counts)'),
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',
@@ -255,7 +257,8 @@ class RobotBridgeNode(Node):
             if self._pub_image is not None:
                 outputs.append(self._pub_image)
             missing += missing_peers(self, outputs, self._sub_action,
-                                     self.params['min_observers'], others=[self._pub_truth])
+                                     self.params['min_observers'], others=[self._pub_truth],
+                                     named=[n for n in self.params['observers'] if n])
             if not missing and self._senders.paired is None:
                 problem = self._senders.pair(settle=PAIRING_SETTLE_S)
                 missing += [problem] if problem else []

@@ -61,6 +61,8 @@ SPECS: dict[str, Spec] = {
                        live=True, low=0.0),
     'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
                           live=True, low=0),
+    'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
+                      '(launchers: the group; empty: min_observers alone counts)'),
     'action_sender': Spec('', 'node whose actions are applied, e.g. /policy (empty: the only '
                           'action publisher at step 0); others are refused (docs/security.md)'),
     'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
@@ -158,7 +160,8 @@ class SimBridgeNode(Node):
         if self._pub_image is not None:
             outputs.append(self._pub_image)
         missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'],
-                                others=[self._pub_truth, self._pub_clock])
+                                others=[self._pub_truth, self._pub_clock],
+                                named=[name for name in self.params['observers'] if name])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
