@@ -96,7 +96,7 @@ SPECS: dict[str, Spec] = {
     'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
                           live=True, low=0),
     'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
-                      '(launchers: the group; empty: min_observers alone counts)'),
+                      '(launchers: the group; empty: min_observers alone counts)', live=True),
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',

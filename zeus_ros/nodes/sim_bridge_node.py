@@ -62,7 +62,7 @@ SPECS: dict[str, Spec] = {
     'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
                           live=True, low=0),
     'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
-                      '(launchers: the group; empty: min_observers alone counts)'),
+                      '(launchers: the group; empty: min_observers alone counts)', live=True),
     'action_sender': Spec('', 'node whose actions are applied, e.g. /policy (empty: the only '
                           'action publisher at step 0); others are refused (docs/security.md)'),
     'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
