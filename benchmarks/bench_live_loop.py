@@ -188,7 +188,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     memory: dict[str, float] = {}
-    cpu: list[tuple[int, float]] = []  # (steps seen, CPU seconds of the loop's processes)
+    cpu: list[tuple[int, dict[str, float]]] = []  # (steps seen, CPU seconds per process)
     try:
         deadline = time.monotonic() + 500
         while processes[loop].poll() is None and time.monotonic() < deadline:
@@ -198,7 +198,8 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
             # CPU per step between 10 % and 90 % of the run: load on the machine stretches
             # the wall clock, not the work a step costs.
             if len(cpu) < 2 and len(seen_obs) >= steps * (1 + 8 * len(cpu)) // 10:
-                cpu.append((len(seen_obs), sum(cpu_seconds(p.pid) for p in processes.values())))
+                cpu.append((len(seen_obs), {name: cpu_seconds(p.pid)
+                                            for name, p in processes.items()}))
     finally:
         for process in processes.values():
             process.terminate()
@@ -220,13 +221,15 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
-    cpu_ms = (cpu[1][1] - cpu[0][1]) / (cpu[1][0] - cpu[0][0]) * 1e3 if len(cpu) == 2 \
-        else float('nan')
+    per_process = {name: (cpu[1][1][name] - cpu[0][1][name]) / (cpu[1][0] - cpu[0][0]) * 1e3
+                   for name in processes} if len(cpu) == 2 else {}
+    cpu_ms = sum(per_process.values()) if per_process else float('nan')
     latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
     span = seen_obs[done[-1]] - seen_obs[done[0]]
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
             'p50': float(np.percentile(latency, 50)),
-            'p99': float(np.percentile(latency, 99)), **memory_values}
+            'p99': float(np.percentile(latency, 99)), **memory_values,
+            **{f'cpu_{name}': ms for name, ms in per_process.items()}}
 
 
 MODES = ('multi', 'single', 'single-dds', 'single-quiet')
@@ -288,7 +291,7 @@ def main() -> None:
     print(f'{"obs":<7} {"mode":<10} {"executor":<8} {"in-proc/s":>9} {"live/s":>8} '
           f'{"ratio [target]":>15} {"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} '
           f'{"p99 ms [target]":>16}  '
-          'RSS MiB per process')
+          'RSS MiB per process; CPU ms per step per process')
     with tempfile.TemporaryDirectory() as tmp:
         for kind in kinds:
             steps = args.steps if kind == 'state' else args.pixel_steps
@@ -306,13 +309,16 @@ def main() -> None:
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
                                   if k.startswith('rss_'))
+                per_node = ' '.join(f'{k[4:]} {v:.2f}' for k, v in live.items()
+                                    if k.startswith('cpu_') and k != 'cpu_ms')
                 ratio_text = f'{ratio:.3f} [{target}]' + ('' if ratio >= target else '!')
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
                     '' if live['p99'] <= p99_target or np.isnan(live['p99']) else '!')
                 cpu_text = f'{local_cpu:.2f}/{live["cpu_ms"]:.2f}'
                 print(f'{kind:<7} {mode:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
-                      f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}', flush=True)
+                      f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}'
+                      + (f'; CPU {per_node}' if per_node else ''), flush=True)
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
           'DDS threads included, 10-90 % of the run); CPU ratio = in-process / live: the rate '
           'ratio an idle machine would show, as far as the loop is CPU-bound; steadier than '
