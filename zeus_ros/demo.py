@@ -109,23 +109,26 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
     group = ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
              'policy', *(['recorder'] if args.record else [])]
 
+    def gates(name: str) -> list[str]:
+        return start_args(name, group)
+
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None,
-                                                 bridge + start_args('sim_bridge', group)))]
+                                                 bridge + gates('sim_bridge')))]
     if checkpoint is not None:
         ckpt = ['-p', f'checkpoint:={checkpoint}', '-p', f'task:={args.task}']
         nodes.append(NodeProcess('context_estimator', node_argv(
-            'context_estimator', None, ckpt + start_args('context_estimator', group))))
+            'context_estimator', None, ckpt + gates('context_estimator'))))
         frozen_param = ['-p', f'frozen_context:={frozen}'] if frozen else []
         nodes.append(NodeProcess('policy', node_argv(
-            'policy', None, ckpt + frozen_param + start_args('policy', group))))
+            'policy', None, ckpt + frozen_param + gates('policy'))))
     else:
         nodes.append(NodeProcess('policy', node_argv(
             'policy', None, ['-p', f'task:={args.task}', '-p', f'seed:={args.seed}',
-                             *start_args('policy', group)])))
+                             *gates('policy')])))
     if args.record:
         nodes.append(NodeProcess('recorder', node_argv(
             'recorder', None, ['-p', f'output:={args.out / "bag"}',
-                               *start_args('recorder', group)])))
+                               *gates('recorder')])))
     return nodes
 
 
