@@ -36,6 +36,9 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     # (not on its own run) and the estimator publishes the estimate in m/s.
     assert 'context read-out (target_velocity RMSE' in done.stdout
     assert sum('estimated_target_velocity' in r for r in live) >= 50
+    # The demo's viewer is one of the nodes sim_bridge waits for, and it takes the steps only
+    # once it hears the estimator: every step of both runs has its context.
+    assert all(r['psi'] for r in live) and all(r['psi'] for r in frozen)
 
 
 def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> None:

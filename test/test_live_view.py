@@ -18,7 +18,7 @@ from live_fixtures import tiny_checkpoint
 from ros_harness import REPO, ros_environment
 
 # This file's own domain ids (the issue-12 range), so parallel runs do not meet.
-DOMAIN_EMPTY, DOMAIN_LIVE = 131, 132
+DOMAIN_EMPTY, DOMAIN_LIVE, DOMAIN_QUIET = 131, 132, 133
 
 
 def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
@@ -74,6 +74,37 @@ def test_inspect_with_nothing_running_hints_once_and_exits_1(tmp_path: Path) -> 
     assert err[0].startswith('zeus inspect: saw no step on /zeus/* in ')
     assert f'ROS_DOMAIN_ID={DOMAIN_EMPTY}' in err[0]
     assert not (tmp_path / 'x.png').exists()
+
+
+@pytest.mark.ros
+def test_a_step_without_an_estimate_means_no_estimator_only_once_discovery_settled(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Heard a step but no estimator yet: no verdict for DISCOVERY_SETTLE_S, then 'no estimator'.
+
+    (An inspector started beside a launch hears the step source a moment before it discovers
+    the estimator; CI once saw 'no estimator' at step 26 of a loop that had one.) The summary
+    at the end still counts the step as seen. `expect` naming a topic it cannot read is a
+    ValueError before any ROS set-up.
+    """
+    from zeus_msgs.msg import ContextTruth, StepFeedback
+
+    from zeus_ros.inspector import DISCOVERY_SETTLE_S, Inspector
+
+    with pytest.raises(ValueError, match=r"expect names \['zeus/bogus'\]"):
+        Inspector(expect=['zeus/bogus'])
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(DOMAIN_QUIET))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    inspector = Inspector()
+    try:
+        inspector._on_step(StepFeedback(step=0, episode=0, reward=0.5))
+        inspector._on_truth(ContextTruth(step=0, segment=0, names=['torso_length'],
+                                         values=[0.6]))
+        assert inspector.current() is None and inspector.current(settled=False).step == 0
+        inspector.first_step_at -= DISCOVERY_SETTLE_S
+        assert inspector.current().step == 0
+        assert inspector.estimate_text(inspector.current()).endswith('| no estimator')
+    finally:
+        inspector.close()
 
 
 @pytest.mark.ros

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from live_fixtures import node
+from live_fixtures import node, start_gates
 from ros_harness import (
     REPO,
     ProcessGroup,
@@ -67,22 +67,31 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
     bag, commands = tmp / f'bag_{tag}', tmp / f'commands_{tag}.json'
     fake = group.start(f'fake_robot_{tag}', [sys.executable, str(REPO / 'test' / 'fake_robot.py'),
                                              str(commands)])
-    recorder = group.start(f'recorder_{tag}', node('recorder', f'output:={bag}'))
+    # The start-up parameters a launcher gives this group: without them the recorder's reader
+    # may match the estimator late and the bag lose the first contexts (CI once: 272 of 300).
+    group_names = ('robot_bridge', *(('context_estimator',) if checkpoint else ()), 'policy',
+                   'recorder')
+
+    def gates(name: str) -> tuple[str, ...]:
+        return start_gates(name, group_names)
+
+    recorder = group.start(f'recorder_{tag}', node('recorder', f'output:={bag}',
+                                                   *gates('recorder')))
     agents = []
     if checkpoint is None:
-        agents.append(group.start(f'policy_{tag}', robot_node('policy', f'task:={PARAMS}')))
+        agents.append(group.start(f'policy_{tag}', robot_node('policy', f'task:={PARAMS}',
+                                                              *gates('policy'))))
     else:
         agents.append(group.start(f'estimator_{tag}', robot_node(
-            'context_estimator', f'checkpoint:={checkpoint}')))
+            'context_estimator', f'checkpoint:={checkpoint}', *gates('context_estimator'))))
         agents.append(group.start(f'policy_{tag}', robot_node(
-            'policy', f'checkpoint:={checkpoint}')))
+            'policy', f'checkpoint:={checkpoint}', *gates('policy'))))
     group.wait_for_log(f'recorder_{tag}', 'recording ')
     group.wait_for_log(f'fake_robot_{tag}', 'fake robot up')
-    observers = len(agents) + 1
     bridge = group.start(f'robot_bridge_{tag}', [
         *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
         '--params-file', str(PARAMS), '-p', f'max_steps:={steps}',
-        '-p', f'min_observers:={observers}'])
+        *[arg for gate in gates('robot_bridge') for arg in ('-p', gate)]])
     assert bridge.wait(timeout=120) == 0, group.log_text(f'robot_bridge_{tag}')[-3000:]
     for process in agents:
         group.stop(process)

@@ -26,7 +26,7 @@ import numpy as np
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
 from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import start_args
+from zeus_ros.launch_defaults import RECORDED_ANSWERS, start_args
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
@@ -99,6 +99,24 @@ def schedule_lengths(task: str) -> tuple[int, int]:
     return 150, 2000
 
 
+VIEWER = 'zeus_demo_view'
+"""The demo's own inspector node: one of the group sim_bridge waits for by name."""
+
+
+def demo_group(args: argparse.Namespace, checkpoint: Path | None) -> list[str]:
+    """The nodes the demo starts (its viewer not included)."""
+    return ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
+            'policy', *(['recorder'] if args.record else [])]
+
+
+def viewer_expects(group: Sequence[str]) -> list[str]:
+    """The topics whose publishers the viewer must hear before it takes the steps."""
+    from zeus_ros.nodes.common import TOPICS
+
+    answers = [topic.lstrip('/') for node, topic in RECORDED_ANSWERS.items() if node in group]
+    return [*answers, TOPICS.CONTEXT_TRUTH]
+
+
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
                 frozen: str = '') -> list[NodeProcess]:
     """The node processes of the demo with their parameters (`frozen`: policy frozen_context)."""
@@ -106,11 +124,10 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
     bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
-    group = ['sim_bridge', *(['context_estimator'] if checkpoint is not None else []),
-             'policy', *(['recorder'] if args.record else [])]
+    group = demo_group(args, checkpoint)
 
-    def gates(name: str) -> list[str]:
-        return start_args(name, group)
+    def gates(name: str) -> list[str]:  # the step source waits for the viewer too
+        return start_args(name, [*group, VIEWER])
 
     nodes = [NodeProcess('sim_bridge', node_argv('sim_bridge', None,
                                                  bridge + gates('sim_bridge')))]
@@ -190,7 +207,11 @@ def main(argv: list[str] | None = None) -> int:
     if failed is None and checkpoint is not None and not args.no_frozen:
         estimates = [r.estimate for r in log.ordered() if r.estimate is not None
                      and r.estimate.size]
-        if estimates:
+        if not estimates:
+            print('[demo] the live run published no context estimate that the viewer heard: '
+                  'no frozen run to compare with', file=sys.stderr)
+            return 1
+        else:
             mean = np.mean(np.stack(estimates), axis=0)
             frozen = ','.join(f'{v:.6g}' for v in mean)
             print(f"\n[demo] the same schedule again, the policy's context FROZEN at the mean "
@@ -260,7 +281,7 @@ def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str],
          *, label: str, frozen: str = '') -> tuple[Any, tuple[str, int] | None]:
     """One run of the system; prints live views and the summary, writes CSV and figure."""
     out.mkdir(parents=True, exist_ok=True)
-    inspector = Inspector()
+    inspector = Inspector(name=VIEWER, expect=viewer_expects(demo_group(args, checkpoint)))
     supervisor = Supervisor(build_nodes(args, checkpoint, frozen), env)
     started = time.monotonic()
     supervisor.start()

@@ -12,10 +12,12 @@ observation-to-action latency and the health counters that the nodes publish on 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable, Sequence
 import os
 from pathlib import Path
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +30,8 @@ from zeus_ros.step_log import (
     plot_inspection,
 )
 
+DISCOVERY_SETTLE_S = 2.0
+"""Seconds after the first step before a step without an estimate means 'no estimator'."""
 NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the same '
                 'ROS_DOMAIN_ID (and --namespace, if it runs in one)')
 
@@ -35,7 +39,15 @@ NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the s
 class Inspector:
     """ROS subscriber that fills a StepLog (imports rclpy only when constructed)."""
 
-    def __init__(self, namespace: str = '') -> None:
+    def __init__(self, namespace: str = '', name: str = 'zeus_inspect',
+                 expect: Sequence[str] = (), expect_timeout: float = 20.0) -> None:
+        """`expect`: topics (TOPICS values) whose publishers must be matched before the steps.
+
+        An inspector that a launch waits for by name (the demo's: sim_bridge `observers`)
+        subscribes to the steps only once its readers hear the expected publishers, as the
+        recorder does: else a fast loop can run to its end before this reader matches the
+        estimator, and the view (and the demo's frozen run) has no context at all.
+        """
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
@@ -43,11 +55,17 @@ class Inspector:
 
         from zeus_ros.nodes.common import STEP_BACKLOG, TOPICS, step_qos
 
+        readable = (TOPICS.STEP, TOPICS.CONTEXT_TRUTH, TOPICS.CONTEXT, TOPICS.CONTEXT_READOUT,
+                    TOPICS.CONTEXT_NOVELTY, TOPICS.ACTION)
+        unknown = sorted(set(expect) - set(readable))
+        if unknown:  # before rclpy.init: nothing to clean up
+            raise ValueError(f'Inspector: expect names {unknown}; it reads {list(readable)}')
         rclpy.init()
         self.namespace = namespace
         self.started = time.monotonic()
+        self.first_step_at: float | None = None
         # In the system's namespace, the relative zeus topics resolve to that system's.
-        self.node = rclpy.create_node('zeus_inspect', namespace=namespace)
+        self.node = rclpy.create_node(name, namespace=namespace)
         # One executor for the whole run: rclpy.spin_once() would build a new one per call.
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -58,17 +76,50 @@ class Inspector:
         # returns of the live and the frozen run stop being comparable.
         qos = step_qos(depth=STEP_BACKLOG)
         node = self.node
-        node.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, qos)
-        node.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth, qos)
-        context = node.create_subscription(ContextEstimate, TOPICS.CONTEXT, self._on_context, qos)
-        readout = node.create_subscription(ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout,
-                                           qos)
-        self._topics = {'context': context.topic_name, 'readout': readout.topic_name}
-        node.create_subscription(ContextTruth, TOPICS.CONTEXT_NOVELTY, self._on_novelty, qos)
-        node.create_subscription(Action, TOPICS.ACTION, self._on_action, qos)
+        readers = {
+            TOPICS.CONTEXT_TRUTH: node.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH,
+                                                           self._on_truth, qos),
+            TOPICS.CONTEXT: node.create_subscription(ContextEstimate, TOPICS.CONTEXT,
+                                                     self._on_context, qos),
+            TOPICS.CONTEXT_READOUT: node.create_subscription(
+                ContextTruth, TOPICS.CONTEXT_READOUT, self._on_readout, qos),
+            TOPICS.CONTEXT_NOVELTY: node.create_subscription(
+                ContextTruth, TOPICS.CONTEXT_NOVELTY, self._on_novelty, qos),
+            TOPICS.ACTION: node.create_subscription(Action, TOPICS.ACTION, self._on_action, qos),
+        }
+        self._topics = {'context': readers[TOPICS.CONTEXT].topic_name,
+                        'readout': readers[TOPICS.CONTEXT_READOUT].topic_name}
         node.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, self._on_diag, 10)
 
+        def subscribe_steps() -> None:
+            node.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, qos)
+
+        if expect:
+            self._take_steps_when_heard(readers, expect, expect_timeout, subscribe_steps)
+        else:  # a bystander: from whatever step it first hears
+            subscribe_steps()
+
+    def _take_steps_when_heard(self, readers: dict[str, Any], expect: Sequence[str],
+                               timeout: float, subscribe_steps: Callable[[], None]) -> None:
+        """Subscribe to the steps once the `expect`ed publishers are matched (or on timeout)."""
+        from zeus_ros.nodes.common import TOPICS, call_when_ready, unmatched_readers
+
+        node = self.node
+
+        def unheard() -> list[str]:
+            short = unmatched_readers(node, [(reader, 1) for topic, reader in readers.items()
+                                             if topic in expect])
+            steps = node.resolve_topic_name(TOPICS.STEP)
+            if TOPICS.STEP in expect and node.count_publishers(steps) == 0:
+                short.append(f'a publisher of {steps}')
+            return short
+
+        call_when_ready(node, unheard, subscribe_steps, timeout, 'expect_timeout',
+                        'subscribing to the steps anyway: the view may miss the first contexts')
+
     def _on_step(self, msg: object) -> None:
+        if self.first_step_at is None:
+            self.first_step_at = time.monotonic()
         record = self.log.record(msg.step)
         record.episode, record.first, record.reward = msg.episode, msg.first, msg.reward
         record.t_observation = time.monotonic()
@@ -120,7 +171,7 @@ class Inspector:
                 next_draw = now + refresh
                 if self.current() is not None:
                     print(self.view(), flush=True)
-                elif not hinted:  # one hint, then wait quietly
+                elif not hinted and self.first_step_at is None:  # one hint, then quiet
                     print(self.waiting_hint(), flush=True)
                     hinted = True
         except KeyboardInterrupt:
@@ -138,8 +189,10 @@ class Inspector:
         return f'[inspect] waiting for {self.listening()}; {NOTHING_HINT}'
 
 
-    def current(self) -> SeenStep | None:
+    def current(self, settled: bool = True) -> SeenStep | None:
         """The newest step seen whole, or None before the first one.
+
+        `settled`: none while the graph may still be undiscovered (`discovering`).
 
         Whole: feedback and true context, and the estimate (and its read-out) when an estimator
         publishes them. Parts of later steps still in flight are not shown, so no half-filled
@@ -149,6 +202,8 @@ class Inspector:
         # An estimator that is up but whose first estimate is still in flight counts as one.
         estimating = any(r.estimate is not None for r in records[-50:]) or \
             self.node.count_publishers(self._topics['context']) > 0
+        if settled and not estimating and self.discovering():
+            return None  # the estimator may exist and be not yet discovered: no verdict
         reading = any(r.readout is not None for r in records[-50:]) or \
             self.node.count_publishers(self._topics['readout']) > 0
         for record in reversed(records):
@@ -157,6 +212,16 @@ class Inspector:
                     and (record.readout is not None or not reading):
                 return record
         return None
+
+    def discovering(self) -> bool:
+        """Whether the steps began so recently that the rest of the graph may be unknown yet.
+
+        DDS discovers each node on its own: an inspector started beside a launch can hear the
+        step source a moment before it discovers the estimator, and would call that step
+        'no estimator'. Within DISCOVERY_SETTLE_S of the first step it gives no verdict.
+        """
+        return self.first_step_at is not None and \
+            time.monotonic() - self.first_step_at < DISCOVERY_SETTLE_S
 
     def step_rate(self, window: int = 200) -> float | None:
         """Steps per second over the newest `window` steps (None before two steps)."""
@@ -245,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     seen = False
     try:
         inspector.spin(args.duration, args.steps, args.refresh, args.quiet)
-        seen = inspector.current() is not None
+        seen = inspector.current(settled=False) is not None
     finally:
         inspector.close()
     log = inspector.log
