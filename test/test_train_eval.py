@@ -236,12 +236,20 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
     frozen = np.mean([r['return'] for r in contexts if r['policy'] == 'frozen_mean'])
     assert summary['adaptation_value_mean'] == pytest.approx(live - frozen, abs=1e-3)
     # off the train values: frozen at what psi reads on the train values (a deployed robot's
-    # question), the same episodes as a direct evaluation frozen there
+    # question), the same episodes as a direct evaluation frozen there; computed once per
+    # checkpoint and protocol beside the evaluation folders
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts, train_mean_context
+    from zeus_ros.offline.evaluation.evaluate import (
+        TRAIN_MEAN_FILE,
+        evaluate,
+        evaluate_contexts,
+        train_mean_context,
+    )
 
+    stored = json.loads((tmp_path / TRAIN_MEAN_FILE).read_text())
+    assert (stored['key']['episodes'], stored['key']['seed']) == (2, 100)
+    train_mean = np.asarray(stored['context'])
     agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
-    train_mean = train_mean_context(agent, episodes=2, seed=100)
     values = [{'torso_length': 0.65}, {'torso_length': 1.4}]
     direct = evaluate_contexts(agent, values, episodes=2, seed=100, progress=False,
                                frozen=[train_mean, train_mean])
@@ -250,19 +258,16 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                                                   abs=1e-4)  # the CSV's 6 digits
     assert summary['adaptation_value_train_mean'] == pytest.approx(
         live - np.mean(at_train_mean), abs=1e-3)
-    # computed once per checkpoint and protocol beside the evaluation folders; the train
-    # split's own episodes store the same context (so held-out splits do not roll them out again)
-    from zeus_ros.offline.evaluation.evaluate import TRAIN_MEAN_FILE, evaluate
-
-    stored = json.loads((tmp_path / TRAIN_MEAN_FILE).read_text())
-    np.testing.assert_allclose(stored['context'], train_mean, atol=1e-6)
-    assert (stored['key']['episodes'], stored['key']['seed']) == (2, 100)
+    # the train split's own episodes store the same context as a direct computation (so
+    # held-out splits do not roll them out again); one episode per value keeps this short
     run = tmp_path / 'run'
-    evaluate(trained.out / 'final.pt', split='train', episodes=2, seed=100, probe_steps=0,
+    evaluate(trained.out / 'final.pt', split='train', episodes=1, seed=100, probe_steps=0,
              out=run / 'eval_train', progress=False)
     from_train_split = json.loads((run / TRAIN_MEAN_FILE).read_text())
-    assert from_train_split['key'] == stored['key']
-    np.testing.assert_allclose(from_train_split['context'], train_mean, atol=1e-6)
+    assert (from_train_split['key']['episodes'], from_train_split['key']['seed']) == (1, 100)
+    assert from_train_split['key']['checkpoint_sha256'] == stored['key']['checkpoint_sha256']
+    np.testing.assert_allclose(from_train_split['context'],
+                               train_mean_context(agent, episodes=1, seed=100), atol=1e-6)
     printed = capsys.readouterr().out
     assert 'sensitivity' in printed and 'frozen_other' in printed
     assert main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.6,abc',
@@ -339,7 +344,8 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
                                      extra=first.extra))
     out = tmp_path / 'tables'
     argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '150',
-            '--probe-steps', '0', '--episodes', '1', '--out', str(out), '--no-progress']
+            '--probe-steps', '0', '--episodes', '1', '--out', str(out), '--no-progress',
+            '--jobs', '2']  # one process per checkpoint
     assert main(argv) == 0
     runs = out / f'cheetah_run_v0_{first.step}'
     for seed in (0, 1):
