@@ -48,3 +48,20 @@ def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> No
     assert schedule_lengths('Cheetah-Run-v1') == (20, 400)  # 40-step episodes
     assert schedule_lengths('Cheetah-Bias-v0') == (20, 400)
     assert schedule_lengths('Cheetah-Run-v0') == (150, 2000)  # 500-step episodes
+
+
+def test_sim_bridge_waits_for_the_demo_viewer_which_waits_for_the_answers() -> None:
+    """The viewer is named among sim_bridge's observers; it expects every answer of the group."""
+    import argparse
+
+    from zeus_ros.demo import VIEWER, build_nodes, viewer_expects
+
+    args = argparse.Namespace(task=DEFAULT_TASK, steps=60, seed=0, every=20, record=False)
+    nodes = {node.name: node.argv for node in build_nodes(args, default_checkpoint(DEFAULT_TASK))}
+    bridge = ' '.join(nodes['sim_bridge'])
+    assert f"observers:=['context_estimator','policy','{VIEWER}']" in bridge
+    assert 'min_observers:=3' in bridge
+    assert viewer_expects(['sim_bridge', 'context_estimator', 'policy']) == [
+        'zeus/step', 'zeus/context', 'zeus/action', 'zeus/context_truth']
+    assert viewer_expects(['sim_bridge', 'policy']) == [
+        'zeus/step', 'zeus/action', 'zeus/context_truth']
