@@ -96,7 +96,8 @@ def test_a_step_without_an_estimate_means_no_estimator_only_once_discovery_settl
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     inspector = Inspector()
     try:
-        inspector._on_step(StepFeedback(step=0, episode=0, reward=0.5))
+        inspector._on_step(StepFeedback(step=0, episode=0, reward=0.5),
+                           {'received_timestamp': 1_000_000_000})
         inspector._on_truth(ContextTruth(step=0, segment=0, names=['torso_length'],
                                          values=[0.6]))
         assert inspector.current() is None and inspector.current(settled=False).step == 0

@@ -36,6 +36,15 @@ NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the s
                 'ROS_DOMAIN_ID (and --namespace, if it runs in one)')
 
 
+def received_s(info: Any) -> float:
+    """When the middleware received a message (s): not when the executor got round to it.
+
+    The executor serves ready subscriptions in its own order, so a step and its action taken
+    in one spin would read as a negative observation -> action latency on the handling time.
+    """
+    return info['received_timestamp'] * 1e-9
+
+
 class Inspector:
     """ROS subscriber that fills a StepLog (imports rclpy only when constructed)."""
 
@@ -117,12 +126,12 @@ class Inspector:
         call_when_ready(node, unheard, subscribe_steps, timeout, 'expect_timeout',
                         'subscribing to the steps anyway: the view may miss the first contexts')
 
-    def _on_step(self, msg: object) -> None:
+    def _on_step(self, msg: object, info: Any) -> None:
         if self.first_step_at is None:
             self.first_step_at = time.monotonic()
         record = self.log.record(msg.step)
         record.episode, record.first, record.reward = msg.episode, msg.first, msg.reward
-        record.t_observation = time.monotonic()
+        record.t_observation = received_s(info)
 
     def _on_truth(self, msg: object) -> None:
         record = self.log.record(msg.step)
@@ -143,8 +152,8 @@ class Inspector:
         values = dict(zip(msg.names, msg.values, strict=False))
         self.log.record(msg.step).novelty = (values['novelty'], values['threshold'])
 
-    def _on_action(self, msg: object) -> None:
-        self.log.record(msg.step).t_action = time.monotonic()
+    def _on_action(self, msg: object, info: Any) -> None:
+        self.log.record(msg.step).t_action = received_s(info)
 
     def _on_diag(self, msg: object) -> None:
         for status in msg.status:

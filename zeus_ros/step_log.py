@@ -36,9 +36,9 @@ class SeenStep:
     novelty: tuple[float, float] | None = None
     """(score, threshold) of the estimator's novelty monitor; above: not a training context."""
     t_observation: float | None = None
-    """Wall-clock receipt time of the step's feedback (seconds, monotonic)."""
+    """When the middleware received the step's feedback (seconds, system clock)."""
     t_action: float | None = None
-    """Wall-clock receipt time of the action answering it."""
+    """When the middleware received the action answering it (seconds, system clock)."""
 
     @property
     def latency_ms(self) -> float | None:
