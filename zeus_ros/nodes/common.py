@@ -180,6 +180,7 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     if listening < min_observers:
         missing.append(f'{min_observers} subscribers of {step_pub.topic_name} (min_observers; '
                        f'{listening} so far)')
+    named = [name for name in named if name]  # the parameter's empty default: [''] (any)
     if named:
         present = {info.node_name
                    for info in node.get_subscriptions_info_by_topic(step_pub.topic_name)}

@@ -258,7 +258,7 @@ class RobotBridgeNode(Node):
                 outputs.append(self._pub_image)
             missing += missing_peers(self, outputs, self._sub_action,
                                      self.params['min_observers'], others=[self._pub_truth],
-                                     named=[n for n in self.params['observers'] if n])
+                                     named=self.params['observers'])
             if not missing and self._senders.paired is None:
                 problem = self._senders.pair(settle=PAIRING_SETTLE_S)
                 missing += [problem] if problem else []

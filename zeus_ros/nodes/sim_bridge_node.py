@@ -161,7 +161,7 @@ class SimBridgeNode(Node):
             outputs.append(self._pub_image)
         missing = missing_peers(self, outputs, self._sub_action, self.params['min_observers'],
                                 others=[self._pub_truth, self._pub_clock],
-                                named=[name for name in self.params['observers'] if name])
+                                named=self.params['observers'])
         if missing:
             self._wait_report.waiting('; '.join(missing))
         return not missing
