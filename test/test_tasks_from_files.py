@@ -185,13 +185,17 @@ def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> Non
             # A passive observer does not pace the lockstep loop: under load it falls behind,
             # and a keep-last-10 reader would drop steps (seen: 5-6 in a row), so it keeps 1000.
             deep = step_qos(1000)
-            driver.create_subscription(StepFeedback, 'zeus/step', lambda m: seen.__setitem__(
-                m.step, m.task), deep)
-            driver.create_subscription(ContextTruth, 'zeus/context_truth', lambda m: truths
-                                       .__setitem__(m.step, m.values[0]), deep)
+            readers = [
+                driver.create_subscription(StepFeedback, 'zeus/step', lambda m: seen.__setitem__(
+                    m.step, m.task), deep),
+                driver.create_subscription(ContextTruth, 'zeus/context_truth', lambda m: truths
+                                           .__setitem__(m.step, m.values[0]), deep)]
             bridge = group.start('sim_bridge_task_file', node(
                 'sim_bridge', f'task:={PAYLOAD}', 'max_steps:=30', 'min_observers:=2',
                 'schedule.kind:=switch', 'schedule.values:=train', 'schedule.every:=10'))
+            # The policy (the loop's last peer) only once this bystander's readers matched the
+            # bridge on their side too: sim_bridge sees only its writers' side of each match.
+            assert spin_until(driver, lambda: all(r.get_publisher_count() for r in readers), 90)
             group.start('policy_task_file', node('policy', f'task:={PAYLOAD}'))
             assert spin_until(driver, lambda: len(seen) > 30, 90), (
                 f'steps never seen: {sorted(set(range(31)) - set(seen))}',
