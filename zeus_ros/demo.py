@@ -211,17 +211,16 @@ def main(argv: list[str] | None = None) -> int:
             print('[demo] the live run published no context estimate that the viewer heard: '
                   'no frozen run to compare with', file=sys.stderr)
             return 1
-        else:
-            mean = np.mean(np.stack(estimates), axis=0)
-            frozen = ','.join(f'{v:.6g}' for v in mean)
-            print(f"\n[demo] the same schedule again, the policy's context FROZEN at the mean "
-                  f'context of the live run ({len(mean)} values)', flush=True)
-            frozen_log, failed = _run(args, checkpoint, env, args.out / 'frozen',
-                                      label='context frozen', frozen=frozen)
-            print('\n[demo] value of adaptation: per-segment return with the context live '
-                  'and frozen (same schedule and seed)')
-            print(format_comparison(log.segments(), frozen_log.segments(),
-                                    log.context_names))
+        mean = np.mean(np.stack(estimates), axis=0)
+        frozen = ','.join(f'{v:.6g}' for v in mean)
+        print(f"\n[demo] the same schedule again, the policy's context FROZEN at the mean "
+              f'context of the live run ({len(mean)} values)', flush=True)
+        frozen_log, failed = _run(args, checkpoint, env, args.out / 'frozen',
+                                  label='context frozen', frozen=frozen)
+        print('\n[demo] value of adaptation: per-segment return with the context live '
+              'and frozen (same schedule and seed)')
+        print(format_comparison(log.segments(), frozen_log.segments(),
+                                log.context_names))
     if failed == ('demo', 130):
         return 130
     if failed is not None:
