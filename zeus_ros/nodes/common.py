@@ -163,9 +163,6 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     other subscriptions are known too. `named` (parameter `observers`) names the nodes that
     must be among the step subscribers (a launcher's group): a count alone can be met by a
     bystander (a status line, `ros2 topic echo`) while a node of the group is still starting.
-    The node that publishes the actions counts as a step subscriber once it subscribes to an
-    observation topic: a policy on state observations takes the StateVector alone (it carries
-    the step and the stamp), and subscribes to the observations last (`StepInputs`).
     Counted on the names as the node resolved them: namespace and remaps applied.
     """
     step_pub, observations = outputs[0], outputs[1:]
@@ -174,13 +171,7 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
                  if pub.get_subscription_count() < node.count_subscribers(pub.topic_name)]
     action_topic = action_sub.topic_name
     actions = node.count_publishers(action_topic)
-    on_steps = {info.node_name
-                for info in node.get_subscriptions_info_by_topic(step_pub.topic_name)}
-    acting = {info.node_name for info in node.get_publishers_info_by_topic(action_topic)}
-    observing = {info.node_name for pub in observations
-                 for info in node.get_subscriptions_info_by_topic(pub.topic_name)}
-    actors_on_observations = (acting & observing) - on_steps
-    listening = step_pub.get_subscription_count() + len(actors_on_observations)
+    listening = step_pub.get_subscription_count()
     missing = []
     if actions == 0:
         missing.append(f'a policy publishing on {action_topic}')
@@ -191,7 +182,8 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
                        f'{listening} so far)')
     named = [name for name in named if name]  # the parameter's empty default: [''] (any)
     if named:
-        present = on_steps | actors_on_observations
+        present = {info.node_name
+                   for info in node.get_subscriptions_info_by_topic(step_pub.topic_name)}
         absent = [name for name in named if name not in present]
         if absent:
             missing.append(f'{", ".join(absent)} subscribed to {step_pub.topic_name} '

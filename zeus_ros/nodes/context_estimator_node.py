@@ -152,7 +152,7 @@ class ContextEstimatorNode(Node):
 
     def _on_step(self, parts: StepParts) -> None:
         feedback: StepFeedback = parts.parts['feedback']
-        received, raw, _header = parts.parts['obs']
+        received, raw = parts.parts['obs']
         step = parts.step
         obs = self.decoder.observation(raw, feedback.first)
         if feedback.first:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 import time
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sensor_msgs.msg import Image
@@ -25,9 +25,8 @@ from zeus_ros.nodes.params import Spec
 
 if TYPE_CHECKING:
     from rclpy.node import Node
-    from std_msgs.msg import Header
 
-__all__ = ['HEARD_SPECS', 'ObservationDecoder', 'Observed', 'StepInputs']
+__all__ = ['HEARD_SPECS', 'ObservationDecoder', 'StepInputs']
 
 HEARD_SPECS: dict[str, Spec] = {
     'expected_subscribers': Spec(0, "subscribe to the steps only once this node's output has "
@@ -69,58 +68,36 @@ class ObservationDecoder:
         return self.frames.reset(raw) if first else self.frames.push(raw)
 
 
-class Observed(NamedTuple):
-    """Observation o_k as a node received it: when, its validated array, its message header."""
-
-    received: float
-    raw: np.ndarray
-    header: Header
-
-
 class StepInputs:
     """Subscribes a node to StepFeedback and its observation topic; assembles them per step.
 
-    `on_step` receives StepParts with 'feedback' (the StepFeedback) and 'obs' (`Observed`),
-    plus any `extra_parts` the node adds itself through `assembler.add`. With
-    `feedback=False` (state observations only: a StateVector carries the step index and stamp
-    itself) the node takes the observation alone, one message fewer per step, and the parts
-    hold no 'feedback'. A message that fails validation goes to `on_reject(step, topic,
-    error)` and is dropped. With `subscribe=False` the subscriptions wait for `subscribe()` or
-    `subscribe_when_heard()`.
+    `on_step` receives StepParts with 'feedback' (the StepFeedback) and 'obs' (receipt time,
+    validated raw array), plus any `extra_parts` the node adds itself through `assembler.add`.
+    A message that fails validation goes to `on_reject(step, topic, error)` and is dropped.
+    With `subscribe=False` the subscriptions wait for `subscribe()` or `subscribe_when_heard()`.
     """
 
     def __init__(self, node: Node, decoder: ObservationDecoder,
                  on_step: Callable[[StepParts], None],
                  on_reject: Callable[[int, str, ValueError], None], *, mode: str,
-                 extra_parts: Sequence[str] = (), subscribe: bool = True,
-                 feedback: bool = True) -> None:
-        if not feedback and decoder.obs_kind == 'pixels':
-            raise ValueError('StepInputs: images carry no step index; pixel observations need '
-                             'the StepFeedback (feedback=True)')
+                 extra_parts: Sequence[str] = (), subscribe: bool = True) -> None:
         self.node = node
         self.decoder = decoder
         self.on_reject = on_reject
         self.mode = mode
-        self.feedback = feedback
-        self.assembler = StepAssembler([*(['feedback'] if feedback else []), 'obs',
-                                        *extra_parts], on_step)
+        self.assembler = StepAssembler(['feedback', 'obs', *extra_parts], on_step)
         self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
         self.subscribed = False
         if subscribe:
             self.subscribe()
 
     def subscribe(self) -> None:
-        """Subscribe to StepFeedback (unless `feedback=False`) and the observation topic, once.
-
-        The observation topic comes last: sim_bridge counts the node that publishes the
-        actions as an observer once it subscribes there (`common.missing_peers`).
-        """
+        """Subscribe to StepFeedback and the observation topic (once)."""
         if self.subscribed:
             return
         self.subscribed = True
         node = self.node
-        if self.feedback:
-            node.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
+        node.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
         if self.decoder.obs_kind == 'pixels':
             node.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(self.mode))
         else:
@@ -154,8 +131,7 @@ class StepInputs:
             short.append(f'{expected} subscribers of {output.topic_name} (expected_subscribers; '
                          f'{matched} matched so far)')
         observation = TOPICS.IMAGE if self.decoder.obs_kind == 'pixels' else TOPICS.STATE
-        heard = (TOPICS.STEP, observation) if self.feedback else (observation,)
-        sources = [self.node.resolve_topic_name(topic) for topic in heard]
+        sources = [self.node.resolve_topic_name(topic) for topic in (TOPICS.STEP, observation)]
         unseen = [topic for topic in sources if self.node.count_publishers(topic) == 0]
         if unseen:
             short.append(f'the step source publishing on {", ".join(unseen)}')
@@ -172,7 +148,7 @@ class StepInputs:
         except ValueError as error:
             self.on_reject(msg.step, TOPICS.STATE, error)
             return
-        self.assembler.add(msg.step, 'obs', Observed(time.monotonic(), raw, msg.header))
+        self.assembler.add(msg.step, 'obs', (time.monotonic(), raw))
 
     def _on_image(self, msg: Image) -> None:
         # Images carry no step index: the join matches them to a step through the stamp.
@@ -181,5 +157,4 @@ class StepInputs:
         except ValueError as error:
             self.on_reject(-1, TOPICS.IMAGE, error)
             return
-        observed = Observed(time.monotonic(), raw, msg.header)
-        self._join.image(stamp_ns(msg.header.stamp), observed)
+        self._join.image(stamp_ns(msg.header.stamp), (time.monotonic(), raw))

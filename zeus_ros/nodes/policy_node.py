@@ -18,7 +18,6 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
-from std_msgs.msg import Header
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
 from zeus_ros.learning.inference import InferenceAgent
@@ -35,7 +34,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, Observed, StepInputs
+from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
@@ -100,17 +99,15 @@ class PolicyNode(Node):
             ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched', 'foreign'), 0)
         self._contexts: dict[int, np.ndarray] = {}
         self._newest_context: tuple[float, np.ndarray] | None = None
-        self._waiting: tuple[int, Header, np.ndarray, float] | None = None
+        self._waiting: tuple[int, Any, np.ndarray, float] | None = None
         self._rate = RateMeter()
         self._started = time.monotonic()
 
         mode = self.params['mode']
         self._pub: Any = None
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
-        # State observations carry their step and stamp: the StateVector alone is step k.
         self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
-                                 mode=mode, subscribe=not self.params['expected_subscribers'],
-                                 feedback=obs_kind == 'pixels')
+                                 mode=mode, subscribe=not self.params['expected_subscribers'])
         self.assembler = self.inputs.assembler
         # Contexts come from one estimator only (the only publisher, by GID; followed when it
         # restarts): another publisher on zeus/context is refused, counted and an ERROR.
@@ -223,10 +220,10 @@ class PolicyNode(Node):
         for old in [step for step in self._contexts if step < msg.step - 16]:
             del self._contexts[old]
         if self._waiting is not None and self._waiting[0] == msg.step:
-            step, header, obs, _deadline = self._waiting
+            step, feedback, obs, _deadline = self._waiting
             self._waiting = None
             self._deadline_timer.cancel()
-            self._act(step, header, obs, context, 'fresh')
+            self._act(step, feedback, obs, context, 'fresh')
 
     def _reject(self, step: int, topic: str, error: ValueError) -> None:
         self.counts['rejected'] += 1
@@ -235,19 +232,17 @@ class PolicyNode(Node):
 
     # -- acting ------------------------------------------------------------------------------
     def _on_observation(self, parts: StepParts) -> None:
-        observed: Observed = parts.parts['obs']
-        feedback: StepFeedback | None = parts.parts.get('feedback')  # pixels only
-        header = observed.header if feedback is None else feedback.header
-        obs = self.decoder.observation(observed.raw, feedback is not None and feedback.first)
+        feedback: StepFeedback = parts.parts['feedback']
+        obs = self.decoder.observation(parts.parts['obs'][1], feedback.first)
         if self._waiting is not None:  # a newer observation overtook the one still waiting
             self._expire_waiting()
         if not self.needs_context:
-            self._act(parts.step, header, obs, np.zeros(0, np.float32), 'fresh')
+            self._act(parts.step, feedback, obs, np.zeros(0, np.float32), 'fresh')
         elif parts.step in self._contexts:
-            self._act(parts.step, header, obs, self._contexts[parts.step], 'fresh')
+            self._act(parts.step, feedback, obs, self._contexts[parts.step], 'fresh')
         else:
             deadline = time.monotonic() + self.params['context_deadline']
-            self._waiting = (parts.step, header, obs, deadline)
+            self._waiting = (parts.step, feedback, obs, deadline)
             # Deadline first, then the timer: it cannot fire before the deadline.
             self._deadline_timer.timer_period_ns = int(self.params['context_deadline'] * 1e9)
             self._deadline_timer.reset()
@@ -259,25 +254,25 @@ class PolicyNode(Node):
     def _expire_waiting(self) -> None:
         """Context k did not come in time: act on the newest one, or safely if none is recent."""
         assert self._waiting is not None
-        step, header, obs, _deadline = self._waiting
+        step, feedback, obs, _deadline = self._waiting
         self._waiting = None
         self._deadline_timer.cancel()
         newest = self._newest_context
         last_seen = self._started if newest is None else newest[0]
         if newest is None or time.monotonic() - last_seen > self.params['context_timeout']:
-            self._publish(step, header, self._safe_action(), 'safe')
+            self._publish(step, feedback, self._safe_action(), 'safe')
             self.get_logger().warning(
                 f'no context for {time.monotonic() - last_seen:.1f} s: safe action for step '
                 f'{step}', throttle_duration_sec=2.0)
         else:
-            self._act(step, header, obs, newest[1], 'stale')
+            self._act(step, feedback, obs, newest[1], 'stale')
             self.get_logger().warning(f'context {step} late: acting on the newest context',
                                       throttle_duration_sec=2.0)
 
     def _safe_action(self) -> np.ndarray:
         return np.clip(np.zeros_like(self.low), self.low, self.high)
 
-    def _act(self, step: int, header: Header, obs: np.ndarray, context: np.ndarray,
+    def _act(self, step: int, feedback: StepFeedback, obs: np.ndarray, context: np.ndarray,
              kind: str) -> None:
         if self.agent is None:
             action = self.rng.uniform(self.low, self.high).astype(np.float32)
@@ -286,15 +281,14 @@ class PolicyNode(Node):
                 context = self.frozen
             action = self.agent.act(obs, context, deterministic=self.params['deterministic'],
                                     noise=self.params['noise'], rng=self.rng)
-        self._publish(step, header, action, kind)
+        self._publish(step, feedback, action, kind)
 
-    def _publish(self, step: int, header: Header, action: np.ndarray, kind: str) -> None:
-        """Action k, stamped as the messages of step k (`header`: the observation's)."""
+    def _publish(self, step: int, feedback: StepFeedback, action: np.ndarray, kind: str) -> None:
         if self._pub is None:
             return
         msg = Action()
-        msg.header.stamp = header.stamp
-        msg.header.frame_id = header.frame_id
+        msg.header.stamp = feedback.header.stamp
+        msg.header.frame_id = feedback.header.frame_id
         msg.step = step
         msg.data = np.clip(action, self.low, self.high).astype(np.float32).tolist()
         self._pub.publish(msg)

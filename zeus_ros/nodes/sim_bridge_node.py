@@ -59,11 +59,10 @@ SPECS: dict[str, Spec] = {
     'wait_for_peers': Spec(True, 'start once a policy publishes actions and someone observes'),
     'peer_grace': Spec(0.5, 'seconds between seeing the peers and publishing step 0',
                        live=True, low=0.0),
-    'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0 (the '
-                          'action publisher counts on its observation topic)', live=True, low=0),
-    'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step (the action '
-                      'publisher: to its observation topic) before step 0 (launchers: the '
-                      'group; empty: min_observers alone counts)', live=True),
+    'min_observers': Spec(0, 'wait for this many zeus/step subscribers before step 0',
+                          live=True, low=0),
+    'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
+                      '(launchers: the group; empty: min_observers alone counts)', live=True),
     'action_sender': Spec('', 'node whose actions are applied, e.g. /policy (empty: the only '
                           'action publisher at step 0); others are refused (docs/security.md)'),
     'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
