@@ -41,7 +41,8 @@ def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus',
 
 
 MODULES = {'sim_bridge': 'sim_bridge_node', 'context_estimator': 'context_estimator_node',
-           'policy': 'policy_node', 'recorder': 'recorder_node'}
+           'policy': 'policy_node', 'recorder': 'recorder_node',
+           'robot_bridge': 'robot_bridge_node'}
 
 
 def _param_args(params: tuple[str, ...]) -> list[str]:

@@ -25,7 +25,6 @@ from ros_harness import (
     ProcessGroup,
     driver_node,
     fresh_domain_id,
-    python_module,
     require_ros,
     spin_until,
 )
@@ -88,10 +87,8 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
             'policy', f'checkpoint:={checkpoint}', *gates('policy'))))
     group.wait_for_log(f'recorder_{tag}', 'recording ')
     group.wait_for_log(f'fake_robot_{tag}', 'fake robot up')
-    bridge = group.start(f'robot_bridge_{tag}', [
-        *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
-        '--params-file', str(PARAMS), '-p', f'max_steps:={steps}',
-        *[arg for gate in gates('robot_bridge') for arg in ('-p', gate)]])
+    bridge = group.start(f'robot_bridge_{tag}', robot_node(
+        'robot_bridge', f'max_steps:={steps}', *gates('robot_bridge')))
     assert bridge.wait(timeout=120) == 0, group.log_text(f'robot_bridge_{tag}')[-3000:]
     for process in agents:
         group.stop(process)
@@ -192,10 +189,8 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     robot_processes.start('fake_robot_safety', [sys.executable, str(REPO / 'test' /
                                                                     'fake_robot.py'),
                                                 str(tmp_path / 'commands.json')])
-    robot_processes.start('robot_bridge_safety', [
-        *python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args',
-        '--params-file', str(PARAMS), '-p', 'safe_command:=0.1,-0.1',
-        '-p', 'image_topic:=camera/image_raw'])
+    robot_processes.start('robot_bridge_safety', robot_node(
+        'robot_bridge', 'safe_command:=0.1,-0.1', 'image_topic:=camera/image_raw'))
     plan = {3: [0.3, -0.2], 4: [float('nan'), 0.0], 5: [5.0, -5.0], 6: [0.1, 0.2, 0.3]}
     commands: list[tuple[float, ...]] = []
     feedback: dict[int, int] = {}

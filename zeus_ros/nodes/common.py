@@ -193,7 +193,8 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
     return missing
 
 
-def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]]) -> list[str]:
+def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]],
+                      steps: str | None = None) -> list[str]:
     """Which of this node's `(subscription, expected publishers)` cannot hear them all yet.
 
     The start gates above count what the *writer* matched; a reader matches the writer on its
@@ -201,7 +202,10 @@ def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]]) -> list[st
     machine can come later, and a volatile reader drops what arrives before that. A node that
     gives the loop its go-ahead (subscribes to the steps) only once these readers have matched
     every publisher the graph shows (and at least `expected`) loses nothing at step 0; a
-    reader created after its publishers were discovered matches them at once.
+    reader created after its publishers were discovered matches them at once. With `steps`
+    (the steps topic, relative or absolute: resolved in the node's namespace) it is also
+    short while no publisher of the steps is discovered: a bystander that waits for the
+    steps (recorder, viewer) then subscribes to a source it matches at once.
     """
     short = []
     for reader, expected in readers:
@@ -209,6 +213,10 @@ def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]]) -> list[st
         matched = reader.get_publisher_count()
         if matched < needed:
             short.append(f'{reader.topic_name} ({matched} of {needed} publishers matched)')
+    if steps is not None:
+        resolved = node.resolve_topic_name(steps.lstrip('/'))
+        if node.count_publishers(resolved) == 0:
+            short.append(f'a publisher of {resolved}')
     return short
 
 

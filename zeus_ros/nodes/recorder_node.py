@@ -189,12 +189,9 @@ class RecorderNode(Node):
     def _unheard(self) -> list[str]:
         """What _subscribe_steps_when_heard still waits for (empty: subscribe now)."""
         expected = self.params['expected_publishers']
-        short = unmatched_readers(self, [(reader, int(topic in expected))
-                                         for topic, reader in self._readers.items()])
-        steps = self.resolve_topic_name(TOPIC_STEP.lstrip('/'))
-        if TOPIC_STEP in expected and self.count_publishers(steps) == 0:
-            short.append(f'a publisher of {steps}')
-        return short
+        return unmatched_readers(self, [(reader, int(topic in expected))
+                                        for topic, reader in self._readers.items()],
+                                 steps=TOPIC_STEP if TOPIC_STEP in expected else None)
 
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
