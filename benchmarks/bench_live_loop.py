@@ -13,9 +13,12 @@ count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized
 round's in-process rate to last about QUIET_SECONDS, long enough for several counts).
 `--executors single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
 nodes/common.py), alternately in each round, so a loaded machine weighs on both alike.
+`--context-lags 0,1` likewise runs every mode once per policy `context_lag` (shown as
+`multi/lag1`): with a lag the policy acts on the context of an earlier step instead of waiting
+for the estimator's answer to this one.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400] \
-        [--executors single,events]
+        [--executors single,events] [--context-lags 0,1]
 """
 
 from __future__ import annotations
@@ -115,12 +118,13 @@ def rss_mb(pid: int) -> float:
 
 
 def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
-              executor: str | None = None) -> dict[str, float]:
+              executor: str | None = None, context_lag: int = 0) -> dict[str, float]:
     """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
 
     `mode` (MODES): a process per node, or the three nodes in one process on one executor
     (zeus launch --single-process) with or without intra-process delivery. `executor`: the
-    nodes' $ZEUS_EXECUTOR (None: as this process's environment says).
+    nodes' $ZEUS_EXECUTOR (None: as this process's environment says). `context_lag`: the
+    policy's parameter of that name.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
@@ -140,7 +144,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     quiet = mode == 'single-quiet'
     params = {
         'context_estimator': [f'checkpoint:={checkpoint}'],
-        'policy': [f'checkpoint:={checkpoint}'],
+        'policy': [f'checkpoint:={checkpoint}', f'context_lag:={context_lag}'],
         'sim_bridge': [f'task:={TASK}', f'max_steps:={steps}',
                        f'pixels:={"true" if pixels else "false"}', 'schedule.kind:=switch',
                        'schedule.every:=100', f'schedule.values:={values}',
@@ -255,6 +259,28 @@ def quiet_steps(steps: int, in_process_rate: float) -> int:
     return max(steps, math.ceil(in_process_rate * QUIET_SECONDS))
 
 
+def lag_summary(results: list[dict], lags: list[int]) -> list[str]:
+    """Per kind, mode and executor: each lag's paired difference to lag 0, round by round."""
+    lines = []
+    for kind, mode, executor, lag in dict.fromkeys(
+            (r['kind'], r['mode'], r['executor'], r['lag']) for r in results):
+        if lag == 0 or 0 not in lags:
+            continue
+        rounds = {(r['round'], r['lag']): r for r in results
+                  if (r['kind'], r['mode'], r['executor']) == (kind, mode, executor)}
+        paired = [n for n, other in rounds if other == lag and (n, 0) in rounds]
+        if len(paired) < 2:
+            continue
+        parts = []
+        for metric in ('rate', 'ratio', 'cpu_ms', 'p50', 'p99'):
+            diffs = np.array([rounds[n, lag][metric] - rounds[n, 0][metric] for n in paired])
+            error = diffs.std(ddof=1) / np.sqrt(len(diffs))
+            parts.append(f'{metric} {diffs.mean():+.3f} ± {error:.3f}')
+        lines.append(f'{kind} {mode}/lag{lag} - {mode} ({executor}, {len(paired)} paired rounds): '
+                     + ', '.join(parts))
+    return lines
+
+
 def main() -> None:
     """Measure state and pixel loops, multi- and single-process, and print one table."""
     parser = argparse.ArgumentParser(description=__doc__)
@@ -270,12 +296,21 @@ def main() -> None:
     parser.add_argument('--executors', default='',
                         help='executors the nodes spin on, each mode run once per executor '
                         'in every round (e.g. single,events; default: as $ZEUS_EXECUTOR says)')
+    parser.add_argument('--context-lags', default='0',
+                        help='policy context_lag values, each mode run once per value in every '
+                        'round (e.g. 0,1)')
     args = parser.parse_args()
     from zeus_ros.nodes.common import EXECUTORS, executor_kind
 
     modes = [m.strip() for m in args.modes.split(',') if m.strip()]
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
     executors = [e.strip() for e in args.executors.split(',') if e.strip()]
+    try:
+        lags = [int(v) for v in args.context_lags.split(',') if v.strip()]
+    except ValueError:
+        parser.error(f'--context-lags {args.context_lags!r}: give integers, e.g. 0,1')
+    if not lags or min(lags) < 0:
+        parser.error(f'--context-lags {args.context_lags!r}: give integers >= 0, e.g. 0,1')
     unknown = [m for m in modes if m not in MODES] + [k for k in kinds if k not in P99_TARGETS_MS]
     unknown += [e for e in executors if e not in EXECUTORS]
     if unknown:
@@ -292,20 +327,27 @@ def main() -> None:
           f'{"ratio [target]":>15} {"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} '
           f'{"p99 ms [target]":>16}  '
           'RSS MiB per process; CPU ms per step per process')
+    results: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind in kinds:
             steps = args.steps if kind == 'state' else args.pixel_steps
             checkpoint = make_checkpoint(Path(tmp) / f'{kind}.pt', kind)
-            runs = [(mode, executor) for mode in modes for executor in executors]
-            for mode, executor in [run for _round in range(args.repeat)
-                                   for run in [(None, None), *runs]]:
+            runs = [(mode, executor, lag) for mode in modes for executor in executors
+                    for lag in lags]
+            # Every other round runs its modes in reverse: a machine speeding up or slowing
+            # down during the run favours neither side of a comparison.
+            for number, mode, executor, lag in [
+                    (n, *run) for n in range(args.repeat)
+                    for run in [(None, None, 0), *(runs[::-1] if n % 2 else runs)]]:
                 if mode is None:  # each round against its own in-process rate
                     local, local_cpu = in_process_rate(checkpoint, steps)
                     continue
                 run_steps = quiet_steps(steps, local) if mode == 'single-quiet' else steps
                 live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode,
-                                 executor=executor)
+                                 executor=executor, context_lag=lag)
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
+                results.append({'kind': kind, 'mode': mode, 'executor': executor, 'lag': lag,
+                                'round': number, 'ratio': ratio, **live})
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
                                   if k.startswith('rss_'))
@@ -315,10 +357,13 @@ def main() -> None:
                 p99_text = f'{live["p99"]:.2f} [{p99_target}]' + (
                     '' if live['p99'] <= p99_target or np.isnan(live['p99']) else '!')
                 cpu_text = f'{local_cpu:.2f}/{live["cpu_ms"]:.2f}'
-                print(f'{kind:<7} {mode:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
+                label = f'{mode}/lag{lag}' if lag else mode
+                print(f'{kind:<7} {label:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
                       f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}'
                       + (f'; CPU {per_node}' if per_node else ''), flush=True)
+    for line in lag_summary(results, lags):
+        print(line)
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
           'DDS threads included, 10-90 % of the run); CPU ratio = in-process / live: the rate '
           'ratio an idle machine would show, as far as the loop is CPU-bound; steadier than '

@@ -173,11 +173,14 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
     assert 1 not in estimates
 
 
+@pytest.mark.parametrize('lag', [0, 1], ids=['lag0', 'lag1'])
 def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
-        ros_processes: ProcessGroup, tmp_path, monkeypatch) -> None:
+        ros_processes: ProcessGroup, tmp_path, monkeypatch, lag: int) -> None:
     """The same checkpoint, seed and schedule live (4 processes) and in-process: same arrays.
 
-    The recorded bag also ingests in batches exactly as decoded one message at a time.
+    The recorded bag also ingests in batches exactly as decoded one message at a time. With
+    the policy's context_lag 1 (acting on context k - 1, the estimator off the critical path)
+    the live actions equal `zeus collect --context-lag 1`'s.
     """
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.training import collect
@@ -191,7 +194,8 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     # A generous context deadline: under CPU load a late context must be waited for, not
     # replaced by the newest one, or the two runs would (legitimately) act differently.
     ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}',
-                                       'context_deadline:=10.0', *start_gates('policy')))
+                                       'context_deadline:=10.0', f'context_lag:={lag}',
+                                       *start_gates('policy')))
     ros_processes.wait_for_log('recorder', 'recording ')
     sim = ros_processes.start('sim_bridge', node(
         'sim_bridge', f'task:={TASK}', 'max_steps:=260', 'seed:=5', 'schedule.kind:=switch',
@@ -201,8 +205,8 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     ros_processes.stop(recorder, signal.SIGINT)
     assert collect.main(['--task', TASK, '--steps', '261', '--seed', '5', '--schedule',
                          'switch:train:every=100', '--checkpoint', str(checkpoint),
-                         '--noise', '0', '--out', str(tmp_path / 'collect'),
-                         '--no-progress']) == 0
+                         '--noise', '0', '--context-lag', str(lag),
+                         '--out', str(tmp_path / 'collect'), '--no-progress']) == 0
     assert_ingests_as_one_by_one([bag_dir], monkeypatch)
     live = ingest_bags([bag_dir], strict=True).episodes
     local = ingest_bags([tmp_path / 'collect'], strict=True).episodes

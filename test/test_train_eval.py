@@ -568,3 +568,33 @@ def test_context_transform_maps_the_live_context_before_the_policy_acts(trained:
     mapped = evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
                                context_transform=lambda psi: constant)
     assert [r['return'] for r in mapped] == [r['return'] for r in frozen]
+
+
+def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
+        trained: Any) -> None:
+    """context_lag L: step k acts on the live estimate of step max(k - L, episode start)."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
+
+    agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
+    values = [{'torso_length': 0.7}]
+    for lag in (0, 2):
+        seen: list[np.ndarray] = []  # every live estimate, in order
+
+        def record(psi: np.ndarray, seen: list[np.ndarray] = seen) -> np.ndarray:
+            seen.append(psi.copy())
+            return psi
+
+        traces: list[Any] = []
+        evaluate_contexts(agent, values, episodes=2, seed=3, progress=False, traces=traces,
+                          context_transform=record, context_lag=lag)
+        trace = traces[0]
+        starts = np.flatnonzero(trace.first)
+        assert len(starts) >= 2 and len(seen) == len(trace.psi)
+        start_of = np.maximum.accumulate(np.where(trace.first, np.arange(len(seen)), 0))
+        for k in range(len(seen)):
+            np.testing.assert_array_equal(trace.psi[k], seen[max(k - lag, start_of[k])])
+        if lag:  # the estimates moved within the episode, so the lag showed
+            assert not np.allclose(trace.psi[starts[0] + 5], seen[starts[0] + 5])
+    with pytest.raises(ValueError, match='context_lag=-1'):
+        evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, context_lag=-1)

@@ -4,6 +4,11 @@ Action k answers observation k (same step, same stamp). When context k is late b
 `context_deadline` it acts on the newest context it has and counts the step as stale; with no
 context at all for `context_timeout` seconds it publishes the task's safe action. Without a
 checkpoint it is a seeded uniform-random policy (for data collection and demos).
+With `context_lag` L > 0 it acts on observation k with context k - L (never one from before
+the episode's first step) instead of waiting for context k: the estimator works beside the
+policy rather than before it, off the step's critical path, at the price of a context L
+steps old (`experiments/context_lag.py` measures that price in-process; `zeus collect
+--context-lag L` acts the same way).
 
 It acts only on estimates stamped with its own checkpoint's sha256: while a live redeploy has
 reached one of the pair but not the other, estimates are refused (counted as `mismatched`) and
@@ -38,6 +43,9 @@ from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInpu
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
+MAX_CONTEXT_LAG = 16
+"""Contexts older than this many steps behind the newest are dropped."""
+
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '
                        'live change loads it (same task, observations and actions) and acts '
@@ -51,6 +59,9 @@ SPECS: dict[str, Spec] = {
     'seed': Spec(0, 'seeds sampling, noise and the random policy', low=0),
     'context_deadline': Spec(0.2, 'seconds to wait for context k before acting on the newest',
                              live=True, low=0.0),
+    'context_lag': Spec(0, 'act on observation k with context k - context_lag (from this '
+                        "episode only) instead of waiting for context k: the estimator leaves "
+                        "the step's critical path", live=True, low=0, high=MAX_CONTEXT_LAG),
     'context_timeout': Spec(2.0, 'no context for this long: publish the safe action',
                             live=True, low=0.001),
     'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
@@ -99,7 +110,9 @@ class PolicyNode(Node):
             ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched', 'foreign'), 0)
         self._contexts: dict[int, np.ndarray] = {}
         self._newest_context: tuple[float, np.ndarray] | None = None
-        self._waiting: tuple[int, Any, np.ndarray, float] | None = None
+        # (observation step, context step it waits for, feedback, observation, deadline)
+        self._waiting: tuple[int, int, Any, np.ndarray, float] | None = None
+        self._episode_start = 0  # step of the current episode's first observation
         self._rate = RateMeter()
         self._started = time.monotonic()
 
@@ -217,10 +230,10 @@ class PolicyNode(Node):
             return
         self._newest_context = (time.monotonic(), context)
         self._contexts[msg.step] = context
-        for old in [step for step in self._contexts if step < msg.step - 16]:
+        for old in [step for step in self._contexts if step < msg.step - MAX_CONTEXT_LAG]:
             del self._contexts[old]
-        if self._waiting is not None and self._waiting[0] == msg.step:
-            step, feedback, obs, _deadline = self._waiting
+        if self._waiting is not None and self._waiting[1] == msg.step:
+            step, _wanted, feedback, obs, _deadline = self._waiting
             self._waiting = None
             self._deadline_timer.cancel()
             self._act(step, feedback, obs, context, 'fresh')
@@ -236,25 +249,28 @@ class PolicyNode(Node):
         obs = self.decoder.observation(parts.parts['obs'][1], feedback.first)
         if self._waiting is not None:  # a newer observation overtook the one still waiting
             self._expire_waiting()
+        if feedback.first:
+            self._episode_start = parts.step
+        wanted = max(parts.step - self.params['context_lag'], self._episode_start)
         if not self.needs_context:
             self._act(parts.step, feedback, obs, np.zeros(0, np.float32), 'fresh')
-        elif parts.step in self._contexts:
-            self._act(parts.step, feedback, obs, self._contexts[parts.step], 'fresh')
+        elif wanted in self._contexts:
+            self._act(parts.step, feedback, obs, self._contexts[wanted], 'fresh')
         else:
             deadline = time.monotonic() + self.params['context_deadline']
-            self._waiting = (parts.step, feedback, obs, deadline)
+            self._waiting = (parts.step, wanted, feedback, obs, deadline)
             # Deadline first, then the timer: it cannot fire before the deadline.
             self._deadline_timer.timer_period_ns = int(self.params['context_deadline'] * 1e9)
             self._deadline_timer.reset()
 
     def _check_deadline(self) -> None:
-        if self._waiting is not None and time.monotonic() >= self._waiting[3]:
+        if self._waiting is not None and time.monotonic() >= self._waiting[4]:
             self._expire_waiting()
 
     def _expire_waiting(self) -> None:
         """Context k did not come in time: act on the newest one, or safely if none is recent."""
         assert self._waiting is not None
-        step, feedback, obs, _deadline = self._waiting
+        step, _wanted, feedback, obs, _deadline = self._waiting
         self._waiting = None
         self._deadline_timer.cancel()
         newest = self._newest_context

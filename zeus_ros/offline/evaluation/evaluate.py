@@ -133,12 +133,13 @@ def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = ''
 
 def _policy(agent: Any, task: Any, seed: int, frozen: np.ndarray | None = None,
             blind_steps: int = 0, live_steps: int = 0,
-            context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> Policy:
+            context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
+            context_lag: int = 0) -> Policy:
     if agent is None:
         return random_policy(task, seed)
     return AgentPolicy(agent, noise=0.0, seed=seed, frozen_context=frozen,
                        blind_steps=blind_steps, live_steps=live_steps,
-                       context_transform=context_transform)
+                       context_transform=context_transform, context_lag=context_lag)
 
 
 def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episodes: int = 1,
@@ -147,7 +148,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
                       frozen: Sequence[np.ndarray] | None = None,
                       blind_steps: int = 0, live_steps: int = 0,
                       context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
-                      ) -> list[dict[str, Any]]:
+                      context_lag: int = 0) -> list[dict[str, Any]]:
     """Deterministic episodes at a constant context per value; one row per episode.
 
     `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
@@ -155,7 +156,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
     the same initial states (paired comparisons); `frozen[i]` replaces the live context of
     value i at every step, or with `blind_steps` only in the first that many of each episode,
     or with `live_steps` only after the first that many; `context_transform` maps the live
-    context before the policy acts (AgentPolicy).
+    context before the policy acts and `context_lag` acts on an older one (AgentPolicy).
     """
     name = agent.task if agent is not None else task_name
     rows = []
@@ -164,7 +165,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
         try:
             policy = _policy(agent, task, seed + index,
                              None if frozen is None else frozen[index], blind_steps,
-                             live_steps, context_transform)
+                             live_steps, context_transform, context_lag)
             trace = run_steps(env, task, policy,
                               episodes * task.episode_length + 1, progress=False)
         finally:

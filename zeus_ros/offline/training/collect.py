@@ -7,6 +7,7 @@ header stamps = simulation time, step indices), so training cannot tell the two 
 from __future__ import annotations
 
 import argparse
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -218,7 +219,8 @@ class AgentPolicy:
                  stochastic: bool = False,
                  frozen_context: np.ndarray | None = None, blind_steps: int = 0,
                  live_steps: int = 0,
-                 context_transform: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
+                 context_lag: int = 0) -> None:
         """Wrap `agent`; options for training collection and for diagnostics.
 
         `stochastic` samples the SAC policy (seeded torch RNG) instead of taking its mode;
@@ -230,8 +232,12 @@ class AgentPolicy:
         many steps after each episode start on (the value of adaptation once psi's history is
         full: what psi's start-of-episode signal earns is not counted as adaptation).
         `context_transform` maps the live context before the policy acts on it (guards for
-        contexts beyond the training range).
+        contexts beyond the training range). `context_lag` L acts on step k with the context
+        estimated at step k - L (never one from before the episode's first step), as the policy
+        node does with its `context_lag` parameter.
         """
+        if context_lag < 0:
+            raise ValueError(f'context_lag={context_lag}: must be >= 0')
         for name, steps in (('blind_steps', blind_steps), ('live_steps', live_steps)):
             if steps < 0 or (steps > 0 and frozen_context is None):
                 raise ValueError(f'{name}={steps}: needs a frozen_context to act on, and must '
@@ -259,6 +265,8 @@ class AgentPolicy:
         self.history = agent.new_history()
         self.frames = FrameStack() if agent.obs_kind == 'pixels' else None
         self._prev: np.ndarray | None = None
+        # This episode's newest L + 1 estimates; the oldest is the one acted on.
+        self._recent: deque[np.ndarray | None] = deque(maxlen=int(context_lag) + 1)
 
     def _observation(self, es: Any, rec: SimStep) -> np.ndarray:
         if self.frames is None:
@@ -274,6 +282,7 @@ class AgentPolicy:
         obs = self._observation(es, rec)
         if es.observation.first or self._prev is None:
             self.history.clear()
+            self._recent.clear()
             self._episode_step = 0
         else:
             self.history.push(self._prev, es.applied_action, es.observation.reward, obs)
@@ -283,6 +292,8 @@ class AgentPolicy:
         psi = self.agent.context(self.history, true_context=true_ctx)
         if self.context_transform is not None and psi is not None:
             psi = np.asarray(self.context_transform(psi), np.float32)
+        self._recent.append(psi)
+        psi = self._recent[0]
         if self.frozen_context is not None and self._blind(true_ctx, es.observation.first):
             psi = self.frozen_context
         self._episode_step += 1
@@ -324,6 +335,9 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--noise', type=float, default=0.0,
                         help='Gaussian exploration noise for --checkpoint, as a fraction of '
                         'half the action range (actions are clipped to the bounds)')
+    parser.add_argument('--context-lag', type=int, default=0,
+                        help="act on step k with the context of step k - L, as the policy "
+                        "node's context_lag parameter does (default: 0)")
     parser.add_argument('--append', action='store_true',
                         help='add a new bag next to the bags already in --out')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
@@ -341,6 +355,10 @@ def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     if args.steps < 1:
         print(f'zeus collect: --steps must be >= 1, got {args.steps}', file=sys.stderr)
+        return 2
+    if args.context_lag < 0:
+        print(f'zeus collect: --context-lag must be >= 0, got {args.context_lag}',
+              file=sys.stderr)
         return 2
     if not 1 <= args.workers <= args.steps:
         print(f'zeus collect: --workers must be between 1 and --steps ({args.steps}), got '
@@ -390,7 +408,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f'zeus collect: {args.checkpoint} is a pixel agent; add --pixels',
                   file=sys.stderr)
             return 2
-        policy = AgentPolicy(agent, noise=args.noise, seed=args.seed)
+        policy = AgentPolicy(agent, noise=args.noise, seed=args.seed,
+                             context_lag=args.context_lag)
     if args.workers > 1 or args.ray:  # checked above, collected by the workers
         task.close()
         from zeus_ros.offline.training.collect_workers import main_workers

@@ -38,6 +38,7 @@ class CollectJob:
     checkpoint: Path | None = None
     noise: float = 0.0
     stochastic: bool = False
+    context_lag: int = 0
     pixels: bool = False
     storage: str = 'mcap'
     progress: bool = False
@@ -82,7 +83,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
             agent = InferenceAgent.from_checkpoint(job.checkpoint, expect_task=task.name,
                                                    reuse_features=True)  # as the nodes do
             policy = AgentPolicy(agent, noise=0.0 if job.stochastic else job.noise,
-                                 seed=job.seed, stochastic=job.stochastic)
+                                 seed=job.seed, stochastic=job.stochastic,
+                                 context_lag=job.context_lag)
         job.bag.parent.mkdir(parents=True, exist_ok=True)
         with StepBagWriter(job.bag, storage=job.storage, pixels=job.pixels) as writer:
             return collect(env, task, policy, writer, job.steps, progress=job.progress)
@@ -140,7 +142,7 @@ def main_workers(args: Any, schedule: dict[str, Any], bag: Path) -> int:
 
     template = CollectJob(args.task, schedule, bag, args.steps, args.seed,
                           checkpoint=args.checkpoint, noise=args.noise, pixels=args.pixels,
-                          storage=args.storage)
+                          storage=args.storage, context_lag=args.context_lag)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     args.out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
