@@ -50,9 +50,12 @@ def parse_rows(text: str) -> list[dict[str, str | float]]:
     return rows
 
 
-def worktree(rev: str, parent: Path) -> Path:
-    """A detached worktree of `rev` under `parent` (removed by `remove_worktree`)."""
-    path = parent / rev.replace('/', '_')
+def worktree(rev: str, path: Path) -> Path:
+    """A detached worktree of `rev` at `path` (removed by `remove_worktree`).
+
+    Named by side, not by revision: the same revision on both sides is an A/A run, which
+    measures the noise alone.
+    """
     subprocess.run(['git', '-C', str(REPO), 'worktree', 'add', '--detach', '-q', str(path), rev],
                    check=True)
     return path
@@ -115,8 +118,8 @@ def main() -> None:
                   '--pixel-steps', str(args.pixel_steps)]
     results: list[dict[str, str | float]] = []
     with tempfile.TemporaryDirectory(prefix='zeus_ab_') as tmp:
-        trees = {'base': worktree(args.base, Path(tmp))}
-        trees['new'] = worktree(args.new, Path(tmp)) if args.new else REPO
+        trees = {'base': worktree(args.base, Path(tmp) / 'base')}
+        trees['new'] = worktree(args.new, Path(tmp) / 'new') if args.new else REPO
         try:
             for number in range(1, args.rounds + 1):
                 order = ('base', 'new') if number % 2 else ('new', 'base')

@@ -38,7 +38,7 @@ from zeus_ros.offline.evaluation.evaluate import (
     split_values,
     switching_order,
 )
-from zeus_ros.offline.evaluation.metrics import write_csv
+from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
 from zeus_ros.offline.evaluation.report import mean_se
 
 _NAME = re.compile(r'(?P<method>.+)_s(?P<seed>\d+)$')
@@ -93,6 +93,8 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                                  'return_se': se}
         for column, reference in (('change', by_seed.get((task, method, protocol, 0), {})),
                                   ('gain', by_seed.get((task, 'no_context', protocol, 0), {}))):
+            if (column == 'change' and lag == 0) or (column == 'gain' and method == 'no_context'):
+                reference = {}  # itself: nothing to compare
             common = sorted(set(seeds) & set(reference))
             paired = [seeds[s] - reference[s] for s in common]
             value, value_se = mean_se(paired) if len(common) >= 2 else (None, None)
@@ -102,28 +104,33 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
-    """Return against the lag per method, one panel per protocol (mean ± s.e. over seeds)."""
+    """Return against the lag per method: a row per task, a panel per protocol (mean ± s.e.)."""
     from zeus_ros.offline.evaluation.metrics import _pyplot
 
     plt = _pyplot()
+    tasks = list(dict.fromkeys(r['task'] for r in table))
     protocols = list(dict.fromkeys(r['protocol'] for r in table))
-    fig, axes = plt.subplots(1, len(protocols), figsize=(5.5 * len(protocols), 4),
-                             squeeze=False)
-    for ax, protocol in zip(axes[0], protocols, strict=True):
-        for method in dict.fromkeys(r['method'] for r in table):
-            sel = [r for r in table if r['method'] == method and r['protocol'] == protocol]
-            m = np.array([r['return'] for r in sel])
-            s = np.array([r['return_se'] for r in sel])
-            label = f'{method} ({sel[0]["seeds"]} seeds)' if sel else method
-            if len(sel) == 1:
-                ax.axhline(m[0], ls='--', color='grey', label=label)
-                continue
-            ax.errorbar([r['lag'] for r in sel], m, yerr=s, marker='o', capsize=3, label=label)
-        ax.set_xlabel('context_lag (steps)')
-        ax.set_ylabel('episode return (mean ± s.e. over seeds)')
-        ax.set_title(f'{protocol}', fontsize=10)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    fig, axes = plt.subplots(len(tasks), len(protocols), squeeze=False,
+                             figsize=(5.5 * len(protocols), 3.6 * len(tasks)))
+    for row, task in enumerate(tasks):
+        for ax, protocol in zip(axes[row], protocols, strict=True):
+            for method in dict.fromkeys(r['method'] for r in table):
+                sel = [r for r in table if (r['task'], r['method'], r['protocol'])
+                       == (task, method, protocol)]
+                if not sel:
+                    continue
+                label = f'{method} ({sel[0]["seeds"]} seeds)'
+                if len(sel) == 1:  # no context, so no lag: a reference line
+                    ax.axhline(sel[0]['return'], ls='--', color='grey', label=label)
+                    continue
+                ax.errorbar([r['lag'] for r in sel], [r['return'] for r in sel],
+                            yerr=[r['return_se'] for r in sel], marker='o', capsize=3,
+                            label=label)
+            ax.set_xlabel('context_lag (steps)')
+            ax.set_ylabel('episode return (mean ± s.e.)')
+            ax.set_title(f'{task}, {protocol}', fontsize=10)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -137,7 +144,7 @@ def _pm(value: float | None, se: float | None) -> str:
 def main() -> None:
     """Evaluate every checkpoint at every lag; write the tables and the plot."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--checkpoints', nargs='+', type=Path, required=True,
+    parser.add_argument('--checkpoints', nargs='+', type=Path, default=[],
                         help='shipped checkpoints (<method>_s<seed>.pt) or folders of them')
     parser.add_argument('--lags', nargs='+', type=int, default=[0, 1, 2, 5])
     parser.add_argument('--split', default='train')
@@ -145,14 +152,20 @@ def main() -> None:
     parser.add_argument('--switch-episodes', type=int, default=3,
                         help='episodes of the switching run')
     parser.add_argument('--out', type=Path, default=Path('docs/results/issue14/context_lag'))
+    parser.add_argument('--rows', type=Path,
+                        help="an earlier run's <out>_runs.csv: tabulate and plot it again, "
+                        'evaluating nothing')
     args = parser.parse_args()
     if any(lag < 0 for lag in args.lags):
         parser.error(f'--lags: steps must be >= 0, got {args.lags}')
     if args.episodes < 1 or args.switch_episodes < 1:
         parser.error('--episodes and --switch-episodes must be >= 1')
+    if not args.checkpoints and not args.rows:
+        parser.error('give --checkpoints (or --rows of an earlier run)')
     lags = sorted(set(args.lags) | {0})
-    rows = []
-    for path in tqdm(find_checkpoints(args.checkpoints), desc='checkpoints', unit='ckpt'):
+    rows = read_csv(args.rows) if args.rows else []
+    for path in [] if args.rows else tqdm(find_checkpoints(args.checkpoints),
+                                          desc='checkpoints', unit='ckpt'):
         rows += lag_returns(path, lags, args.split, args.episodes, args.switch_episodes)
     table = summary(rows)
     args.out.parent.mkdir(parents=True, exist_ok=True)
