@@ -228,12 +228,14 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
             'context_deadline': Parameter('context_deadline', value=-3.0),
             'frozen_context': Parameter('frozen_context', value='banana'),
             'mode': Parameter('mode', value='banana'),
+            'context_lag': Parameter('context_lag', value=99),
         }
         results = call(probe, policy.set_parameters(list(refused.values()))).results
         for (name, _), result in zip(refused.items(), results, strict=True):
             assert not result.successful and result.reason, name
         assert 'frozen_context' in results[1].reason and 'numbers' in results[1].reason
         assert 'read-only' in results[2].reason
+        assert 'Max: 16' in results[3].reason, results[3].reason
         kept = call(probe, policy.get_parameters(['context_deadline', 'mode'])).values
         assert kept[0].double_value == pytest.approx(0.2) and kept[1].string_value == 'lockstep'
 

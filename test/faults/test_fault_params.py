@@ -20,6 +20,7 @@ CASES = [
     ('policy', 'determinstic:=true', "unknown parameter(s) ['determinstic']"),
     ('policy', 'noise:=.nan', 'parameter noise must be a finite number, got nan'),
     ('policy', 'context_deadline:=.inf', 'parameter context_deadline must be a finite number'),
+    ('policy', 'context_lag:=17', 'parameter context_lag must be <= 16, got 17'),
     ('policy', 'mode:=sideways', "parameter mode='sideways' is not allowed; choose one of "
      'lockstep, realtime'),
     ('policy', 'device:=cuda', "cannot load on device 'cuda'"),
