@@ -148,8 +148,10 @@ class PolicyNode(Node):
             f'{self.loaded.describe()}'
         if self.frozen is not None:
             source += ', context FROZEN (frozen_context)'
+        lag = self.params['context_lag']
+        uses = f'acts on context k - {lag} (context_lag)' if lag else 'waits for context k'
         self.get_logger().info(f'{source}; {obs_kind} observations, '
-                               f'{"waits for" if self.needs_context else "no"} context')
+                               f'{uses if self.needs_context else "no context"}')
 
     def _parse_frozen(self, text: str, agent: InferenceAgent | None = None
                       ) -> np.ndarray | None:
@@ -315,7 +317,7 @@ class PolicyNode(Node):
     def _publish_diagnostics(self) -> None:
         self.counts['foreign'] = self._senders.refused
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
-                  **self.counts}
+                  'context_lag': self.params['context_lag'], **self.counts}
         problems = [f'{self.counts[key]} {key}' for key in
                     ('stale', 'safe', 'rejected', 'mismatched', 'foreign') if self.counts[key]]
         errors = self._senders.errors() if self.needs_context else []
