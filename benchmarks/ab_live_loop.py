@@ -31,7 +31,12 @@ REPO = Path(__file__).resolve().parents[1]
 ROW = re.compile(r'^(?P<kind>state|pixels)\s+(?P<mode>\S+)\s+(?P<executor>\S+)\s+'
                  r'(?P<in_process>[\d.]+)\s+(?P<live>[\d.]+)\s+(?P<ratio>[\d.]+)\s+\[[^\]]*\]!?\s+'
                  r'[\d.]+/(?P<cpu_ms>[\d.na]+)\s+\S+\s+(?P<p50>[\d.na]+)\s+(?P<p99>[\d.na]+)')
-"""One result line of bench_live_loop.py (its table has kept this shape since session 8)."""
+"""One result line of bench_live_loop.py (its table has kept this shape since session 8).
+
+Each side runs its own bench_live_loop.py: against a base from before session 17 the p50/p99
+differ in ruler too (the base times them at the probe, the new side from the publishers'
+source timestamps), so compare their latencies only between revisions on the same side of it.
+"""
 METRICS = ('live', 'ratio', 'cpu_ms', 'p50', 'p99', 'in_process')
 
 

@@ -5,8 +5,12 @@ deployment code (ContextHistory + InferenceAgent, each frame encoded once as the
 in-process loop calls them directly, the live loop runs sim_bridge, context_estimator and policy
 in lockstep, as separate processes (multi) and as nodes of one process on one executor
 (single, zeus launch --single-process, with intra-process delivery; single-dds: the same
-without it, every message through DDS). A probe subscriber measures observation-to-action
-latency; /proc gives each node's resident memory. The probe is itself an outside subscriber:
+without it, every message through DDS). Observation-to-action latency runs from StepFeedback
+k's source timestamp to Action k's: each stamped by the publishing process's DDS writer when
+sim_bridge, then the policy, publishes, on the same machine clock, so it is the time the loop
+took and nothing of the probe's (`p99 seen`: the probe's own callback times, as before session
+17, which add the probe's wake-ups: a Python process on the same cores). /proc gives each
+node's resident memory. The probe is itself an outside subscriber:
 the container then publishes every step and action on DDS too. `single-quiet` runs the single
 mode with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step
 count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized from the
@@ -31,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Any
 
 import numpy as np
 
@@ -169,8 +174,16 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     probe = rclpy.create_node('bench_probe', context=context)
-    seen_obs: dict[int, float] = {}
+    seen_obs: dict[int, float] = {}  # step: the probe's clock when its callback ran
     seen_act: dict[int, float] = {}
+    sent_obs: dict[int, int] = {}  # step: source timestamp (ns), stamped by the publisher
+    sent_act: dict[int, int] = {}
+
+    def observer(seen: dict[int, float], sent: dict[int, int]) -> Any:
+        def on_message(msg: Any, info: Any) -> None:  # two parameters: rclpy adds MessageInfo
+            seen.setdefault(msg.step, time.perf_counter())
+            sent.setdefault(msg.step, info['source_timestamp'])
+        return on_message
     counted: list[tuple[float, int, float]] = []  # single-quiet: time, steps so far, CPU s
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
@@ -183,11 +196,9 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     if quiet:
         probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
     else:
-        probe.create_subscription(StepFeedback, TOPICS.STEP,
-                                  lambda m: seen_obs.setdefault(m.step, time.perf_counter()),
+        probe.create_subscription(StepFeedback, TOPICS.STEP, observer(seen_obs, sent_obs),
                                   step_qos(50))
-        probe.create_subscription(Action, TOPICS.ACTION,
-                                  lambda m: seen_act.setdefault(m.step, time.perf_counter()),
+        probe.create_subscription(Action, TOPICS.ACTION, observer(seen_act, sent_act),
                                   step_qos(50))
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
@@ -221,18 +232,21 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
                                f'{log_dir}')
         (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
         return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
-                'p50': float('nan'), 'p99': float('nan'), **memory_values}
+                'p50': float('nan'), 'p99': float('nan'), 'p99_seen': float('nan'),
+                **memory_values}
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
     per_process = {name: (cpu[1][1][name] - cpu[0][1][name]) / (cpu[1][0] - cpu[0][0]) * 1e3
                    for name in processes} if len(cpu) == 2 else {}
     cpu_ms = sum(per_process.values()) if per_process else float('nan')
-    latency = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
+    latency = np.array([(sent_act[k] - sent_obs[k]) * 1e-6 for k in done])
+    latency_seen = np.array([(seen_act[k] - seen_obs[k]) * 1e3 for k in done])
     span = seen_obs[done[-1]] - seen_obs[done[0]]
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
             'p50': float(np.percentile(latency, 50)),
-            'p99': float(np.percentile(latency, 99)), **memory_values,
+            'p99': float(np.percentile(latency, 99)),
+            'p99_seen': float(np.percentile(latency_seen, 99)), **memory_values,
             **{f'cpu_{name}': ms for name, ms in per_process.items()}}
 
 
@@ -272,7 +286,7 @@ def lag_summary(results: list[dict], lags: list[int]) -> list[str]:
         if len(paired) < 2:
             continue
         parts = []
-        for metric in ('rate', 'ratio', 'cpu_ms', 'p50', 'p99'):
+        for metric in ('rate', 'ratio', 'cpu_ms', 'p50', 'p99', 'p99_seen'):
             diffs = np.array([rounds[n, lag][metric] - rounds[n, 0][metric] for n in paired])
             error = diffs.std(ddof=1) / np.sqrt(len(diffs))
             parts.append(f'{metric} {diffs.mean():+.3f} ± {error:.3f}')
@@ -325,7 +339,7 @@ def main() -> None:
           'in-process = ScheduledEnv + the deployment code, no ROS)')
     print(f'{"obs":<7} {"mode":<10} {"executor":<8} {"in-proc/s":>9} {"live/s":>8} '
           f'{"ratio [target]":>15} {"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} '
-          f'{"p99 ms [target]":>16}  '
+          f'{"p99 ms [target]":>16} {"p99 seen":>8}  '
           'RSS MiB per process; CPU ms per step per process')
     results: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -360,10 +374,12 @@ def main() -> None:
                 label = f'{mode}/lag{lag}' if lag else mode
                 print(f'{kind:<7} {label:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
-                      f'{live["p50"]:>7.2f} {p99_text:>16}  {memory}'
+                      f'{live["p50"]:>7.2f} {p99_text:>16} {live["p99_seen"]:>8.2f}  {memory}'
                       + (f'; CPU {per_node}' if per_node else ''), flush=True)
     for line in lag_summary(results, lags):
         print(line)
+    print("p50/p99: observation -> action from the publishers' source timestamps; p99 seen: "
+          "from the probe's callback times (adds its wake-ups)")
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
           'DDS threads included, 10-90 % of the run); CPU ratio = in-process / live: the rate '
           'ratio an idle machine would show, as far as the loop is CPU-bound; steadier than '
