@@ -203,3 +203,22 @@ def test_features_of_another_agent_are_not_reused() -> None:
     assert not np.allclose(first.context(history), expected)
     np.testing.assert_allclose(InferenceAgent(second.agent, reuse_features=True).context(history),
                                expected, atol=1e-5)
+
+
+@pytest.mark.parametrize('kind', ['state', 'pixels'])
+def test_encoding_ahead_leaves_act_only_the_head_and_the_same_action(kind: str) -> None:
+    """The policy encodes o while it waits for psi: acting on o then encodes nothing more."""
+    plain = _pixel_inference() if kind == 'pixels' else _inference()
+    reusing = InferenceAgent(plain.agent, reuse_features=True)
+    encoded: list[int] = []
+    plain.agent.modules['encoder'].register_forward_hook(
+        lambda _module, inputs, _out: encoded.append(inputs[0].shape[0]))
+    obs, *_ = _episodes(plain, 1)[0]
+    context = np.linspace(-1, 1, plain.context_dim, dtype=np.float32)
+    reusing.encode_ahead(obs.copy())  # a decoded copy, as the node holds it
+    assert encoded == [1]
+    assert np.array_equal(reusing.act(obs.copy(), context), plain.act(obs, context))
+    assert encoded == [1, 1]  # the plain agent's own encode; the reusing one took its memo
+    reusing.encode_ahead(np.zeros(3, np.float32))  # another shape: nothing, no error
+    InferenceAgent(plain.agent).encode_ahead(obs)  # without reuse_features: nothing
+    assert encoded == [1, 1]

@@ -258,6 +258,17 @@ class InferenceAgent:
                                         arrays.hist_next_obs, arrays.hist_mask)
         return out.cpu().numpy().astype(np.float32)
 
+    def encode_ahead(self, obs: Any) -> None:
+        """Encode o now and keep phi(o), so that acting on o later runs only the actor's head.
+
+        Why: a policy in its own process gets o_k together with the estimator and waits for
+        psi_k; encoding o_k while it waits takes phi (the conv encoder, milliseconds on a CPU)
+        off the step's critical path, the two processes working on different cores. Without
+        reuse_features, or for an observation of another shape, it does nothing.
+        """
+        if self.reuse_features and np.shape(obs) == self.obs_shape:
+            self._phi(np.asarray(obs))
+
     def act(self, obs: Any, context: Any, deterministic: bool = True, noise: float = 0.0,
             rng: np.random.Generator | None = None) -> np.ndarray:
         """Action in task bounds; optional Gaussian noise with std noise * half the range."""

@@ -264,6 +264,8 @@ class PolicyNode(Node):
             # Deadline first, then the timer: it cannot fire before the deadline.
             self._deadline_timer.timer_period_ns = int(self.params['context_deadline'] * 1e9)
             self._deadline_timer.reset()
+            if self.agent is not None:  # phi(o_k) while the estimator computes psi_k
+                self.agent.encode_ahead(obs)
 
     def _check_deadline(self) -> None:
         if self._waiting is not None and time.monotonic() >= self._waiting[4]:
