@@ -5,7 +5,8 @@ Action k answers observation k (same step, same stamp). When context k is late b
 context at all for `context_timeout` seconds it publishes the task's safe action. Without a
 checkpoint it is a seeded uniform-random policy (for data collection and demos).
 With `context_lag` L > 0 it acts on observation k with context k - L (never one from before
-the episode's first step) instead of waiting for context k: the estimator works beside the
+the episode's first step, nor from before its first context since start or redeploy: those
+never come) instead of waiting for context k: the estimator works beside the
 policy rather than before it, off the step's critical path, at the price of a context L
 steps old (`experiments/context_lag.py` measures that price in-process; `zeus collect
 --context-lag L` acts the same way).
@@ -113,6 +114,7 @@ class PolicyNode(Node):
         # (observation step, context step it waits for, feedback, observation, deadline)
         self._waiting: tuple[int, int, Any, np.ndarray, float] | None = None
         self._episode_start = 0  # step of the current episode's first observation
+        self._first_context: int | None = None  # first context's step since start / redeploy
         self._rate = RateMeter()
         self._started = time.monotonic()
 
@@ -194,6 +196,7 @@ class PolicyNode(Node):
             self.agent = self.loaded.agent
             self._contexts.clear()  # estimates of the old pair: never acted on again
             self._newest_context = None
+            self._first_context = None
             self.get_logger().info(f'redeployed live: {self.agent.method} checkpoint '
                                    f'{self.loaded.describe()}')
         if 'frozen_context' in changed or 'checkpoint' in changed:
@@ -232,6 +235,8 @@ class PolicyNode(Node):
             return
         self._newest_context = (time.monotonic(), context)
         self._contexts[msg.step] = context
+        if self._first_context is None:
+            self._first_context = msg.step
         for old in [step for step in self._contexts if step < msg.step - MAX_CONTEXT_LAG]:
             del self._contexts[old]
         if self._waiting is not None and self._waiting[1] == msg.step:
@@ -253,7 +258,7 @@ class PolicyNode(Node):
             self._expire_waiting()
         if feedback.first:
             self._episode_start = parts.step
-        wanted = max(parts.step - self.params['context_lag'], self._episode_start)
+        wanted = self._wanted_context(parts.step)
         if not self.needs_context:
             self._act(parts.step, feedback, obs, np.zeros(0, np.float32), 'fresh')
         elif wanted in self._contexts:
@@ -266,6 +271,15 @@ class PolicyNode(Node):
             self._deadline_timer.reset()
             if self.agent is not None:  # phi(o_k) while the estimator computes psi_k
                 self.agent.encode_ahead(obs)
+
+    def _wanted_context(self, step: int) -> int:
+        """The context step that observation `step` is acted on with: step - context_lag.
+
+        Never one from before this episode's first step, nor from before the first context
+        received since start or redeploy: those never come (with none yet, context `step`).
+        """
+        floor = step if self._first_context is None else min(self._first_context, step)
+        return max(step - self.params['context_lag'], self._episode_start, floor)
 
     def _check_deadline(self) -> None:
         if self._waiting is not None and time.monotonic() >= self._waiting[4]:
