@@ -30,9 +30,11 @@ def policy_node(checkpoint: Path, lag: int) -> Iterator[tuple[Any, list[tuple[in
 
     import rclpy
     from rclpy.context import Context
+    import torch
 
     from zeus_ros.nodes.policy_node import PolicyNode
 
+    threads = torch.get_num_threads()  # the node sets torch_threads in this test process
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     context = Context()
     rclpy.init(context=context, domain_id=fresh_domain_id())
@@ -47,6 +49,7 @@ def policy_node(checkpoint: Path, lag: int) -> Iterator[tuple[Any, list[tuple[in
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
+        torch.set_num_threads(threads)
 
 
 def observe(node: Any, step: int, first: bool = False) -> None:
