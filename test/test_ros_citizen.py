@@ -379,6 +379,8 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
     """
     from rosbags.highlevel import AnyReader
 
+    from zeus_ros.nodes.common import STACKS_SIGNAL
+
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     out = tmp_path / 'bag'
     agent = ('-p', f'checkpoint:={checkpoint}', '-p', f'task:={TASK}')
@@ -399,7 +401,13 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
         time.sleep(0.05)
     deadline = signalled + LAUNCH_SIGTERM_TIMEOUT_S
     for name, process in processes.items():
-        code = process.wait(timeout=max(0.1, deadline - time.monotonic()))
+        try:
+            code = process.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            os.kill(process.pid, STACKS_SIGNAL)  # where it is stuck, into its log
+            time.sleep(1.0)
+            pytest.fail(f'{name} still running {LAUNCH_SIGTERM_TIMEOUT_S} s after two SIGINTs:'
+                        f'\n{ros_processes.log_text(f"sigint2-{name}")[-6000:]}')
         log = ros_processes.log_text(f'sigint2-{name}')
         assert code == 0 and 'Traceback' not in log, f'{name} exited {code}:\n{log[-2000:]}'
     bag = out / f'{out.name}_000'
@@ -408,6 +416,21 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
         recorded = sorted(int(reader.deserialize(raw, conn.msgtype).step)
                           for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
     assert len(recorded) > 100 and recorded == list(range(len(recorded)))
+
+
+def test_sigusr1_prints_every_thread_s_stack_and_the_node_runs_on(
+        ros_processes: ProcessGroup) -> None:
+    """`kill -USR1 <pid>`: the node's threads' Python stacks in its log; SIGINT still stops it."""
+    from zeus_ros.nodes.common import STACKS_SIGNAL
+
+    policy = ros_processes.start('usr1-policy', ros_node('policy', '-p', f'task:={TASK}'))
+    ros_processes.wait_for_log('usr1-policy', 'random policy', timeout=60)
+    os.kill(policy.pid, STACKS_SIGNAL)
+    ros_processes.wait_for_log('usr1-policy', 'Current thread', timeout=10)
+    assert 'run_nodes' in ros_processes.log_text('usr1-policy')
+    time.sleep(0.5)
+    assert policy.poll() is None
+    assert ros_processes.stop(policy) == 0
 
 
 def test_live_checkpoint_redeploy_swaps_the_pair_and_never_mixes_it(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+import faulthandler
 import math
 import os
 import signal
@@ -377,6 +378,8 @@ def _deliver_published(nodes: Sequence[Node], timeout: float = 2.0) -> None:
                 publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
 
 
+STACKS_SIGNAL = signal.SIGUSR1
+"""The signal on which a node process prints every thread's stack to stderr and goes on."""
 DRAIN_LIMIT_S = 2.0
 """The longest a draining node goes on taking messages after a stop signal."""
 STOP_DELIVERY_S = 1.5
@@ -530,6 +533,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
         signal.signal(stop_signal, lambda signum, _frame: signals.append(signum))
+    # `kill -USR1 <pid>`: every thread's Python stack on stderr, the node running on; for a
+    # node that does not stop or answer (a test times out on it and asks it).
+    faulthandler.register(STACKS_SIGNAL, all_threads=True)
     # The signals are ours: rclpy's handlers would shut the context down at once, and what a
     # node published last would be lost with its publishers (a recorder one step short).
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
