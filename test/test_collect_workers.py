@@ -55,3 +55,7 @@ def test_worker_processes_equal_sequential_collections(tmp_path: Path) -> None:
     assert_same_data(out, sequential_bags(tmp_path / 'sequential'))
     assert collect.main([*COMMON, '--steps', '3', '--out', str(tmp_path / 'x'),
                          '--workers', '4']) == 2
+    for lag in ('-1', '17'):  # the policy node's context_lag range, refused before any work
+        assert collect.main([*COMMON, '--steps', '3', '--out', str(tmp_path / 'x'),
+                             '--context-lag', lag]) == 2
+    assert not (tmp_path / 'x').exists()

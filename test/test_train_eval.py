@@ -573,7 +573,7 @@ def test_context_transform_maps_the_live_context_before_the_policy_acts(trained:
 def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
         trained: Any) -> None:
     """context_lag L: step k acts on the live estimate of step max(k - L, episode start)."""
-    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.learning.inference import MAX_CONTEXT_LAG, InferenceAgent
     from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
 
     agent = InferenceAgent.from_checkpoint(trained.out / 'final.pt')
@@ -596,5 +596,7 @@ def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
             np.testing.assert_array_equal(trace.psi[k], seen[max(k - lag, start_of[k])])
         if lag:  # the estimates moved within the episode, so the lag showed
             assert not np.allclose(trace.psi[starts[0] + 5], seen[starts[0] + 5])
-    with pytest.raises(ValueError, match='context_lag=-1'):
-        evaluate_contexts(agent, values, episodes=1, seed=3, progress=False, context_lag=-1)
+    for refused in (-1, MAX_CONTEXT_LAG + 1):  # the policy node's range, no wider
+        with pytest.raises(ValueError, match=f'context_lag={refused}: must be between 0 and'):
+            evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
+                              context_lag=refused)

@@ -26,6 +26,11 @@ from zeus_ros.learning.context import HistoryFeatures
 
 __all__ = ['ContextHistory', 'HistoryArrays', 'InferenceAgent']
 
+MAX_CONTEXT_LAG = 16
+"""The most steps a policy may act behind its context (the policy node's `context_lag`
+parameter, `zeus collect --context-lag`): beyond it the context is too old to be worth waiting
+for, and the node keeps no older ones."""
+
 
 @dataclass(slots=True)
 class HistoryArrays:

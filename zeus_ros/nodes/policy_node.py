@@ -26,7 +26,7 @@ import numpy as np
 from rclpy.node import Node
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
-from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.learning.inference import MAX_CONTEXT_LAG, InferenceAgent
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
@@ -43,9 +43,6 @@ from zeus_ros.nodes.common import (
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
-
-MAX_CONTEXT_LAG = 16
-"""Contexts older than this many steps behind the newest are dropped."""
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '

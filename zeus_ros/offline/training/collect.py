@@ -236,8 +236,14 @@ class AgentPolicy:
         estimated at step k - L (never one from before the episode's first step), as the policy
         node does with its `context_lag` parameter.
         """
-        if context_lag < 0:
-            raise ValueError(f'context_lag={context_lag}: must be >= 0')
+        import torch
+
+        from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
+        from zeus_ros.learning.inference import MAX_CONTEXT_LAG
+
+        if not 0 <= context_lag <= MAX_CONTEXT_LAG:
+            raise ValueError(f'context_lag={context_lag}: must be between 0 and '
+                             f'{MAX_CONTEXT_LAG}')
         for name, steps in (('blind_steps', blind_steps), ('live_steps', live_steps)):
             if steps < 0 or (steps > 0 and frozen_context is None):
                 raise ValueError(f'{name}={steps}: needs a frozen_context to act on, and must '
@@ -245,10 +251,6 @@ class AgentPolicy:
         if blind_steps and live_steps:
             raise ValueError('blind_steps and live_steps: give one (frozen first, or frozen '
                              'after)')
-        import torch
-
-        from zeus_ros.learning.frames import FrameStack  # torch: only when a checkpoint acts
-
         self.agent = agent
         self.noise = noise
         self.stochastic = stochastic
@@ -337,7 +339,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         'half the action range (actions are clipped to the bounds)')
     parser.add_argument('--context-lag', type=int, default=0,
                         help="act on step k with the context of step k - L, as the policy "
-                        "node's context_lag parameter does (default: 0)")
+                        "node's context_lag parameter does, within its limit (default: 0)")
     parser.add_argument('--append', action='store_true',
                         help='add a new bag next to the bags already in --out')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
@@ -356,10 +358,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.steps < 1:
         print(f'zeus collect: --steps must be >= 1, got {args.steps}', file=sys.stderr)
         return 2
-    if args.context_lag < 0:
-        print(f'zeus collect: --context-lag must be >= 0, got {args.context_lag}',
-              file=sys.stderr)
-        return 2
+    if args.context_lag:
+        from zeus_ros.learning.inference import MAX_CONTEXT_LAG  # torch: only with a lag
+
+        if not 0 <= args.context_lag <= MAX_CONTEXT_LAG:
+            print(f'zeus collect: --context-lag must be between 0 and {MAX_CONTEXT_LAG} (the '
+                  f"policy node's limit), got {args.context_lag}", file=sys.stderr)
+            return 2
     if not 1 <= args.workers <= args.steps:
         print(f'zeus collect: --workers must be between 1 and --steps ({args.steps}), got '
               f'{args.workers}', file=sys.stderr)
