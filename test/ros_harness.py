@@ -159,20 +159,31 @@ def python_module(module: str, *args: str) -> list[str]:
 
 
 @contextlib.contextmanager
-def driver_node(domain_id: int, name: str = 'test_driver') -> Iterator[Any]:
-    """An rclpy node in the test process on its own context and domain; destroyed afterwards."""
+def ros_context(domain_id: int) -> Iterator[Any]:
+    """An rclpy context of its own in the test process, on `domain_id`, localhost only."""
     import rclpy
     from rclpy.context import Context
 
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node(name, context=context)
     try:
-        yield node
+        yield context
     finally:
-        node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+@contextlib.contextmanager
+def driver_node(domain_id: int, name: str = 'test_driver') -> Iterator[Any]:
+    """An rclpy node in the test process on its own context and domain; destroyed afterwards."""
+    import rclpy
+
+    with ros_context(domain_id) as context:
+        node = rclpy.create_node(name, context=context)
+        try:
+            yield node
+        finally:
+            node.destroy_node()
 
 
 def spin_until(node: Any, predicate: Callable[[], bool], timeout: float) -> bool:

@@ -13,7 +13,14 @@ from executor_probe import SAYS
 import pytest
 
 from live_fixtures import TASK
-from ros_harness import REPO, ProcessGroup, driver_node, require_ros, spin_until
+from ros_harness import (
+    REPO,
+    ProcessGroup,
+    driver_node,
+    fresh_domain_id,
+    require_ros,
+    spin_until,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -50,24 +57,16 @@ def test_a_guard_condition_keeps_the_single_threaded_executor() -> None:
     The events executor cannot serve guard conditions, also when it was asked for.
     """
     require_ros()
-    import rclpy
-    from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
 
     from zeus_ros.nodes.common import make_executor
 
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('guarded', context=context)
-    try:
+    with driver_node(fresh_domain_id(), 'guarded') as node:
         node.create_guard_condition(lambda: None)
-        executor = make_executor([node], 'events', context=context)
+        executor = make_executor([node], 'events', context=node.context)
         assert isinstance(executor, SingleThreadedExecutor)
         assert node.executor is executor
         executor.shutdown()
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
 
 
 @pytest.mark.parametrize('kind', list(CLASS_NAMES))

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from ros_harness import fresh_domain_id, require_ros
+from ros_harness import fresh_domain_id, require_ros, ros_context
 
 pytestmark = pytest.mark.ros
 TOPIC = 'zeus/observation/state'
@@ -30,21 +30,15 @@ def two_contexts(bus: bool = True, executor: str = 'single'
     common.make_executor builds them; outside: single-threaded).
     """
     require_ros()
-    import os
-
-    import rclpy
-    from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
     from zeus_ros.nodes.common import make_executor
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
 
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     domain = fresh_domain_id()
-    contexts = [Context(), Context()]
-    for context in contexts:
-        rclpy.init(context=context, domain_id=domain)
+    opened = contextlib.ExitStack()
+    contexts = [opened.enter_context(ros_context(domain)) for _ in range(2)]
     executors = [make_executor([], executor, context=contexts[0]),
                  SingleThreadedExecutor(context=contexts[1])]
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
@@ -70,9 +64,9 @@ def two_contexts(bus: bool = True, executor: str = 'single'
     finally:
         for node in nodes:
             node.destroy_node()
-        for executor, context in zip(executors, contexts, strict=True):
+        for executor in executors:
             executor.shutdown()
-            rclpy.shutdown(context=context)
+        opened.close()
 
 
 def state(step: int) -> Any:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from live_fixtures import tiny_checkpoint
-from ros_harness import fresh_domain_id, require_ros
+from ros_harness import fresh_domain_id, require_ros, ros_context
 
 pytestmark = pytest.mark.ros
 
@@ -26,30 +26,25 @@ pytestmark = pytest.mark.ros
 def policy_node(checkpoint: Path, lag: int) -> Iterator[tuple[Any, list[tuple[int, int, str]]]]:
     """A PolicyNode on its own context; yields it and the (step, context step, kind) it acted."""
     require_ros()
-    import os
-
-    import rclpy
-    from rclpy.context import Context
     import torch
 
     from zeus_ros.nodes.policy_node import PolicyNode
 
     threads = torch.get_num_threads()  # the node sets torch_threads in this test process
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = Context()
-    rclpy.init(context=context, domain_id=fresh_domain_id())
-    node = PolicyNode(context=context, cli_args=[
-        '--ros-args', '-p', f'checkpoint:={checkpoint}', '-p', f'context_lag:={lag}',
-        '-p', 'context_deadline:=30.0'])
-    acted: list[tuple[int, int, str]] = []
-    # Each context's data holds its step, so the action's context names the step it came from.
-    node._act = lambda step, _feedback, _obs, ctx, kind: acted.append((step, int(ctx[0]), kind))
-    try:
-        yield node, acted
-    finally:
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        torch.set_num_threads(threads)
+    with ros_context(fresh_domain_id()) as context:
+        node = PolicyNode(context=context, cli_args=[
+            '--ros-args', '-p', f'checkpoint:={checkpoint}', '-p', f'context_lag:={lag}',
+            '-p', 'context_deadline:=30.0'])
+        acted: list[tuple[int, int, str]] = []
+        # Each context's data holds its step, so the action's context names the step it came
+        # from.
+        node._act = lambda step, _feedback, _obs, ctx, kind: acted.append((step, int(ctx[0]),
+                                                                            kind))
+        try:
+            yield node, acted
+        finally:
+            node.destroy_node()
+            torch.set_num_threads(threads)
 
 
 def observe(node: Any, step: int, first: bool = False) -> None:
