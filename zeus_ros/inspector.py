@@ -118,7 +118,7 @@ class Inspector:
         def unheard() -> list[str]:
             return unmatched_readers(node, [(reader, 1) for topic, reader in readers.items()
                                             if topic in expect],
-                                     steps=TOPICS.STEP if TOPICS.STEP in expect else None)
+                                     sources=[TOPICS.STEP] if TOPICS.STEP in expect else [])
 
         call_when_ready(node, unheard, subscribe_steps, timeout, 'expect_timeout',
                         'subscribing to the steps anyway: the view may miss the first contexts')

@@ -195,7 +195,7 @@ def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_obser
 
 
 def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]],
-                      steps: str | None = None) -> list[str]:
+                      sources: Sequence[str] = ()) -> list[str]:
     """Which of this node's `(subscription, expected publishers)` cannot hear them all yet.
 
     The start gates above count what the *writer* matched; a reader matches the writer on its
@@ -203,10 +203,11 @@ def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]],
     machine can come later, and a volatile reader drops what arrives before that. A node that
     gives the loop its go-ahead (subscribes to the steps) only once these readers have matched
     every publisher the graph shows (and at least `expected`) loses nothing at step 0; a
-    reader created after its publishers were discovered matches them at once. With `steps`
-    (the steps topic, relative or absolute: resolved in the node's namespace) it is also
-    short while no publisher of the steps is discovered: a bystander that waits for the
-    steps (recorder, viewer) then subscribes to a source it matches at once.
+    reader created after its publishers were discovered matches them at once. With `sources`
+    (topics, relative or absolute: resolved in the node's namespace; the steps, and for a
+    node that acts on them the observations) it is also short while one of them has no
+    publisher discovered: a node that waits for the step source (estimator, policy, recorder,
+    viewer) then subscribes to a source it matches at once.
     """
     short = []
     for reader, expected in readers:
@@ -214,10 +215,10 @@ def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]],
         matched = reader.get_publisher_count()
         if matched < needed:
             short.append(f'{reader.topic_name} ({matched} of {needed} publishers matched)')
-    if steps is not None:
-        resolved = node.resolve_topic_name(steps.lstrip('/'))
-        if node.count_publishers(resolved) == 0:
-            short.append(f'a publisher of {resolved}')
+    resolved = [node.resolve_topic_name(topic.lstrip('/')) for topic in sources]
+    unseen = [topic for topic in resolved if node.count_publishers(topic) == 0]
+    if unseen:
+        short.append(f'a publisher of {" and of ".join(unseen)}')
     return short
 
 

@@ -131,11 +131,7 @@ class StepInputs:
             short.append(f'{expected} subscribers of {output.topic_name} (expected_subscribers; '
                          f'{matched} matched so far)')
         observation = TOPICS.IMAGE if self.decoder.obs_kind == 'pixels' else TOPICS.STATE
-        sources = [self.node.resolve_topic_name(topic) for topic in (TOPICS.STEP, observation)]
-        unseen = [topic for topic in sources if self.node.count_publishers(topic) == 0]
-        if unseen:
-            short.append(f'the step source publishing on {", ".join(unseen)}')
-        return short + unmatched_readers(self.node, readers)
+        return short + unmatched_readers(self.node, readers, sources=(TOPICS.STEP, observation))
 
     def _on_feedback(self, msg: StepFeedback) -> None:
         self.assembler.add(msg.step, 'feedback', msg)

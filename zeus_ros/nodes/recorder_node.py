@@ -191,7 +191,7 @@ class RecorderNode(Node):
         expected = self.params['expected_publishers']
         return unmatched_readers(self, [(reader, int(topic in expected))
                                         for topic, reader in self._readers.items()],
-                                 steps=TOPIC_STEP if TOPIC_STEP in expected else None)
+                                 sources=[TOPIC_STEP] if TOPIC_STEP in expected else [])
 
     # -- parameters -------------------------------------------------------------------------
     def _read_parameters(self) -> dict[str, Any]:
