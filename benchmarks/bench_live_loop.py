@@ -2,27 +2,33 @@
 
 Both loops run the same task, schedule, networks (state_cpu / pixels_paper sizes) and
 deployment code (ContextHistory + InferenceAgent, each frame encoded once as the nodes do): the
-in-process loop calls them directly, the live loop runs sim_bridge, context_estimator and policy
-in lockstep, as separate processes (multi) and as nodes of one process on one executor
+in-process loop calls them directly, the live loop runs sim_bridge, context_estimator and
+policy in lockstep, as separate processes (multi) and as nodes of one process on one executor
 (single, zeus launch --single-process, with intra-process delivery; single-dds: the same
-without it, every message through DDS). Observation-to-action latency runs from StepFeedback
-k's source timestamp to Action k's: each stamped by the publishing process's DDS writer when
-sim_bridge, then the policy, publishes, on the same machine clock, so it is the time the loop
-took and nothing of the probe's (`p99 seen`: the probe's own callback times, as before session
-17, which add the probe's wake-ups: a Python process on the same cores). /proc gives each
-node's resident memory. The probe is itself an outside subscriber:
-the container then publishes every step and action on DDS too. `single-quiet` runs the single
-mode with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step
-count on /diagnostics, published at 1 Hz, so it has no latency; the run is sized from the
-round's in-process rate to last about QUIET_SECONDS, long enough for several counts).
-`--executors single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
+without it, every message through DDS; pair: sim_bridge in its own process, the estimator and
+the policy in one container, as `python -m zeus_ros.nodes.container --node context_estimator
+... --node policy ...` runs them beside a robot's own driver). Observation-to-action latency
+runs from StepFeedback k's source timestamp to Action k's: each stamped by the publishing
+process's DDS writer when sim_bridge, then the policy, publishes, on the same machine clock, so
+it is the time the loop took and nothing of the probe's (`p99 seen`: the probe's own callback
+times, as before session 17, which add the probe's wake-ups: a Python process on the same
+cores). /proc gives each node's resident memory. The probe is itself an outside subscriber: the
+container then publishes every step and action on DDS too. `single-quiet` runs the single mode
+with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step count on
+/diagnostics, published at 1 Hz, so it has no latency; the run is sized from the round's
+in-process rate to last about QUIET_SECONDS, long enough for several counts). `--executors
+single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
 nodes/common.py), alternately in each round, so a loaded machine weighs on both alike.
 `--context-lags 0,1` likewise runs every mode once per policy `context_lag` (shown as
 `multi/lag1`): with a lag the policy acts on the context of an earlier step instead of waiting
-for the estimator's answer to this one.
+for the estimator's answer to this one. `--split` also subscribes the probe to the context
+topic and splits each step's period at the publishers' source timestamps into its three
+segments (SEGMENTS): StepFeedback k -> ContextEstimate k (delivery to the estimator, its work,
+its publish), -> Action k (the policy's), -> StepFeedback k + 1 (sim_bridge's); it costs the
+estimator one more reader, so its rates are not those of a run without it.
 
     source scripts/env.sh && python benchmarks/bench_live_loop.py [--steps 400] \
-        [--executors single,events] [--context-lags 0,1]
+        [--executors single,events] [--context-lags 0,1] [--split]
 """
 
 from __future__ import annotations
@@ -122,20 +128,48 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
+SEGMENTS = ('estimator', 'policy', 'sim_bridge')
+"""--split: the step's period, cut where each node publishes: StepFeedback k -> context k
+(estimator), -> action k (policy), -> StepFeedback k + 1 (sim_bridge). Each segment holds the
+delivery into its node, the node's work and its publish; the three add up to the period."""
+
+
+def segment_times(sent: dict[str, dict[int, int]]) -> dict[str, float]:
+    """p50 / p99 / mean ms of each SEGMENTS part over the steps seen on all three topics.
+
+    `sent`: per topic ('feedback', 'context', 'action'), step -> source timestamp (ns). A step
+    k whose k + 1 is the next episode's first still counts: sim_bridge's reset is its work.
+    """
+    feedback, context, action = sent['feedback'], sent['context'], sent['action']
+    steps = [k for k in sorted(feedback) if k in context and k in action and k + 1 in feedback]
+    parts = {'estimator': [context[k] - feedback[k] for k in steps],
+             'policy': [action[k] - context[k] for k in steps],
+             'sim_bridge': [feedback[k + 1] - action[k] for k in steps]}
+    out: dict[str, float] = {}
+    for name, values in parts.items():
+        ms = np.asarray(values, float) * 1e-6
+        out.update({f'seg_{name}_p50': float(np.percentile(ms, 50)) if len(ms) else math.nan,
+                    f'seg_{name}_p99': float(np.percentile(ms, 99)) if len(ms) else math.nan,
+                    f'seg_{name}_mean': float(ms.mean()) if len(ms) else math.nan})
+    return out
+
+
 def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
-              executor: str | None = None, context_lag: int = 0) -> dict[str, float]:
+              executor: str | None = None, context_lag: int = 0, split: bool = False
+              ) -> dict[str, float]:
     """Steps/s, latency percentiles and node memory of the three-node lockstep loop.
 
     `mode` (MODES): a process per node, or the three nodes in one process on one executor
     (zeus launch --single-process) with or without intra-process delivery. `executor`: the
     nodes' $ZEUS_EXECUTOR (None: as this process's environment says). `context_lag`: the
-    policy's parameter of that name.
+    policy's parameter of that name. `split`: also the step's segments (SEGMENTS,
+    `segment_times`), from a probe subscription to the context topic.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from zeus_msgs.msg import Action, StepFeedback
+    from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
     from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
     from zeus_ros.nodes.common import EXECUTOR_ENV, TOPICS, step_qos
@@ -157,11 +191,16 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     }
     ros_args = {name: ['--ros-args', *(a for v in values for a in ('-p', v))]
                 for name, values in params.items()}
-    single = mode != 'multi'
+    single = mode not in ('multi', 'pair')
     if single:
         switch = [CONTAINER_NO_INTRA] if mode == 'single-dds' else []
         argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *switch, *(
             a for name, args in ros_args.items() for a in ('--node', name, *args))]}
+    elif mode == 'pair':
+        argvs = {CONTAINER: [sys.executable, '-m', CONTAINER_MODULE, *(
+            a for name, args in ros_args.items() if name != 'sim_bridge'
+            for a in ('--node', name, *args))],
+            'sim_bridge': [sys.executable, '-m', NODES['sim_bridge'], *ros_args['sim_bridge']]}
     else:
         argvs = {name: [sys.executable, '-m', NODES[name], *args]
                  for name, args in ros_args.items()}
@@ -178,6 +217,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     seen_act: dict[int, float] = {}
     sent_obs: dict[int, int] = {}  # step: source timestamp (ns), stamped by the publisher
     sent_act: dict[int, int] = {}
+    sent_ctx: dict[int, int] = {}
 
     def observer(seen: dict[int, float], sent: dict[int, int]) -> Any:
         def on_message(msg: Any, info: Any) -> None:  # two parameters: rclpy adds MessageInfo
@@ -200,6 +240,9 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
                                   step_qos(50))
         probe.create_subscription(Action, TOPICS.ACTION, observer(seen_act, sent_act),
                                   step_qos(50))
+        if split:
+            probe.create_subscription(ContextEstimate, TOPICS.CONTEXT, observer({}, sent_ctx),
+                                      step_qos(50))
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     memory: dict[str, float] = {}
@@ -247,14 +290,16 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
             'p50': float(np.percentile(latency, 50)),
             'p99': float(np.percentile(latency, 99)),
             'p99_seen': float(np.percentile(latency_seen, 99)), **memory_values,
-            **{f'cpu_{name}': ms for name, ms in per_process.items()}}
+            **{f'cpu_{name}': ms for name, ms in per_process.items()},
+            **(segment_times({'feedback': sent_obs, 'context': sent_ctx, 'action': sent_act})
+               if split else {})}
 
 
-MODES = ('multi', 'single', 'single-dds', 'single-quiet')
-RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'single'): 0.8, ('state', 'single-dds'): 0.8,
-                 ('state', 'single-quiet'): 0.8, ('pixels', 'multi'): 0.9,
-                 ('pixels', 'single'): 0.9, ('pixels', 'single-dds'): 0.9,
-                 ('pixels', 'single-quiet'): 0.9}
+MODES = ('multi', 'pair', 'single', 'single-dds', 'single-quiet')
+RATIO_TARGETS = {('state', 'multi'): 0.5, ('state', 'pair'): 0.5, ('state', 'single'): 0.8,
+                 ('state', 'single-dds'): 0.8, ('state', 'single-quiet'): 0.8,
+                 ('pixels', 'multi'): 0.9, ('pixels', 'pair'): 0.9, ('pixels', 'single'): 0.9,
+                 ('pixels', 'single-dds'): 0.9, ('pixels', 'single-quiet'): 0.9}
 """Issue 14's targets: live steps/s over the in-process loop's (pixels: the render-bound rate)."""
 P99_TARGETS_MS = {'state': 2.0, 'pixels': 10.0}
 """Issue 14's observation -> action p99 targets."""
@@ -301,7 +346,8 @@ def main() -> None:
     parser.add_argument('--steps', type=int, default=400)
     parser.add_argument('--pixel-steps', type=int, default=120)
     parser.add_argument('--modes', default='multi,single,single-dds,single-quiet',
-                        help='multi: a process per node; single: one process, one executor, '
+                        help='multi: a process per node; pair: sim_bridge alone, estimator '
+                        'and policy in one container; single: one process, one executor, '
                         'intra-process delivery; single-dds: the same through DDS; '
                         'single-quiet: single with no outside subscriber (rate only)')
     parser.add_argument('--kinds', default='state,pixels', help='observation kinds to run')
@@ -313,6 +359,10 @@ def main() -> None:
     parser.add_argument('--context-lags', default='0',
                         help='policy context_lag values, each mode run once per value in every '
                         'round (e.g. 0,1)')
+    parser.add_argument('--split', action='store_true',
+                        help="split each step's period into the estimator's, the policy's and "
+                        "sim_bridge's segments (publishers' timestamps; one more reader of the "
+                        'context topic)')
     args = parser.parse_args()
     from zeus_ros.nodes.common import EXECUTORS, executor_kind
 
@@ -358,7 +408,8 @@ def main() -> None:
                     continue
                 run_steps = quiet_steps(steps, local) if mode == 'single-quiet' else steps
                 live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode,
-                                 executor=executor, context_lag=lag)
+                                 executor=executor, context_lag=lag,
+                                 split=args.split and mode != 'single-quiet')
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 results.append({'kind': kind, 'mode': mode, 'executor': executor, 'lag': lag,
                                 'round': number, 'ratio': ratio, **live})
@@ -376,6 +427,11 @@ def main() -> None:
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
                       f'{live["p50"]:>7.2f} {p99_text:>16} {live["p99_seen"]:>8.2f}  {memory}'
                       + (f'; CPU {per_node}' if per_node else ''), flush=True)
+                if 'seg_policy_p50' in live:
+                    print(f'{"":<7} {"":<10} split, ms p50 / p99 / mean: ' + ', '.join(
+                        f'{name} {live[f"seg_{name}_p50"]:.2f} / {live[f"seg_{name}_p99"]:.2f}'
+                        f' / {live[f"seg_{name}_mean"]:.2f}' for name in SEGMENTS)
+                        + f' (period {1e3 / live["rate"]:.2f})', flush=True)
     for line in lag_summary(results, lags):
         print(line)
     print("p50/p99: observation -> action from the publishers' source timestamps; p99 seen: "
