@@ -49,6 +49,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 TASK = 'Cheetah-Run-v0'
 SCHEDULE = {'kind': 'switch', 'every': 100, 'values': [0.6, 1.0, 1.4]}
+SEGMENTS = ('estimator', 'policy', 'sim_bridge')
+"""--split: the step's period, cut where each node publishes: StepFeedback k -> context k
+(estimator), -> action k (policy), -> StepFeedback k + 1 (sim_bridge). Each segment holds the
+delivery into its node, the node's work and its publish; the three add up to the period."""
 
 
 def make_checkpoint(path: Path, obs_kind: str) -> Path:
@@ -74,8 +78,13 @@ def make_checkpoint(path: Path, obs_kind: str) -> Path:
     return path
 
 
-def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float]:
-    """Steps/s and CPU ms per step of ScheduledEnv + the deployment code in one process."""
+def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float, dict[str, float]]:
+    """Steps/s, CPU ms per step and the mean ms of each node's part (SEGMENTS) in one process.
+
+    ScheduledEnv + the deployment code: the parts are the estimator's (psi from the history,
+    and pushing the transition into it), the policy's (acting) and sim_bridge's (stepping and,
+    for pixels, rendering): what each node would do with no messages between them.
+    """
     import torch
 
     from sim_bridge.env import ScheduledEnv
@@ -99,19 +108,29 @@ def in_process_rate(checkpoint: Path, steps: int) -> tuple[float, float]:
 
     result = env.reset()
     obs = observe(result, True)
-    start, cpu = time.perf_counter(), time.process_time()
+    parts = dict.fromkeys(SEGMENTS, 0.0)
+    clock = time.perf_counter
+    start, cpu = clock(), time.process_time()
     for _ in range(steps):
-        action = agent.act(obs, agent.context(history))
+        t0 = clock()
+        psi = agent.context(history)
+        t1 = clock()
+        action = agent.act(obs, psi)
+        t2 = clock()
         result = env.step(action)
         new_obs = observe(result, result.observation.first)
+        t3 = clock()
         if result.observation.first:
             history.clear()
         else:
             history.push(obs, result.applied_action, result.observation.reward, new_obs)
         obs = new_obs
-    elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
+        parts['estimator'] += t1 - t0 + clock() - t3
+        parts['policy'] += t2 - t1
+        parts['sim_bridge'] += t3 - t2
+    elapsed, cpu = clock() - start, time.process_time() - cpu
     task.close()
-    return steps / elapsed, cpu / steps * 1e3
+    return steps / elapsed, cpu / steps * 1e3, {k: v / steps * 1e3 for k, v in parts.items()}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -126,12 +145,6 @@ def rss_mb(pid: int) -> float:
         if line.startswith('VmRSS:'):
             return int(line.split()[1]) / 1024
     return float('nan')
-
-
-SEGMENTS = ('estimator', 'policy', 'sim_bridge')
-"""--split: the step's period, cut where each node publishes: StepFeedback k -> context k
-(estimator), -> action k (policy), -> StepFeedback k + 1 (sim_bridge). Each segment holds the
-delivery into its node, the node's work and its publish; the three add up to the period."""
 
 
 def segment_times(sent: dict[str, dict[int, int]]) -> dict[str, float]:
@@ -359,6 +372,9 @@ def main() -> None:
     parser.add_argument('--context-lags', default='0',
                         help='policy context_lag values, each mode run once per value in every '
                         'round (e.g. 0,1)')
+    parser.add_argument('--out', type=Path,
+                        help='also write every row to OUT/live_loop.csv and, with --split, '
+                        'the segments beside the in-process parts to OUT/live_loop_split.png')
     parser.add_argument('--split', action='store_true',
                         help="split each step's period into the estimator's, the policy's and "
                         "sim_bridge's segments (publishers' timestamps; one more reader of the "
@@ -404,7 +420,7 @@ def main() -> None:
                     (n, *run) for n in range(args.repeat)
                     for run in [(None, None, 0), *(runs[::-1] if n % 2 else runs)]]:
                 if mode is None:  # each round against its own in-process rate
-                    local, local_cpu = in_process_rate(checkpoint, steps)
+                    local, local_cpu, local_parts = in_process_rate(checkpoint, steps)
                     continue
                 run_steps = quiet_steps(steps, local) if mode == 'single-quiet' else steps
                 live = live_rate(checkpoint, run_steps, pixels=kind == 'pixels', mode=mode,
@@ -412,7 +428,9 @@ def main() -> None:
                                  split=args.split and mode != 'single-quiet')
                 ratio, target = live['rate'] / local, RATIO_TARGETS[kind, mode]
                 results.append({'kind': kind, 'mode': mode, 'executor': executor, 'lag': lag,
-                                'round': number, 'ratio': ratio, **live})
+                                'round': number, 'ratio': ratio, 'in_process_rate': local,
+                                'in_process_cpu_ms': local_cpu, **live,
+                                **{f'in_process_{k}_mean': v for k, v in local_parts.items()}})
                 p99_target = P99_TARGETS_MS[kind]
                 memory = ' '.join(f'{k[4:]} {v:.0f}' for k, v in live.items()
                                   if k.startswith('rss_'))
@@ -428,12 +446,23 @@ def main() -> None:
                       f'{live["p50"]:>7.2f} {p99_text:>16} {live["p99_seen"]:>8.2f}  {memory}'
                       + (f'; CPU {per_node}' if per_node else ''), flush=True)
                 if 'seg_policy_p50' in live:
-                    print(f'{"":<7} {"":<10} split, ms p50 / p99 / mean: ' + ', '.join(
+                    print(f'{"":<7} {"":<10} split, ms p50 / p99 / mean (in-process): '
+                          + ', '.join(
                         f'{name} {live[f"seg_{name}_p50"]:.2f} / {live[f"seg_{name}_p99"]:.2f}'
-                        f' / {live[f"seg_{name}_mean"]:.2f}' for name in SEGMENTS)
-                        + f' (period {1e3 / live["rate"]:.2f})', flush=True)
+                        f' / {live[f"seg_{name}_mean"]:.2f} ({local_parts[name]:.2f})'
+                        for name in SEGMENTS) + f'; period {1e3 / live["rate"]:.2f} '
+                        f'({1e3 / local:.2f})', flush=True)
     for line in lag_summary(results, lags):
         print(line)
+    if args.out is not None:
+        from live_loop_plot import plot_segments, write_rows
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_rows(results, args.out / 'live_loop.csv')
+        print(f'rows: {args.out / "live_loop.csv"}')
+        if any('seg_policy_mean' in row for row in results):
+            plot_segments(results, SEGMENTS, args.out / 'live_loop_split.png')
+            print(f'split: {args.out / "live_loop_split.png"}')
     print("p50/p99: observation -> action from the publishers' source timestamps; p99 seen: "
           "from the probe's callback times (adds its wake-ups)")
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
