@@ -24,7 +24,7 @@ from zeus_ros.learning.agent import ZeusAgent
 from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
 from zeus_ros.learning.context import HistoryFeatures
 
-__all__ = ['ContextHistory', 'HistoryArrays', 'InferenceAgent']
+__all__ = ['MAX_CONTEXT_LAG', 'ContextHistory', 'HistoryArrays', 'InferenceAgent']
 
 MAX_CONTEXT_LAG = 16
 """The most steps a policy may act behind its context (the policy node's `context_lag`
