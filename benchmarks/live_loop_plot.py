@@ -31,6 +31,11 @@ def _mean(rows: Sequence[dict[str, Any]], key: str) -> float:
     return float(np.mean([row[key] for row in rows]))
 
 
+def _label(row: dict[str, Any]) -> tuple[str, str]:
+    """(mode, with its context lag when there is one; executor): one bar of the picture."""
+    return row['mode'] + (f'/lag{row["lag"]}' if row['lag'] else ''), row['executor']
+
+
 def plot_segments(rows: Sequence[dict[str, Any]], segments: Sequence[str], path: Path) -> None:
     """Stacked bars: in-process part and live segment of each node, per kind and mode."""
     import matplotlib
@@ -43,12 +48,9 @@ def plot_segments(rows: Sequence[dict[str, Any]], segments: Sequence[str], path:
     figure, axes = plt.subplots(len(kinds), 1, figsize=(9, 1.2 + 1.6 * len(kinds)),
                                 squeeze=False)
     for axis, kind in zip(axes[:, 0], kinds, strict=True):
-        labels = list(dict.fromkeys(
-            (row['mode'] + (f'/lag{row["lag"]}' if row['lag'] else ''), row['executor'])
-            for row in split if row['kind'] == kind))
-        for y, (label, executor) in enumerate(labels):
-            same = [row for row in split if row['kind'] == kind and row['executor'] == executor
-                    and row['mode'] + (f'/lag{row["lag"]}' if row['lag'] else '') == label]
+        labels = list(dict.fromkeys(_label(row) for row in split if row['kind'] == kind))
+        for y, bar in enumerate(labels):
+            same = [row for row in split if row['kind'] == kind and _label(row) == bar]
             left = 0.0
             for name in segments:
                 live, local = _mean(same, f'seg_{name}_mean'), _mean(same,
