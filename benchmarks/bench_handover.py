@@ -1,0 +1,361 @@
+"""The platform's floor for one hand-over between nodes, and the live-loop ratio it allows.
+
+Why: every step of the live loop passes three hand-overs in turn (StepFeedback to the estimator,
+its context to the policy, the action back to sim_bridge), each a publish, a delivery and a
+callback in another node. Rings of relays that do nothing else measure what one hand-over costs
+on this machine: n members in a ring, each passing on at once what it got; one round is n
+hand-overs, so a hand-over costs round time / n. Rings:
+
+- `pipe`: n processes joined by OS pipes (the kernel's wake-up and copy, no ROS);
+- `rclpy-<executor>`: n processes, one rclpy node each, reliable keep-last topics (step_qos) on
+  DDS, spinning on the executor the nodes use ($ZEUS_EXECUTOR: `single` or `events`);
+- `one-process-dds`: n nodes of one process on one executor, every message through DDS (as
+  `zeus launch --single-process --no-intra-process`);
+- `one-process-bus`: the same nodes with the container's intra-process bus (as
+  `zeus launch --single-process`).
+
+Then what that leaves of the in-process rate: with W the in-process state loop's period
+(bench_live_loop.in_process_rate, the work of the three nodes, no messages) and h a hand-over,
+a loop of three hand-overs runs at most at W / (W + 3h) of the in-process rate. Each ring is
+then run again with its members working (a busy loop, no sleep) as long as each node's part of
+W in process, sim_bridge's, the estimator's, the policy's in ring order: the ratio a live loop
+would reach if its nodes did exactly their in-process work and paid the platform's hand-overs,
+and h under that load. `--payload-bytes` sizes each message's float array (0: an Action
+without data; 21168: one 84x84 RGB frame's bytes, what a pixel step carries).
+
+    source scripts/env.sh && python benchmarks/bench_handover.py [--rounds 3000] \
+        [--payload-bytes 0,21168] [--rings pipe,rclpy-events,...] [--csv out.csv]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+import csv
+import multiprocessing
+from pathlib import Path
+import sys
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+LOOP_HANDOVERS = 3
+"""Hand-overs in turn per live-loop step: sim_bridge -> estimator -> policy -> sim_bridge."""
+RINGS = ('pipe', 'rclpy-single', 'rclpy-events', 'rclpy-events+sender', 'one-process-dds',
+         'one-process-bus', 'one-process-bus+sender')
+START_TIMEOUT = 60.0
+"""Seconds a ring may take to carry its first message (discovery of n processes)."""
+
+
+def link_topic(index: int) -> str:
+    """The topic from ring member `index` to the next (a name token may not start with a digit)."""
+    return f'/handover_ring/link_{index}'
+
+
+def _pipe_member(inbox: Any, outbox: Any, work: float) -> None:
+    """Pass on every message after `work` s of work, until an empty one (passed on too)."""
+    while True:
+        message = inbox.recv_bytes()
+        if message:
+            busy(work)
+        outbox.send_bytes(message)
+        if not message:
+            return
+
+
+def pipe_ring(rounds: int, payload_bytes: int, work: Sequence[float]) -> float:
+    """Seconds per round of a ring of len(work) processes joined by pipes."""
+    members = len(work)
+    spawn = multiprocessing.get_context('spawn')
+    pipes = [spawn.Pipe(duplex=False) for _ in range(members)]  # pipes[i]: member i -> i + 1
+    children = [spawn.Process(target=_pipe_member, args=(pipes[i - 1][0], pipes[i][1], work[i]))
+                for i in range(1, members)]
+    for child in children:
+        child.start()
+    inbox, outbox = pipes[members - 1][0], pipes[0][1]
+    message = b'x' * max(1, payload_bytes)
+    outbox.send_bytes(message)  # one round to start every member
+    inbox.recv_bytes()
+    start = time.perf_counter()
+    for _ in range(rounds):
+        busy(work[0])
+        outbox.send_bytes(message)
+        inbox.recv_bytes()
+    elapsed = time.perf_counter() - start
+    outbox.send_bytes(b'')
+    inbox.recv_bytes()
+    for child in children:
+        child.join(timeout=10)
+    return elapsed / rounds
+
+
+def _message(payload_bytes: int) -> Any:
+    from zeus_msgs.msg import Action
+
+    message = Action()
+    if payload_bytes:
+        message.data = np.zeros(payload_bytes // 4, np.float32)
+    return message
+
+
+class _Ring:
+    """Member 0 of a ring: injects step k, times the rounds, passes the next step on arrival."""
+
+    def __init__(self, node: Any, members: int, rounds: int, payload_bytes: int,
+                 work: float = 0.0, sender: bool = False) -> None:
+        from zeus_msgs.msg import Action
+
+        from zeus_ros.nodes.common import step_qos
+
+        self.rounds, self.work = rounds, work
+        self.message = _message(payload_bytes)
+        self.step = 0  # steps below 1 are warm-up injections, re-sent until one comes round
+        self.started = self.finished = 0.0
+        self.publisher = node.create_publisher(Action, link_topic(0), step_qos())
+        subscribe(node, link_topic(members - 1), self.on_message, sender)
+
+    def inject(self) -> None:
+        """Send the warm-up message again until the ring is matched end to end."""
+        if self.step == 0:
+            self.publisher.publish(self.message)
+
+    def on_message(self, message: Any) -> None:
+        if message.step != self.step or self.finished:
+            return  # a duplicate warm-up message
+        if self.step == 0:
+            self.started = time.perf_counter()
+        elif self.step == self.rounds:
+            self.finished = time.perf_counter()
+            return
+        self.step += 1
+        self.message.step = self.step
+        busy(self.work)
+        self.publisher.publish(self.message)
+
+    def seconds_per_round(self) -> float:
+        return (self.finished - self.started) / self.rounds
+
+
+def busy(seconds: float) -> None:
+    """Hold the CPU for `seconds`, as a node's own work does (not a sleep: no wake-up)."""
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
+        pass
+
+
+def subscribe(node: Any, topic: str, callback: Any, sender: bool) -> None:
+    """A plain subscription, or (`sender`) a SenderSubscription.
+
+    sim_bridge and the policy take actions and contexts through one (nodes/senders.py).
+    """
+    from zeus_msgs.msg import Action
+
+    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.senders import SenderSubscription
+
+    if sender:
+        SenderSubscription(node, Action, topic, step_qos(), callback, admit=lambda _gid: True)
+    else:
+        node.create_subscription(Action, topic, callback, step_qos())
+
+
+def _relay(node: Any, index: int, members: int, work: float = 0.0, sender: bool = False
+           ) -> None:
+    """Member `index` > 0: works `work` s on what arrives on the link before it, passes it on.
+
+    `sender`: the last member (the policy's place) takes through a SenderSubscription.
+    """
+    from zeus_msgs.msg import Action
+
+    from zeus_ros.nodes.common import step_qos
+
+    publisher = node.create_publisher(Action, link_topic(index), step_qos())
+
+    def on_message(message: Any) -> None:
+        busy(work)
+        publisher.publish(message)
+    subscribe(node, link_topic(index - 1), on_message, sender and index == members - 1)
+
+
+def _spin_ring(executor: Any, ring: _Ring) -> float:
+    """Spin until the ring has done its rounds; seconds per round."""
+    deadline = time.monotonic() + START_TIMEOUT
+    while not ring.started:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f'the ring carried no message in {START_TIMEOUT:.0f} s: '
+                               'its members did not discover each other')
+        ring.inject()
+        executor.spin_once(timeout_sec=0.05)
+    while not ring.finished:
+        executor.spin_once(timeout_sec=1.0)
+    return ring.seconds_per_round()
+
+
+def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_kind: str,
+               sender: bool = False) -> float:
+    """Seconds per round of a ring of len(work) processes, one rclpy node each."""
+    import rclpy
+    from rclpy.context import Context
+
+    from zeus_ros.nodes.common import EXECUTOR_ENV, make_executor
+    from zeus_ros.processes import ros_env, start_node, stop_nodes
+
+    env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
+    env[EXECUTOR_ENV] = executor_kind
+    log = (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w')
+    members = len(work)
+    relays = [start_node([sys.executable, __file__, '--relay', str(index), '--members',
+                          str(members), '--relay-work', str(work[index]),
+                          *(['--relay-sender'] if sender else [])], env, stdout=log)
+              for index in range(1, members)]
+    context = Context()  # its own: a caller's (a test's) default context stays untouched
+    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+    try:
+        node = rclpy.create_node('handover_0', context=context)
+        ring = _Ring(node, members, rounds, payload_bytes, work[0], sender)
+        executor = make_executor([node], executor_kind, context)
+        seconds = _spin_ring(executor, ring)
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        stop_nodes(relays, deadline=time.monotonic() + 10)
+        log.close()
+    return seconds
+
+
+def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus: bool,
+                     sender: bool = False) -> float:
+    """Seconds per round of a ring of len(work) nodes of one process on one executor."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    from zeus_ros.nodes.common import make_executor
+    from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
+    from zeus_ros.processes import ros_env
+
+    node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
+    context = Context()
+    rclpy.init(context=context, domain_id=int(ros_env()['ROS_DOMAIN_ID']))
+    try:
+        members = len(work)
+        nodes = [node_class(f'handover_{index}', context=context) for index in range(members)]
+        ring = _Ring(nodes[0], members, rounds, payload_bytes, work[0], sender)
+        for index in range(1, members):
+            _relay(nodes[index], index, members, work[index], sender)
+        executor = make_executor(nodes, context=context)
+        seconds = _spin_ring(executor, ring)
+        executor.shutdown()
+        for node in nodes:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    return seconds
+
+
+def relay_main(index: int, members: int, work: float, sender: bool) -> None:
+    """A ring member in its own process (the --relay entry point), until stopped."""
+    import rclpy
+
+    from zeus_ros.nodes.common import make_executor
+
+    rclpy.init()
+    node = rclpy.create_node(f'handover_{index}')
+    _relay(node, index, members, work, sender)
+    executor = make_executor([node])
+    try:  # spin_once, as the nodes: rclpy's EventsExecutor.spin() delivered nothing here
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        rclpy.try_shutdown()
+
+
+def round_seconds(ring: str, rounds: int, payload_bytes: int, work: Sequence[float]) -> float:
+    """Seconds per round of the ring named `ring` (RINGS), member i working work[i] s.
+
+    A name ending in `+sender` takes the links into sim_bridge's and the policy's places
+    through SenderSubscriptions, as those nodes do.
+    """
+    base, sender = ring.removesuffix('+sender'), ring.endswith('+sender')
+    if base == 'pipe' and not sender:
+        return pipe_ring(rounds, payload_bytes, work)
+    if base in ('rclpy-single', 'rclpy-events'):
+        return rclpy_ring(rounds, payload_bytes, work, base.removeprefix('rclpy-'), sender)
+    if base in ('one-process-dds', 'one-process-bus'):
+        return one_process_ring(rounds, payload_bytes, work, base.endswith('bus'), sender)
+    raise ValueError(f'unknown ring {ring!r}: one of {", ".join(RINGS)}')
+
+
+def loop_bound(period: float, handover: float) -> float:
+    """The highest ratio to the in-process rate a loop of LOOP_HANDOVERS hand-overs can reach."""
+    return period / (period + LOOP_HANDOVERS * handover)
+
+
+def in_process_parts(steps: int) -> tuple[float, dict[str, float]]:
+    """The in-process state loop's period and each node's part of it, in seconds."""
+    from bench_live_loop import in_process_rate, make_checkpoint
+
+    with tempfile.TemporaryDirectory() as tmp:
+        checkpoint = make_checkpoint(Path(tmp) / 'state.pt', 'state')
+        rate, _, parts = in_process_rate(checkpoint, steps)
+    return 1.0 / rate, {name: ms * 1e-3 for name, ms in parts.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rounds', type=int, default=3000)
+    parser.add_argument('--members', type=int, default=LOOP_HANDOVERS)
+    parser.add_argument('--payload-bytes', default='0,21168')
+    parser.add_argument('--rings', default=','.join(RINGS))
+    parser.add_argument('--in-process-steps', type=int, default=1000,
+                        help='steps of the in-process state loop that gives W (0: skip)')
+    parser.add_argument('--csv', type=Path, default=None)
+    parser.add_argument('--relay', type=int, default=None, help=argparse.SUPPRESS)
+    parser.add_argument('--relay-work', type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument('--relay-sender', action='store_true', help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.relay is not None:
+        relay_main(args.relay, args.members, args.relay_work, args.relay_sender)
+        return
+    rings = args.rings.split(',')
+    rows = []
+    for payload in (int(b) for b in args.payload_bytes.split(',')):
+        for ring in rings:
+            seconds = round_seconds(ring, args.rounds, payload, [0.0] * args.members)
+            rows.append({'ring': ring, 'payload_bytes': payload, 'work_ms': 0.0,
+                         'round_ms': seconds * 1e3, 'handover_us': seconds / args.members * 1e6})
+            print(f'{ring:>16} payload {payload:>6} B: {rows[-1]["handover_us"]:8.1f} us per '
+                  'hand-over', flush=True)
+    if args.in_process_steps and args.members == LOOP_HANDOVERS:
+        period, parts = in_process_parts(args.in_process_steps)
+        work = [parts['sim_bridge'], parts['estimator'], parts['policy']]  # ring order
+        print(f'in-process state loop: {1 / period:.0f} steps/s, W = {period * 1e3:.2f} ms '
+              f'(sim_bridge {work[0] * 1e3:.2f}, estimator {work[1] * 1e3:.2f}, policy '
+              f'{work[2] * 1e3:.2f}); ratio to it of a loop of {LOOP_HANDOVERS} hand-overs:')
+        print(f'{"":>16}  {"W/(W+3h)":>9}  {"members work as in process: ratio, h":>38}')
+        for ring in rings:
+            handover = next(row['handover_us'] for row in rows
+                            if row['ring'] == ring and row['payload_bytes'] == 0) * 1e-6
+            seconds = round_seconds(ring, args.rounds, 0, work)
+            ratio, loaded = period / seconds, (seconds - sum(work)) / LOOP_HANDOVERS
+            rows.append({'ring': ring, 'payload_bytes': 0, 'work_ms': sum(work) * 1e3,
+                         'round_ms': seconds * 1e3, 'handover_us': loaded * 1e6,
+                         'ratio_to_in_process': ratio})
+            print(f'{ring:>16}  {loop_bound(period, handover):>8.2f}x  {ratio:>25.2f}x, '
+                  f'{loaded * 1e6:6.1f} us', flush=True)
+    if args.csv:
+        with args.csv.open('w', newline='') as out:
+            writer = csv.DictWriter(out, fieldnames=[*rows[-1]], restval='')
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,41 @@
+"""bench_handover.py: its rings carry every round, members' work adds up, the bound's sums."""
+
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+import pytest
+
+from ros_harness import fresh_domain_id, require_ros
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
+
+from bench_handover import LOOP_HANDOVERS, loop_bound, round_seconds
+
+
+def test_bound_is_the_in_process_period_over_the_period_with_the_handovers() -> None:
+    assert loop_bound(1e-3, 0.0) == 1.0
+    assert loop_bound(0.6e-3, 0.1e-3) == pytest.approx(0.6 / (0.6 + LOOP_HANDOVERS * 0.1))
+
+
+def test_pipe_ring_members_work_in_turn() -> None:
+    work = [0.4e-3, 0.3e-3, 0.2e-3]
+    idle = round_seconds('pipe', 50, 64, [0.0] * 3)
+    busy = round_seconds('pipe', 50, 64, work)
+    assert 0 < idle < busy
+    assert busy >= sum(work)  # the members work one after another, never side by side
+
+
+@pytest.mark.parametrize('ring', ['rclpy-events+sender', 'one-process-dds', 'one-process-bus'])
+def test_ros_rings_carry_every_round(ring: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    require_ros()
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(fresh_domain_id()))
+    work = [0.2e-3, 0.1e-3, 0.1e-3]
+    seconds = round_seconds(ring, 100, 21168, work)
+    assert sum(work) <= seconds < 0.5  # each round passed every member's work once
+
+
+def test_unknown_ring_is_named() -> None:
+    with pytest.raises(ValueError, match=r"unknown ring 'pipe-dream'.*rclpy-events"):
+        round_seconds('pipe-dream', 10, 0, [0.0] * 3)
