@@ -30,19 +30,21 @@ without data; 21168: one 84x84 RGB frame's bytes, what a pixel step carries).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import csv
 import multiprocessing
 from pathlib import Path
 import sys
 import tempfile
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from bench_live_loop import cpu_seconds, in_process_rate, make_checkpoint  # noqa: E402
+
 LOOP_HANDOVERS = 3
 """Hand-overs in turn per live-loop step: sim_bridge -> estimator -> policy -> sim_bridge."""
 RINGS = ('pipe', 'rclpy-single', 'rclpy-events', 'rclpy-events+sender', 'one-process-dds',
@@ -67,8 +69,15 @@ def _pipe_member(inbox: Any, outbox: Any, work: float) -> None:
             return
 
 
-def pipe_ring(rounds: int, payload_bytes: int, work: Sequence[float]) -> float:
-    """Seconds per round of a ring of len(work) processes joined by pipes."""
+class Round(NamedTuple):
+    """One round of a ring: wall-clock seconds, and CPU seconds of all members together."""
+
+    wall: float
+    cpu: float
+
+
+def pipe_ring(rounds: int, payload_bytes: int, work: Sequence[float]) -> Round:
+    """A round of a ring of len(work) processes joined by pipes."""
     members = len(work)
     spawn = multiprocessing.get_context('spawn')
     pipes = [spawn.Pipe(duplex=False) for _ in range(members)]  # pipes[i]: member i -> i + 1
@@ -80,17 +89,19 @@ def pipe_ring(rounds: int, payload_bytes: int, work: Sequence[float]) -> float:
     message = b'x' * max(1, payload_bytes)
     outbox.send_bytes(message)  # one round to start every member
     inbox.recv_bytes()
-    start = time.perf_counter()
+    def cpu() -> float:
+        return time.process_time() + sum(cpu_seconds(child.pid) for child in children)
+    cpu_start, start = cpu(), time.perf_counter()
     for _ in range(rounds):
         busy(work[0])
         outbox.send_bytes(message)
         inbox.recv_bytes()
-    elapsed = time.perf_counter() - start
+    elapsed, cpu_used = time.perf_counter() - start, cpu() - cpu_start
     outbox.send_bytes(b'')
     inbox.recv_bytes()
     for child in children:
         child.join(timeout=10)
-    return elapsed / rounds
+    return Round(elapsed / rounds, cpu_used / rounds)
 
 
 def _message(payload_bytes: int) -> Any:
@@ -136,8 +147,6 @@ class _Ring:
         busy(self.work)
         self.publisher.publish(self.message)
 
-    def seconds_per_round(self) -> float:
-        return (self.finished - self.started) / self.rounds
 
 
 def busy(seconds: float) -> None:
@@ -181,8 +190,8 @@ def _relay(node: Any, index: int, members: int, work: float = 0.0, sender: bool 
     subscribe(node, link_topic(index - 1), on_message, sender and index == members - 1)
 
 
-def _spin_ring(executor: Any, ring: _Ring) -> float:
-    """Spin until the ring has done its rounds; seconds per round."""
+def _spin_ring(executor: Any, ring: _Ring, cpu: Callable[[], float]) -> Round:
+    """Spin until the ring has done its rounds; `cpu`: the members' CPU seconds so far."""
     deadline = time.monotonic() + START_TIMEOUT
     while not ring.started:
         if time.monotonic() > deadline:
@@ -190,14 +199,15 @@ def _spin_ring(executor: Any, ring: _Ring) -> float:
                                'its members did not discover each other')
         ring.inject()
         executor.spin_once(timeout_sec=0.05)
+    cpu_start = cpu()  # a round or so after the start: a small part of the rounds
     while not ring.finished:
         executor.spin_once(timeout_sec=1.0)
-    return ring.seconds_per_round()
+    return Round((ring.finished - ring.started) / ring.rounds, (cpu() - cpu_start) / ring.rounds)
 
 
 def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_kind: str,
-               sender: bool = False) -> float:
-    """Seconds per round of a ring of len(work) processes, one rclpy node each."""
+               sender: bool = False) -> Round:
+    """A round of a ring of len(work) processes, one rclpy node each."""
     import rclpy
     from rclpy.context import Context
 
@@ -218,19 +228,20 @@ def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_
         node = rclpy.create_node('handover_0', context=context)
         ring = _Ring(node, members, rounds, payload_bytes, work[0], sender)
         executor = make_executor([node], executor_kind, context)
-        seconds = _spin_ring(executor, ring)
+        timing = _spin_ring(executor, ring, lambda: time.process_time() + sum(
+            cpu_seconds(relay.pid) for relay in relays))
         executor.shutdown()
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
         stop_nodes(relays, deadline=time.monotonic() + 10)
         log.close()
-    return seconds
+    return timing
 
 
 def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus: bool,
-                     sender: bool = False) -> float:
-    """Seconds per round of a ring of len(work) nodes of one process on one executor."""
+                     sender: bool = False) -> Round:
+    """A round of a ring of len(work) nodes of one process on one executor."""
     import rclpy
     from rclpy.context import Context
     from rclpy.node import Node
@@ -249,13 +260,13 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
         for index in range(1, members):
             _relay(nodes[index], index, members, work[index], sender)
         executor = make_executor(nodes, context=context)
-        seconds = _spin_ring(executor, ring)
+        timing = _spin_ring(executor, ring, time.process_time)
         executor.shutdown()
         for node in nodes:
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
-    return seconds
+    return timing
 
 
 def relay_main(index: int, members: int, work: float, sender: bool) -> None:
@@ -277,8 +288,8 @@ def relay_main(index: int, members: int, work: float, sender: bool) -> None:
         rclpy.try_shutdown()
 
 
-def round_seconds(ring: str, rounds: int, payload_bytes: int, work: Sequence[float]) -> float:
-    """Seconds per round of the ring named `ring` (RINGS), member i working work[i] s.
+def ring_round(ring: str, rounds: int, payload_bytes: int, work: Sequence[float]) -> Round:
+    """A round of the ring named `ring` (RINGS), member i working work[i] s.
 
     A name ending in `+sender` takes the links into sim_bridge's and the policy's places
     through SenderSubscriptions, as those nodes do.
@@ -300,8 +311,6 @@ def loop_bound(period: float, handover: float) -> float:
 
 def in_process_parts(steps: int) -> tuple[float, dict[str, float]]:
     """The in-process state loop's period and each node's part of it, in seconds."""
-    from bench_live_loop import in_process_rate, make_checkpoint
-
     with tempfile.TemporaryDirectory() as tmp:
         checkpoint = make_checkpoint(Path(tmp) / 'state.pt', 'state')
         rate, _, parts = in_process_rate(checkpoint, steps)
@@ -328,28 +337,34 @@ def main() -> None:
     rows = []
     for payload in (int(b) for b in args.payload_bytes.split(',')):
         for ring in rings:
-            seconds = round_seconds(ring, args.rounds, payload, [0.0] * args.members)
+            timing = ring_round(ring, args.rounds, payload, [0.0] * args.members)
             rows.append({'ring': ring, 'payload_bytes': payload, 'work_ms': 0.0,
-                         'round_ms': seconds * 1e3, 'handover_us': seconds / args.members * 1e6})
-            print(f'{ring:>16} payload {payload:>6} B: {rows[-1]["handover_us"]:8.1f} us per '
-                  'hand-over', flush=True)
+                         'round_ms': timing.wall * 1e3,
+                         'handover_us': timing.wall / args.members * 1e6,
+                         'cpu_per_handover_us': timing.cpu / args.members * 1e6})
+            print(f'{ring:>22} payload {payload:>6} B: {rows[-1]["handover_us"]:6.1f} us per '
+                  f'hand-over, CPU {rows[-1]["cpu_per_handover_us"]:6.1f} us', flush=True)
     if args.in_process_steps and args.members == LOOP_HANDOVERS:
         period, parts = in_process_parts(args.in_process_steps)
         work = [parts['sim_bridge'], parts['estimator'], parts['policy']]  # ring order
         print(f'in-process state loop: {1 / period:.0f} steps/s, W = {period * 1e3:.2f} ms '
               f'(sim_bridge {work[0] * 1e3:.2f}, estimator {work[1] * 1e3:.2f}, policy '
               f'{work[2] * 1e3:.2f}); ratio to it of a loop of {LOOP_HANDOVERS} hand-overs:')
-        print(f'{"":>16}  {"W/(W+3h)":>9}  {"members work as in process: ratio, h":>38}')
+        print(f'{"":>22}  W/(W+3h)  members working as in process: ratio, h, CPU per '
+              'hand-over beyond the work')
         for ring in rings:
             handover = next(row['handover_us'] for row in rows
                             if row['ring'] == ring and row['payload_bytes'] == 0) * 1e-6
-            seconds = round_seconds(ring, args.rounds, 0, work)
-            ratio, loaded = period / seconds, (seconds - sum(work)) / LOOP_HANDOVERS
+            timing = ring_round(ring, args.rounds, 0, work)
+            loaded = (timing.wall - sum(work)) / LOOP_HANDOVERS
+            cpu = (timing.cpu - sum(work)) / LOOP_HANDOVERS
             rows.append({'ring': ring, 'payload_bytes': 0, 'work_ms': sum(work) * 1e3,
-                         'round_ms': seconds * 1e3, 'handover_us': loaded * 1e6,
-                         'ratio_to_in_process': ratio})
-            print(f'{ring:>16}  {loop_bound(period, handover):>8.2f}x  {ratio:>25.2f}x, '
-                  f'{loaded * 1e6:6.1f} us', flush=True)
+                         'round_ms': timing.wall * 1e3, 'handover_us': loaded * 1e6,
+                         'cpu_per_handover_us': cpu * 1e6,
+                         'ratio_to_in_process': period / timing.wall})
+            print(f'{ring:>22}  {loop_bound(period, handover):>7.2f}x  '
+                  f'{period / timing.wall:>8.2f}x, {loaded * 1e6:6.1f} us, {cpu * 1e6:6.1f} us',
+                  flush=True)
     if args.csv:
         with args.csv.open('w', newline='') as out:
             writer = csv.DictWriter(out, fieldnames=[*rows[-1]], restval='')
