@@ -12,7 +12,9 @@ hand-overs, so a hand-over costs round time / n. Rings:
 - `one-process-dds`: n nodes of one process on one executor, every message through DDS (as
   `zeus launch --single-process --no-intra-process`);
 - `one-process-bus`: the same nodes with the container's intra-process bus (as
-  `zeus launch --single-process`).
+  `zeus launch --single-process`);
+- a name ending in `+sender`: the links into sim_bridge's and the policy's places go through
+  `SenderSubscription`s (nodes/senders.py), as those nodes take actions and contexts.
 
 Then what that leaves of the in-process rate: with W the in-process state loop's period
 (bench_live_loop.in_process_rate, the work of the three nodes, no messages) and h a hand-over,
@@ -20,8 +22,12 @@ a loop of three hand-overs runs at most at W / (W + 3h) of the in-process rate. 
 then run again with its members working (a busy loop, no sleep) as long as each node's part of
 W in process, sim_bridge's, the estimator's, the policy's in ring order: the ratio a live loop
 would reach if its nodes did exactly their in-process work and paid the platform's hand-overs,
-and h under that load. `--payload-bytes` sizes each message's float array (0: an Action
-without data; 21168: one 84x84 RGB frame's bytes, what a pixel step carries).
+and h under that load. Last, how long one `publish()` holds its caller with 0, 1 and 2
+subscriber processes matched: each reader outside costs the publisher, whatever the layout.
+`--payload-bytes` sizes each message's float array (0: an Action without data; 21168: one
+84x84 RGB frame's bytes, what a pixel step carries). Rings start with their own rclpy
+context; relays loop on `spin_once`, as the nodes do (rclpy's EventsExecutor.spin() delivered
+nothing in a relay here and ignored SIGTERM).
 
     source scripts/env.sh && python benchmarks/bench_handover.py [--rounds 3000] \
         [--payload-bytes 0,21168] [--rings pipe,rclpy-events,...] [--csv out.csv]
@@ -33,6 +39,7 @@ import argparse
 from collections.abc import Callable, Sequence
 import csv
 import multiprocessing
+import os
 from pathlib import Path
 import sys
 import tempfile
@@ -276,7 +283,7 @@ def relay_main(index: int, members: int, work: float, sender: bool) -> None:
     from zeus_ros.nodes.common import make_executor
 
     rclpy.init()
-    node = rclpy.create_node(f'handover_{index}')
+    node = rclpy.create_node(f'handover_{index}_{os.getpid()}')  # publish_cost runs several
     _relay(node, index, members, work, sender)
     executor = make_executor([node])
     try:  # spin_once, as the nodes: rclpy's EventsExecutor.spin() delivered nothing here
@@ -286,6 +293,48 @@ def relay_main(index: int, members: int, work: float, sender: bool) -> None:
         pass
     finally:
         rclpy.try_shutdown()
+
+
+def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-3) -> float:
+    """Seconds one publish() holds its caller with `readers` subscriber processes matched.
+
+    Published every `gap` s (the caller busy in between, as a node working), not back to
+    back, so each reader has taken the previous message.
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.processes import ros_env, start_node, stop_nodes
+
+    env = ros_env()
+    log = (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w')
+    sinks = [start_node([sys.executable, __file__, '--relay', '1', '--members', '2'], env,
+                        stdout=log) for _ in range(readers)]
+    context = Context()
+    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
+    try:
+        node = rclpy.create_node('publisher', context=context)
+        publisher = node.create_publisher(type(_message(0)), link_topic(0), step_qos())
+        deadline = time.monotonic() + START_TIMEOUT
+        while publisher.get_subscription_count() < readers:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'{readers} readers did not match in {START_TIMEOUT:.0f} s')
+            time.sleep(0.05)
+        time.sleep(0.5)  # the readers' own discovery settles
+        message, held = _message(payload_bytes), 0.0
+        for step in range(rounds):
+            message.step = step
+            start = time.perf_counter()
+            publisher.publish(message)
+            held += time.perf_counter() - start
+            busy(gap)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        stop_nodes(sinks, deadline=time.monotonic() + 10)
+        log.close()
+    return held / rounds
 
 
 def ring_round(ring: str, rounds: int, payload_bytes: int, work: Sequence[float]) -> Round:
@@ -344,6 +393,12 @@ def main() -> None:
                          'cpu_per_handover_us': timing.cpu / args.members * 1e6})
             print(f'{ring:>22} payload {payload:>6} B: {rows[-1]["handover_us"]:6.1f} us per '
                   f'hand-over, CPU {rows[-1]["cpu_per_handover_us"]:6.1f} us', flush=True)
+    for payload in (int(b) for b in args.payload_bytes.split(',')):
+        costs = [publish_cost(readers, args.rounds, payload) for readers in (0, 1, 2)]
+        rows.extend({'ring': f'publish-{readers}-readers', 'payload_bytes': payload,
+                     'publish_us': cost * 1e6} for readers, cost in enumerate(costs))
+        print(f'publish() with 0 / 1 / 2 subscriber processes, payload {payload} B: '
+              f'{" / ".join(f"{cost * 1e6:.1f}" for cost in costs)} us in the call', flush=True)
     if args.in_process_steps and args.members == LOOP_HANDOVERS:
         period, parts = in_process_parts(args.in_process_steps)
         work = [parts['sim_bridge'], parts['estimator'], parts['policy']]  # ring order
@@ -367,7 +422,8 @@ def main() -> None:
                   flush=True)
     if args.csv:
         with args.csv.open('w', newline='') as out:
-            writer = csv.DictWriter(out, fieldnames=[*rows[-1]], restval='')
+            fields = list(dict.fromkeys(key for row in rows for key in row))
+            writer = csv.DictWriter(out, fieldnames=fields, restval='')
             writer.writeheader()
             writer.writerows(rows)
 

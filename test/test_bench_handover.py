@@ -11,7 +11,7 @@ from ros_harness import fresh_domain_id, require_ros
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
 
-from bench_handover import LOOP_HANDOVERS, loop_bound, ring_round
+from bench_handover import LOOP_HANDOVERS, loop_bound, publish_cost, ring_round
 
 
 def test_bound_is_the_in_process_period_over_the_period_with_the_handovers() -> None:
@@ -41,3 +41,9 @@ def test_ros_rings_carry_every_round(ring: str, monkeypatch: pytest.MonkeyPatch)
 def test_unknown_ring_is_named() -> None:
     with pytest.raises(ValueError, match=r"unknown ring 'pipe-dream'.*rclpy-events"):
         ring_round('pipe-dream', 10, 0, [0.0] * 3)
+
+
+def test_publish_cost_waits_for_its_readers(monkeypatch: pytest.MonkeyPatch) -> None:
+    require_ros()
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(fresh_domain_id()))
+    assert 0 < publish_cost(2, 20, 64) < 0.1  # raises if the two readers never matched
