@@ -36,7 +36,8 @@ nothing in a relay here and ignored SIGTERM).
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 import csv
 import multiprocessing
 import os
@@ -46,11 +47,12 @@ import tempfile
 import time
 from typing import Any, NamedTuple
 
+from bench_live_loop import (  # puts the repo on the path
+    cpu_seconds,
+    in_process_rate,
+    make_checkpoint,
+)
 import numpy as np
-
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-from bench_live_loop import cpu_seconds, in_process_rate, make_checkpoint  # noqa: E402
 
 LOOP_HANDOVERS = 3
 """Hand-overs in turn per live-loop step: sim_bridge -> estimator -> policy -> sim_bridge."""
@@ -67,13 +69,10 @@ def link_topic(index: int) -> str:
 
 def _pipe_member(inbox: Any, outbox: Any, work: float) -> None:
     """Pass on every message after `work` s of work, until an empty one (passed on too)."""
-    while True:
-        message = inbox.recv_bytes()
-        if message:
-            busy(work)
+    while message := inbox.recv_bytes():
+        busy(work)
         outbox.send_bytes(message)
-        if not message:
-            return
+    outbox.send_bytes(message)
 
 
 class Round(NamedTuple):
@@ -155,7 +154,6 @@ class _Ring:
         self.publisher.publish(self.message)
 
 
-
 def busy(seconds: float) -> None:
     """Hold the CPU for `seconds`, as a node's own work does (not a sleep: no wake-up)."""
     end = time.perf_counter() + seconds
@@ -212,26 +210,48 @@ def _spin_ring(executor: Any, ring: _Ring, cpu: Callable[[], float]) -> Round:
     return Round((ring.finished - ring.started) / ring.rounds, (cpu() - cpu_start) / ring.rounds)
 
 
+@contextmanager
+def _own_context(domain_id: int) -> Iterator[Any]:
+    """An rclpy context of its own on `domain_id`: a caller's (a test's) default is untouched."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@contextmanager
+def _helpers(argvs: Sequence[Sequence[str]], env: dict[str, str]) -> Iterator[list[Any]]:
+    """Child processes of this script (relays, sinks), stopped on leaving; their log in /tmp."""
+    from zeus_ros.processes import start_node, stop_nodes
+
+    with (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w') as log:
+        children = [start_node([sys.executable, __file__, *argv], env, stdout=log)
+                    for argv in argvs]
+        try:
+            yield children
+        finally:
+            stop_nodes(children, deadline=time.monotonic() + 10)
+
+
 def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_kind: str,
                sender: bool = False) -> Round:
     """A round of a ring of len(work) processes, one rclpy node each."""
     import rclpy
-    from rclpy.context import Context
 
     from zeus_ros.nodes.common import EXECUTOR_ENV, make_executor
-    from zeus_ros.processes import ros_env, start_node, stop_nodes
+    from zeus_ros.processes import ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     env[EXECUTOR_ENV] = executor_kind
-    log = (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w')
     members = len(work)
-    relays = [start_node([sys.executable, __file__, '--relay', str(index), '--members',
-                          str(members), '--relay-work', str(work[index]),
-                          *(['--relay-sender'] if sender else [])], env, stdout=log)
-              for index in range(1, members)]
-    context = Context()  # its own: a caller's (a test's) default context stays untouched
-    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
-    try:
+    argvs = [['--relay', str(index), '--members', str(members), '--relay-work', str(work[index]),
+              *(['--relay-sender'] if sender else [])] for index in range(1, members)]
+    with _helpers(argvs, env) as relays, _own_context(int(env['ROS_DOMAIN_ID'])) as context:
         node = rclpy.create_node('handover_0', context=context)
         ring = _Ring(node, members, rounds, payload_bytes, work[0], sender)
         executor = make_executor([node], executor_kind, context)
@@ -239,18 +259,12 @@ def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_
             cpu_seconds(relay.pid) for relay in relays))
         executor.shutdown()
         node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-        stop_nodes(relays, deadline=time.monotonic() + 10)
-        log.close()
     return timing
 
 
 def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus: bool,
                      sender: bool = False) -> Round:
     """A round of a ring of len(work) nodes of one process on one executor."""
-    import rclpy
-    from rclpy.context import Context
     from rclpy.node import Node
 
     from zeus_ros.nodes.common import make_executor
@@ -258,9 +272,7 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
     from zeus_ros.processes import ros_env
 
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
-    context = Context()
-    rclpy.init(context=context, domain_id=int(ros_env()['ROS_DOMAIN_ID']))
-    try:
+    with _own_context(int(ros_env()['ROS_DOMAIN_ID'])) as context:
         members = len(work)
         nodes = [node_class(f'handover_{index}', context=context) for index in range(members)]
         ring = _Ring(nodes[0], members, rounds, payload_bytes, work[0], sender)
@@ -271,8 +283,6 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
         executor.shutdown()
         for node in nodes:
             node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
     return timing
 
 
@@ -302,20 +312,16 @@ def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-
     back, so each reader has taken the previous message.
     """
     import rclpy
-    from rclpy.context import Context
+    from zeus_msgs.msg import Action
 
     from zeus_ros.nodes.common import step_qos
-    from zeus_ros.processes import ros_env, start_node, stop_nodes
+    from zeus_ros.processes import ros_env
 
     env = ros_env()
-    log = (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w')
-    sinks = [start_node([sys.executable, __file__, '--relay', '1', '--members', '2'], env,
-                        stdout=log) for _ in range(readers)]
-    context = Context()
-    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
-    try:
+    sink = ['--relay', '1', '--members', '2']  # a relay whose link onwards nobody reads
+    with _helpers([sink] * readers, env), _own_context(int(env['ROS_DOMAIN_ID'])) as context:
         node = rclpy.create_node('publisher', context=context)
-        publisher = node.create_publisher(type(_message(0)), link_topic(0), step_qos())
+        publisher = node.create_publisher(Action, link_topic(0), step_qos())
         deadline = time.monotonic() + START_TIMEOUT
         while publisher.get_subscription_count() < readers:
             if time.monotonic() > deadline:
@@ -330,10 +336,6 @@ def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-
             held += time.perf_counter() - start
             busy(gap)
         node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
-        stop_nodes(sinks, deadline=time.monotonic() + 10)
-        log.close()
     return held / rounds
 
 
