@@ -12,11 +12,14 @@ runs from StepFeedback k's source timestamp to Action k's: each stamped by the p
 process's DDS writer when sim_bridge, then the policy, publishes, on the same machine clock, so
 it is the time the loop took and nothing of the probe's (`p99 seen`: the probe's own callback
 times, as before session 17, which add the probe's wake-ups: a Python process on the same
-cores). /proc gives each node's resident memory. The probe is itself an outside subscriber: the
+cores; `p99 bridge`: sim_bridge's own count on /diagnostics, from StepFeedback k published to
+Action k received, the way back included, the one latency a run with no outside reader has).
+/proc gives each node's resident memory. The probe is itself an outside subscriber: the
 container then publishes every step and action on DDS too. `single-quiet` runs the single mode
 with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step count on
-/diagnostics, published at 1 Hz, so it has no latency; the run is sized from the round's
-in-process rate to last about QUIET_SECONDS, long enough for several counts). `--executors
+/diagnostics, published at 1 Hz, its latency from sim_bridge's own count there; the run is
+sized from the round's in-process rate to last about QUIET_SECONDS, long enough for several
+counts). `--executors
 single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
 nodes/common.py), alternately in each round, so a loaded machine weighs on both alike.
 `--context-lags 0,1` likewise runs every mode once per policy `context_lag` (shown as
@@ -238,17 +241,21 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
             sent.setdefault(msg.step, info['source_timestamp'])
         return on_message
     counted: list[tuple[float, int, float]] = []  # single-quiet: time, steps so far, CPU s
+    bridge: dict[str, float] = {}  # sim_bridge's own latency over the run, in its last report
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name.endswith('sim_bridge: step loop'):
-                steps_so_far = int({kv.key: kv.value for kv in status.values}['steps'])
+                values = {kv.key: kv.value for kv in status.values}
+                steps_so_far = int(values['steps'])
                 counted.append((time.perf_counter(), steps_so_far,
                                 sum(cpu_seconds(p.pid) for p in processes.values())))
+                if 0 < steps_so_far < steps:
+                    bridge.update(p50_bridge=float(values['latency_p50_ms_run']),
+                                  p99_bridge=float(values['latency_p99_ms_run']))
 
-    if quiet:
-        probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
-    else:
+    probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
+    if not quiet:
         probe.create_subscription(StepFeedback, TOPICS.STEP, observer(seen_obs, sent_obs),
                                   step_qos(50))
         probe.create_subscription(Action, TOPICS.ACTION, observer(seen_act, sent_act),
@@ -288,8 +295,9 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
                                f'{log_dir}')
         (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
         return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
-                'p50': float('nan'), 'p99': float('nan'), 'p99_seen': float('nan'),
-                **memory_values}
+                'p50': bridge.get('p50_bridge', math.nan),
+                'p99': bridge.get('p99_bridge', math.nan),
+                'p99_seen': float('nan'), **bridge, **memory_values}
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
         raise RuntimeError(f'only {len(done)} steps completed; node logs in {log_dir}')
@@ -302,7 +310,8 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
             'p50': float(np.percentile(latency, 50)),
             'p99': float(np.percentile(latency, 99)),
-            'p99_seen': float(np.percentile(latency_seen, 99)), **memory_values,
+            'p99_seen': float(np.percentile(latency_seen, 99)),
+            **{'p50_bridge': math.nan, 'p99_bridge': math.nan, **bridge}, **memory_values,
             **{f'cpu_{name}': ms for name, ms in per_process.items()},
             **(segment_times({'feedback': sent_obs, 'context': sent_ctx, 'action': sent_act})
                if split else {})}
@@ -344,7 +353,7 @@ def lag_summary(results: list[dict], lags: list[int]) -> list[str]:
         if len(paired) < 2:
             continue
         parts = []
-        for metric in ('rate', 'ratio', 'cpu_ms', 'p50', 'p99', 'p99_seen'):
+        for metric in ('rate', 'ratio', 'cpu_ms', 'p50', 'p99', 'p99_seen', 'p99_bridge'):
             diffs = np.array([rounds[n, lag][metric] - rounds[n, 0][metric] for n in paired])
             error = diffs.std(ddof=1) / np.sqrt(len(diffs))
             parts.append(f'{metric} {diffs.mean():+.3f} ± {error:.3f}')
@@ -405,7 +414,7 @@ def main() -> None:
           'in-process = ScheduledEnv + the deployment code, no ROS)')
     print(f'{"obs":<7} {"mode":<10} {"executor":<8} {"in-proc/s":>9} {"live/s":>8} '
           f'{"ratio [target]":>15} {"CPU ms/step":>13} {"CPU ratio":>9} {"p50 ms":>7} '
-          f'{"p99 ms [target]":>16} {"p99 seen":>8}  '
+          f'{"p99 ms [target]":>16} {"p99 seen":>8} {"p99 bridge":>10}  '
           'RSS MiB per process; CPU ms per step per process')
     results: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -443,7 +452,8 @@ def main() -> None:
                 label = f'{mode}/lag{lag}' if lag else mode
                 print(f'{kind:<7} {label:<10} {executor:<8} {local:>9.1f} {live["rate"]:>8.1f} '
                       f'{ratio_text:>15} {cpu_text:>13} {local_cpu / live["cpu_ms"]:>9.3f} '
-                      f'{live["p50"]:>7.2f} {p99_text:>16} {live["p99_seen"]:>8.2f}  {memory}'
+                      f'{live["p50"]:>7.2f} {p99_text:>16} {live["p99_seen"]:>8.2f} '
+                      f'{live["p99_bridge"]:>10.2f}  {memory}'
                       + (f'; CPU {per_node}' if per_node else ''), flush=True)
                 if 'seg_policy_p50' in live:
                     print(f'{"":<7} {"":<10} split, ms p50 / p99 / mean (in-process): '
@@ -463,8 +473,10 @@ def main() -> None:
         if any('seg_policy_mean' in row for row in results):
             plot_segments(results, SEGMENTS, args.out / 'live_loop_split.png')
             print(f'split: {args.out / "live_loop_split.png"}')
-    print("p50/p99: observation -> action from the publishers' source timestamps; p99 seen: "
-          "from the probe's callback times (adds its wake-ups)")
+    print("p50/p99: observation -> action from the publishers' source timestamps (single-quiet: "
+          "sim_bridge's own, as p99 bridge); p99 seen: from the probe's callback times (adds its "
+          "wake-ups); p99 bridge: sim_bridge's own measure over the run, StepFeedback k published "
+          "to Action k received (the action's way back included; no reader of the loop needed)")
     print("! marks a target not met. CPU ms/step: in-process / live (all the loop's processes, "
           'DDS threads included, 10-90 % of the run); CPU ratio = in-process / live: the rate '
           'ratio an idle machine would show, as far as the loop is CPU-bound; steadier than '

@@ -36,7 +36,6 @@ __all__ = [
     'EXECUTOR_ENV',
     'TOPICS',
     'NodeFinished',
-    'RateMeter',
     'WaitReport',
     'action_qos',
     'array_from_image',
@@ -296,30 +295,6 @@ def array_from_image(msg: Image, expect_shape: tuple[int, int] | None = None) ->
             f'{msg.height}x{msg.width} rgb8 needs {expected}'
         )
     return np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.width, 3)
-
-
-class RateMeter:
-    """Events per second over a sliding window of wall-clock time (for /diagnostics)."""
-
-    def __init__(self, window: float = 5.0) -> None:
-        self._window = window
-        self._times: list[float] = []
-
-    def tick(self) -> None:
-        """Record one event now."""
-        now = time.monotonic()
-        self._times.append(now)
-        cutoff = now - self._window
-        while self._times and self._times[0] < cutoff:
-            self._times.pop(0)
-
-    @property
-    def rate(self) -> float:
-        """Events per second in the window (0 with fewer than two events)."""
-        if len(self._times) < 2:
-            return 0.0
-        span = self._times[-1] - self._times[0]
-        return (len(self._times) - 1) / span if span > 0 else 0.0
 
 
 def diagnostics_message(

@@ -24,13 +24,13 @@ from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_infer
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
-    RateMeter,
     diagnostics_message,
     publisher_qos,
     run_node,
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.offline.evaluation.readout import NoveltyTracker
@@ -66,7 +66,7 @@ class ContextEstimatorNode(Node):
         self._prev: tuple[int, np.ndarray] | None = None
         self._missing_in_episode = 0
         self._rate = RateMeter()
-        self._latency_ms: list[float] = []
+        self._latency = LatencyMeter()  # observation in -> context out
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         expected = self.params['expected_subscribers']
         self.inputs = StepInputs(
@@ -193,8 +193,7 @@ class ContextEstimatorNode(Node):
                                                                  feedback.first))
         self.counts['estimates'] += 1
         self._rate.tick()
-        self._latency_ms.append((time.monotonic() - received) * 1e3)
-        del self._latency_ms[:-500]
+        self._latency.add(time.monotonic() - received)
 
     def _publish_novelty(self, feedback: StepFeedback, score: float | None) -> None:
         """Publish the step's novelty (none before the history holds k transitions)."""
@@ -212,9 +211,9 @@ class ContextEstimatorNode(Node):
         self._last_novelty = score
 
     def _publish_diagnostics(self) -> None:
-        latency = np.percentile(self._latency_ms, [50, 99]) if self._latency_ms else [0.0, 0.0]
-        values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{latency[0]:.2f}',
-                  'latency_p99_ms': f'{latency[1]:.2f}', 'dropped': self.assembler.dropped,
+        (p50, p99), _ = self._latency.report()
+        values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{p50:.2f}',
+                  'latency_p99_ms': f'{p99:.2f}', 'dropped': self.assembler.dropped,
                   'late': self.assembler.late, **self.counts}
         problems = [f'{self.counts[key]} {key}' for key in ('gaps', 'rejected')
                     if self.counts[key]]

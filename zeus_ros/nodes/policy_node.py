@@ -31,7 +31,6 @@ from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_infer
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.common import (
     TOPICS,
-    RateMeter,
     WaitReport,
     action_qos,
     count_publishers,
@@ -40,6 +39,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.meters import RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription

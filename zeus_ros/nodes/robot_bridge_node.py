@@ -32,7 +32,6 @@ from sim_bridge.rewards import JointObservation, load_reward
 from sim_bridge.robot import RobotSpec, parse_context
 from zeus_ros.nodes.common import (
     TOPICS,
-    RateMeter,
     WaitReport,
     diagnostics_message,
     image_from_array,
@@ -42,6 +41,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.meters import RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.robot_io import (
     COMMAND_TYPES,

@@ -4,7 +4,10 @@ For step k it publishes observation o_k (state, and an 84x84 frame when `pixels`
 StepFeedback (reward r_k of a_{k-1}, the action really applied), the true context c_k and /clock,
 all with the same stamp (simulation time) and step index; then it waits for Action k (lockstep)
 or applies the newest action on a wall-clock timer (realtime). The physics loop itself is
-`sim_bridge.env.ScheduledEnv`, shared with the in-process tools.
+`sim_bridge.env.ScheduledEnv`, shared with the in-process tools. Its /diagnostics says how
+long the loop takes to answer: StepFeedback k published to Action k received, p50 / p99 over
+the last second and over the run (`latency_*_ms`, `latency_*_ms_run`), measured with no reader
+of its own on the loop's topics.
 """
 
 from __future__ import annotations
@@ -24,7 +27,6 @@ from sim_bridge.registry import TASK_NAMES, make_task
 from sim_bridge.schedules import schedule_from_config
 from zeus_ros.nodes.common import (
     TOPICS,
-    RateMeter,
     WaitReport,
     diagnostics_message,
     image_from_array,
@@ -36,6 +38,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
 
@@ -92,6 +95,9 @@ class SimBridgeNode(Node):
             0
         )
         self._rate = RateMeter()
+        # Observation -> action as the simulator sees it: StepFeedback k out to Action k in.
+        self._latency = LatencyMeter()
+        self._sent: tuple[int, float] | None = None  # (step, monotonic time) not yet answered
         self._awaiting: int | None = None
         self._deadline = math.inf
         self._newest_action: tuple[float, Action] | None = None
@@ -205,6 +211,9 @@ class SimBridgeNode(Node):
         return problem is None
 
     def _on_action(self, msg: Action) -> None:
+        if self._sent is not None and msg.step == self._sent[0]:
+            self._latency.add(time.monotonic() - self._sent[1])
+            self._sent = None
         if self.mode == 'realtime':
             self._newest_action = (time.monotonic(), msg)
             return
@@ -234,7 +243,8 @@ class SimBridgeNode(Node):
         if max_steps and self.counts['steps'] > max_steps:
             # Observation max_steps got its answer: the loop is complete, stop here.
             if not self.finished:
-                self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}')
+                self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}; '
+                                       f'{self._latency_text()}')
             self._started = False  # said all there is to say
             self.finished = True  # not NodeFinished: the events executor logs what it raises
             return
@@ -287,6 +297,7 @@ class SimBridgeNode(Node):
         )
         feedback.action_status = int(result.status)
         feedback.task = task_name
+        self._sent = (result.step, time.monotonic())
         self._pub_step.publish(feedback)
         # Counted once its StepFeedback is out: a Ctrl-C that stops the publishing below still
         # leaves `close()` naming the last step a recording holds.
@@ -314,10 +325,19 @@ class SimBridgeNode(Node):
         problems = [f'{self.counts[key]} {key}' for key in
                     ('timeouts', 'rejected', 'stale', 'foreign') if self.counts[key]]
         errors = self._senders.errors()
+        (p50, p99), answered = self._latency.report()
+        run_p50, run_p99 = self._latency.percentiles_ms()
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
-                  **self.counts}
+                  'latency_p50_ms': f'{p50:.2f}', 'latency_p99_ms': f'{p99:.2f}',
+                  'latency_p50_ms_run': f'{run_p50:.2f}', 'latency_p99_ms_run': f'{run_p99:.2f}',
+                  'latency_samples': answered, **self.counts}
         self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems, errors))
+
+    def _latency_text(self) -> str:
+        p50, p99 = self._latency.percentiles_ms()
+        return (f'observation -> action p50 {p50:.2f} ms p99 {p99:.2f} ms over '
+                f'{self._latency.count} answered steps')
 
     def destroy_node(self) -> None:
         """The action subscription is ours (not rclpy's): it goes before the node."""
@@ -329,7 +349,7 @@ class SimBridgeNode(Node):
         self.env.task.close()
         if self._started:
             self.get_logger().info(f'stopped after step {self.counts["steps"] - 1}; '
-                                   f'counts {self.counts}')
+                                   f'counts {self.counts}; {self._latency_text()}')
 
 
 def main(args: list[str] | None = None) -> int:
