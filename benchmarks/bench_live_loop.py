@@ -12,12 +12,13 @@ runs from StepFeedback k's source timestamp to Action k's: each stamped by the p
 process's DDS writer when sim_bridge, then the policy, publishes, on the same machine clock, so
 it is the time the loop took and nothing of the probe's (`p99 seen`: the probe's own callback
 times, as before session 17, which add the probe's wake-ups: a Python process on the same
-cores; `p99 bridge`: sim_bridge's own count on /diagnostics, from StepFeedback k published to
-Action k received, the way back included, the one latency a run with no outside reader has).
+cores; `p99 bridge`: sim_bridge's own count over the run, from StepFeedback k published to
+Action k received, the way back included, as its closing log line says: the one latency a run
+with no outside reader has).
 /proc gives each node's resident memory. The probe is itself an outside subscriber: the
 container then publishes every step and action on DDS too. `single-quiet` runs the single mode
 with no outside subscriber on the loop's topics (the rate comes from sim_bridge's step count on
-/diagnostics, published at 1 Hz, its latency from sim_bridge's own count there; the run is
+/diagnostics, published at 1 Hz, its latency from sim_bridge's own count; the run is
 sized from the round's in-process rate to last about QUIET_SECONDS, long enough for several
 counts). `--executors
 single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
@@ -40,6 +41,7 @@ import argparse
 import math
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import tempfile
@@ -170,6 +172,17 @@ def segment_times(sent: dict[str, dict[int, int]]) -> dict[str, float]:
     return out
 
 
+BRIDGE_LATENCY = re.compile(r'observation -> action p50 ([\d.]+|nan) ms p99 ([\d.]+|nan) ms')
+"""sim_bridge's closing log line: its own latency over the whole run (nodes/meters.py)."""
+
+
+def bridge_latency(log: str) -> dict[str, float]:
+    """p50 / p99 ms of sim_bridge's own count in its log (nan where the run never said it)."""
+    found = BRIDGE_LATENCY.findall(log)
+    p50, p99 = (float(found[-1][0]), float(found[-1][1])) if found else (math.nan, math.nan)
+    return {'p50_bridge': p50, 'p99_bridge': p99}
+
+
 def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
               executor: str | None = None, context_lag: int = 0, split: bool = False
               ) -> dict[str, float]:
@@ -241,21 +254,17 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
             sent.setdefault(msg.step, info['source_timestamp'])
         return on_message
     counted: list[tuple[float, int, float]] = []  # single-quiet: time, steps so far, CPU s
-    bridge: dict[str, float] = {}  # sim_bridge's own latency over the run, in its last report
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name.endswith('sim_bridge: step loop'):
-                values = {kv.key: kv.value for kv in status.values}
-                steps_so_far = int(values['steps'])
+                steps_so_far = int({kv.key: kv.value for kv in status.values}['steps'])
                 counted.append((time.perf_counter(), steps_so_far,
                                 sum(cpu_seconds(p.pid) for p in processes.values())))
-                if 0 < steps_so_far < steps:
-                    bridge.update(p50_bridge=float(values['latency_p50_ms_run']),
-                                  p99_bridge=float(values['latency_p99_ms_run']))
 
-    probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
-    if not quiet:
+    if quiet:
+        probe.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 50)
+    else:
         probe.create_subscription(StepFeedback, TOPICS.STEP, observer(seen_obs, sent_obs),
                                   step_qos(50))
         probe.create_subscription(Action, TOPICS.ACTION, observer(seen_act, sent_act),
@@ -287,6 +296,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
         probe.destroy_node()
         rclpy.shutdown(context=context)
     memory_values = {f'rss_{k}': v for k, v in memory.items()}
+    bridge = bridge_latency((log_dir / f'{loop}.log').read_text())
     if quiet:  # between the first and the last count taken while the loop ran
         running = [entry for entry in counted if 0 < entry[1] < steps]
         if len(running) < 2:
@@ -295,8 +305,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
                                f'{log_dir}')
         (t0, n0, c0), (t1, n1, c1) = running[0], running[-1]
         return {'rate': (n1 - n0) / (t1 - t0), 'cpu_ms': (c1 - c0) / (n1 - n0) * 1e3,
-                'p50': bridge.get('p50_bridge', math.nan),
-                'p99': bridge.get('p99_bridge', math.nan),
+                'p50': bridge['p50_bridge'], 'p99': bridge['p99_bridge'],
                 'p99_seen': float('nan'), **bridge, **memory_values}
     done = sorted(set(seen_obs) & set(seen_act))
     if len(done) < 20:
@@ -310,8 +319,7 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     return {'rate': (len(done) - 1) / span, 'cpu_ms': cpu_ms,
             'p50': float(np.percentile(latency, 50)),
             'p99': float(np.percentile(latency, 99)),
-            'p99_seen': float(np.percentile(latency_seen, 99)),
-            **{'p50_bridge': math.nan, 'p99_bridge': math.nan, **bridge}, **memory_values,
+            'p99_seen': float(np.percentile(latency_seen, 99)), **bridge, **memory_values,
             **{f'cpu_{name}': ms for name, ms in per_process.items()},
             **(segment_times({'feedback': sent_obs, 'context': sent_ctx, 'action': sent_act})
                if split else {})}
