@@ -390,8 +390,9 @@ def main() -> None:
                         help='policy context_lag values, each mode run once per value in every '
                         'round (e.g. 0,1)')
     parser.add_argument('--out', type=Path,
-                        help='also write every row to OUT/live_loop.csv and, with --split, '
-                        'the segments beside the in-process parts to OUT/live_loop_split.png')
+                        help='also write every row to OUT/live_loop.csv, the targets to '
+                        'OUT/live_loop_targets.png and, with --split, the segments beside the '
+                        'in-process parts to OUT/live_loop_split.png')
     parser.add_argument('--split', action='store_true',
                         help="split each step's period into the estimator's, the policy's and "
                         "sim_bridge's segments (publishers' timestamps; one more reader of the "
@@ -473,11 +474,12 @@ def main() -> None:
     for line in lag_summary(results, lags):
         print(line)
     if args.out is not None:
-        from live_loop_plot import plot_segments, write_rows
+        from live_loop_plot import plot_segments, plot_targets, write_rows
 
         args.out.mkdir(parents=True, exist_ok=True)
         write_rows(results, args.out / 'live_loop.csv')
-        print(f'rows: {args.out / "live_loop.csv"}')
+        plot_targets(results, RATIO_TARGETS, P99_TARGETS_MS, args.out / 'live_loop_targets.png')
+        print(f'rows: {args.out / "live_loop.csv"}; targets: {args.out / "live_loop_targets.png"}')
         if any('seg_policy_mean' in row for row in results):
             plot_segments(results, SEGMENTS, args.out / 'live_loop_split.png')
             print(f'split: {args.out / "live_loop_split.png"}')

@@ -1,4 +1,7 @@
-"""CSV and picture of bench_live_loop.py's rows: where a live step's time goes.
+"""CSV and pictures of bench_live_loop.py's rows: the targets, and where a live step's time goes.
+
+`plot_targets` draws, per observation kind, each mode's ratio to the in-process rate and its
+observation -> action p99 against issue 14's targets, one dot per round and the mean as a bar.
 
 `plot_segments` draws, per observation kind, one bar per mode (mean over its rounds) cut into
 the estimator's, the policy's and sim_bridge's segments of the live step, each beside the same
@@ -34,6 +37,44 @@ def _mean(rows: Sequence[dict[str, Any]], key: str) -> float:
 def _label(row: dict[str, Any]) -> tuple[str, str]:
     """(mode, with its context lag when there is one; executor): one bar of the picture."""
     return row['mode'] + (f'/lag{row["lag"]}' if row['lag'] else ''), row['executor']
+
+
+def plot_targets(rows: Sequence[dict[str, Any]], ratio_targets: dict[tuple[str, str], float],
+                 p99_targets: dict[str, float], path: Path) -> None:
+    """Ratio and p99 of each (kind, mode) against its target: bars are means, dots rounds."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    kinds = list(dict.fromkeys(row['kind'] for row in rows))
+    figure, axes = plt.subplots(len(kinds), 2, figsize=(10, 1.5 + 2.2 * len(kinds)),
+                                squeeze=False)
+    for (ratio_axis, p99_axis), kind in zip(axes, kinds, strict=True):
+        labels = list(dict.fromkeys(_label(row) for row in rows if row['kind'] == kind))
+        for x, bar in enumerate(labels):
+            same = [row for row in rows if row['kind'] == kind and _label(row) == bar]
+            mode = same[0]['mode']
+            for axis, key, target in ((ratio_axis, 'ratio', ratio_targets.get((kind, mode))),
+                                      (p99_axis, 'p99', p99_targets.get(kind))):
+                values = [float(row[key]) for row in same if np.isfinite(float(row[key]))]
+                if not values:
+                    continue
+                mean = float(np.mean(values))
+                met = target is None or (mean >= target if key == 'ratio' else mean <= target)
+                axis.bar(x, mean, color='#55a868' if met else '#c44e52', alpha=0.6)
+                axis.plot([x] * len(values), values, 'k.', markersize=5)
+                if target is not None:
+                    axis.plot([x - 0.4, x + 0.4], [target, target], 'k--', linewidth=1)
+        for axis, title in ((ratio_axis, 'live / in-process rate (higher is better)'),
+                            (p99_axis, 'observation -> action p99, ms (lower is better)')):
+            axis.set_xticks(range(len(labels)), [label for label, _ in labels], fontsize=8)
+            axis.set_title(f'{kind}: {title}', fontsize=9)
+    figure.suptitle('issue 14 targets (dashed); green: mean meets it, red: misses it; '
+                    'dots: rounds', fontsize=9)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
 
 
 def plot_segments(rows: Sequence[dict[str, Any]], segments: Sequence[str], path: Path) -> None:

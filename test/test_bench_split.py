@@ -1,4 +1,4 @@
-"""bench_live_loop.py --split: the step's segments from the publishers' stamps, CSV and picture."""
+"""bench_live_loop.py --out: the step's segments (--split), the bridge's latency, CSV, pictures."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'benchmarks'))
 
-from bench_live_loop import SEGMENTS, segment_times
-from live_loop_plot import plot_segments, write_rows
+from bench_live_loop import P99_TARGETS_MS, RATIO_TARGETS, SEGMENTS, bridge_latency, segment_times
+from live_loop_plot import plot_segments, plot_targets, write_rows
 
 
 def test_segments_add_up_to_the_period_and_skip_steps_not_seen_on_every_topic() -> None:
@@ -45,3 +45,20 @@ def test_rows_and_picture_are_written(tmp_path: Path) -> None:
     assert len(lines) == len(rows) + 1 and 'seg_estimator_mean' in lines[0]
     plot_segments(rows, SEGMENTS, tmp_path / 'split.png')
     assert (tmp_path / 'split.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_targets_picture_takes_rows_without_a_latency(tmp_path: Path) -> None:
+    """A row whose p99 is nan (no probe, no bridge count) still gets its ratio drawn."""
+    rows = [{'kind': 'state', 'mode': mode, 'executor': 'events', 'lag': 0, 'round': n,
+             'ratio': 0.3 + 0.2 * n, 'p99': p99}
+            for mode, p99 in (('multi', 2.5), ('single-quiet', float('nan'))) for n in range(2)]
+    plot_targets(rows, RATIO_TARGETS, P99_TARGETS_MS, tmp_path / 'targets.png')
+    assert (tmp_path / 'targets.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_bridge_latency_is_read_from_its_last_closing_line() -> None:
+    """sim_bridge's own count, as its closing log line says; nan when it never said it."""
+    log = ('[INFO] [sim_bridge]: max_steps=400 reached; counts {...}; observation -> action '
+           'p50 0.81 ms p99 1.32 ms over 401 answered steps\n')
+    assert bridge_latency(log) == {'p50_bridge': 0.81, 'p99_bridge': 1.32}
+    assert all(np.isnan(v) for v in bridge_latency('the node was killed').values())
