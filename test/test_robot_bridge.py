@@ -244,3 +244,6 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     last = diagnostics[-1]
     assert int(last['rejected']) == 2 and int(last['clipped']) == 1 and int(last['stale']) > 0
     assert int(last['foreign']) > 0 and last['action_sender'].startswith('/fake_policy')
+    # How late the policy answered (StepFeedback k out -> Action k in), over the run so far.
+    p50, p99 = float(last['latency_p50_ms_run']), float(last['latency_p99_ms_run'])
+    assert 0 < p50 <= p99 < 1000, last

@@ -80,6 +80,19 @@ class LatencyMeter:
         self._reported = counts
         return self._percentiles(window, qs), int(window.sum())
 
+    def diagnostics_values(self) -> dict[str, str]:
+        """/diagnostics values: p50 / p99 ms of the last report's window and of the run."""
+        (p50, p99), samples = self.report()
+        run_p50, run_p99 = self.percentiles_ms()
+        return {'latency_p50_ms': f'{p50:.2f}', 'latency_p99_ms': f'{p99:.2f}',
+                'latency_p50_ms_run': f'{run_p50:.2f}', 'latency_p99_ms_run': f'{run_p99:.2f}',
+                'latency_samples': str(samples)}
+
+    def summary(self, what: str = 'observation -> action') -> str:
+        """One line for a node's closing log: the run's p50 / p99 and how many were counted."""
+        p50, p99 = self.percentiles_ms()
+        return f'{what} p50 {p50:.2f} ms p99 {p99:.2f} ms over {self.count} answered steps'
+
     def _percentiles(self, counts: np.ndarray, qs: tuple[float, ...]) -> list[float]:
         total = int(counts.sum())
         if total == 0:

@@ -41,7 +41,7 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.meters import RateMeter
+from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.robot_io import (
     COMMAND_TYPES,
@@ -118,6 +118,9 @@ class RobotBridgeNode(Node):
         self.period = 1.0 / self.params['control_rate']
         self.counts = dict.fromkeys(COUNTS, 0)
         self._rate = RateMeter()
+        # How late the policy answers: StepFeedback k out to Action k in (/diagnostics, log).
+        self._latency = LatencyMeter()
+        self._sent: tuple[int, float] | None = None  # (step, monotonic time) not yet answered
         self._joints: tuple[float, dict[str, dict[str, float]]] | None = None
         self._positions: dict[str, float] = {}
         self._extras: dict[str, tuple[float, np.ndarray]] = {}
@@ -216,6 +219,9 @@ class RobotBridgeNode(Node):
 
     def _on_action(self, msg: Action) -> None:
         self._action_time = time.monotonic()
+        if self._sent is not None and msg.step == self._sent[0]:
+            self._latency.add(self._action_time - self._sent[1])
+            self._sent = None
         checked = check_action(msg.data, self.low, self.high)
         self.counts[{ActionStatus.OK: 'ok', ActionStatus.CLIPPED: 'clipped'}.get(
             checked.status, 'rejected')] += 1
@@ -356,6 +362,7 @@ class RobotBridgeNode(Node):
             applied_action=[] if first else applied.astype(np.float32).tolist(),
             action_status=int(ActionStatus.NONE if first else status))
         feedback.header.stamp = stamp
+        self._sent = (self._step, time.monotonic())
         self._pub_step.publish(feedback)
         if self._pub_image is not None and self._image is not None:
             self._publish_frame(self._image[1], stamp)
@@ -385,13 +392,15 @@ class RobotBridgeNode(Node):
         errors = [f'{len(others)} other publisher(s) on {self._senders.topic}: '
                   f'{", ".join(map(str, others))}; their actions are refused'] if others else []
         values = {'task': self.spec.task, 'rate_hz': f'{self._rate.rate:.1f}',
-                  'action_sender': str(self._senders.paired), **self.counts}
+                  'action_sender': str(self._senders.paired),
+                  **self._latency.diagnostics_values(), **self.counts}
         self._pub_diag.publish(diagnostics_message(self, 'robot loop', values, problems, errors))
 
     def close(self) -> None:
         """Say how far the loop got."""
         if self._started:
-            self.get_logger().info(f'stopped after step {self._step}; counts {self.counts}')
+            self.get_logger().info(f'stopped after step {self._step}; counts {self.counts}; '
+                                   f'{self._latency.summary()}')
 
 
 def main(args: list[str] | None = None) -> int:

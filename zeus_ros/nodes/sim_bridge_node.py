@@ -244,7 +244,7 @@ class SimBridgeNode(Node):
             # Observation max_steps got its answer: the loop is complete, stop here.
             if not self.finished:
                 self.get_logger().info(f'max_steps={max_steps} reached; counts {self.counts}; '
-                                       f'{self._latency_text()}')
+                                       f'{self._latency.summary()}')
             self._started = False  # said all there is to say
             self.finished = True  # not NodeFinished: the events executor logs what it raises
             return
@@ -325,19 +325,10 @@ class SimBridgeNode(Node):
         problems = [f'{self.counts[key]} {key}' for key in
                     ('timeouts', 'rejected', 'stale', 'foreign') if self.counts[key]]
         errors = self._senders.errors()
-        (p50, p99), answered = self._latency.report()
-        run_p50, run_p99 = self._latency.percentiles_ms()
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
-                  'latency_p50_ms': f'{p50:.2f}', 'latency_p99_ms': f'{p99:.2f}',
-                  'latency_p50_ms_run': f'{run_p50:.2f}', 'latency_p99_ms_run': f'{run_p99:.2f}',
-                  'latency_samples': answered, **self.counts}
+                  **self._latency.diagnostics_values(), **self.counts}
         self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems, errors))
-
-    def _latency_text(self) -> str:
-        p50, p99 = self._latency.percentiles_ms()
-        return (f'observation -> action p50 {p50:.2f} ms p99 {p99:.2f} ms over '
-                f'{self._latency.count} answered steps')
 
     def destroy_node(self) -> None:
         """The action subscription is ours (not rclpy's): it goes before the node."""
@@ -349,7 +340,7 @@ class SimBridgeNode(Node):
         self.env.task.close()
         if self._started:
             self.get_logger().info(f'stopped after step {self.counts["steps"] - 1}; '
-                                   f'counts {self.counts}; {self._latency_text()}')
+                                   f'counts {self.counts}; {self._latency.summary()}')
 
 
 def main(args: list[str] | None = None) -> int:
