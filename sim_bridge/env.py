@@ -47,9 +47,18 @@ class EnvStep:
 class ScheduledEnv:
     """A task driven by a context schedule, with validated actions and a run-long clock."""
 
-    def __init__(self, task: ContextualTask, schedule: Schedule) -> None:
+    def __init__(self, task: ContextualTask, schedule: Schedule,
+                 schedule_start: tuple[int, int] = (0, 0)) -> None:
+        """`schedule_start`: the schedule's (step, episode) at this run's first step.
+
+        A collection that continues earlier ones (a loop's next round) goes on with the
+        schedule where they stopped; started over, a schedule of one value per episode would
+        never reach its later values when a round holds fewer episodes than it has values.
+        The run's own step and episode indices start at 0 either way.
+        """
         self.task = task
         self.schedule = schedule
+        self.schedule_start = schedule_start
         self.step_index = -1
         self.episode = -1
         self.episode_step = 0
@@ -66,7 +75,8 @@ class ScheduledEnv:
         return self._time_offset + self.task.sim_time
 
     def _apply_context(self, step: int, episode: int) -> None:
-        context = self.schedule.value_at(step, episode)
+        context = self.schedule.value_at(step + self.schedule_start[0],
+                                         episode + self.schedule_start[1])
         if context != self._context:
             self.task.set_context(context)
             self._context = context

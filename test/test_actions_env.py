@@ -84,3 +84,16 @@ def test_missing_action_times_out_with_the_safe_action() -> None:
     result = env.step(None)
     assert result.status == ActionStatus.TIMEOUT
     assert result.applied_action.tolist() == [0.0] * 6
+
+
+def test_a_continued_run_goes_on_with_the_schedule_where_the_earlier_one_stopped() -> None:
+    """schedule_start: one value per episode resumes at the 5th value, indices start at 0."""
+    task = make_task('Cheetah-Run-v0', seed=0)
+    values = [0.6, 0.7, 0.8, 0.9, 1.0, 1.1]
+    schedule = schedule_from_config({'kind': 'switch', 'every_episodes': 1, 'values': values},
+                                    task)
+    env = ScheduledEnv(task, schedule, schedule_start=(4 * 500, 4))
+    first = env.reset()
+    assert (first.step, first.episode) == (0, 0)
+    assert first.observation.context['torso_length'] == 1.0
+    task.close()

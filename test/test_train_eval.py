@@ -298,6 +298,15 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
     assert [r.step for r in results] == [30, 60] and results[1].start_step == 30
     assert sorted(p.name for p in (tmp_path / 'bags').iterdir()) == ['bag_000', 'bag_001']
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 60
+    # Round 2 continues the schedule where round 1 stopped (step 300: its 4th and 5th train
+    # values), instead of starting over at the first one.
+    from sim_bridge.presets import load_preset
+    from zeus_ros.offline.data.ingest import ingest_bags
+
+    values = [v['torso_length'] for v in load_preset(TASK, 'train')]
+    second = ingest_bags(tmp_path / 'bags' / 'bag_001')
+    seen = sorted({round(float(c), 4) for ep in second.episodes for c in ep.context[:, 0]})
+    assert seen == sorted(round(v, 4) for v in values[3:5]), seen
 
 
 def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,

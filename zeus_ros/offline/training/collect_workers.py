@@ -42,6 +42,8 @@ class CollectJob:
     pixels: bool = False
     storage: str = 'mcap'
     progress: bool = False
+    schedule_start: tuple[int, int] = (0, 0)
+    """The schedule's (step, episode) at the first step: where earlier collections stopped."""
 
 
 def portable_task(name: str) -> str:
@@ -75,7 +77,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
 
     task = make_task(job.task, seed=job.seed)
     try:
-        env = ScheduledEnv(task, schedule_from_config(job.schedule, task, job.seed))
+        env = ScheduledEnv(task, schedule_from_config(job.schedule, task, job.seed),
+                           job.schedule_start)
         policy = random_policy(task, job.seed)
         if job.checkpoint is not None:
             from zeus_ros.learning.inference import InferenceAgent

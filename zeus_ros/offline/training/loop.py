@@ -5,7 +5,10 @@ the newest checkpoint plus exploration noise (the policy as deployed, via collec
 appends that bag and resumes training on all bags. `--resume` continues a stopped or finished
 loop up to --rounds: rounds whose bag exists are not collected again, rounds whose updates are
 in the checkpoint are not trained again (round i always collects with seed + i, so a loop
-extended from 5 to 10 rounds is the 10-round loop). A resume after a kill during collection
+extended from 5 to 10 rounds is the 10-round loop). Each round continues the context schedule
+where the earlier rounds' bags stopped (their steps and episode starts), rather than starting
+it over: one value per episode over 8 values would otherwise, with 500-step episodes and 2,000
+steps per round, never collect the last four. A resume after a kill during collection
 recovers the unfinished bag (as `zeus recover` does; one without a single complete step is moved
 to unfinished/) and collects the steps the round still lacks into bag_NNN_restK before training.
 Layout under --out:
@@ -70,6 +73,40 @@ def _bag_steps(bag: Path) -> int:
         reader.close()
 
 
+def _schedule_position(bags: list[Path]) -> tuple[int, int]:
+    """(steps, episode starts) the collections in `bags` took of the context schedule.
+
+    A round continues the schedule from here (CollectJob.schedule_start): counted from the
+    bags themselves, so a resumed or extended loop continues it exactly as an unbroken one.
+    """
+    from rosbags.rosbag2 import Reader
+
+    from zeus_ros.offline.data.schema import MSGTYPES, TOPIC_STEP, codec
+
+    steps = episodes = 0
+    decode = codec().deserialize
+    for bag in bags:
+        key = (bag.resolve(), (bag / 'metadata.yaml').stat().st_mtime_ns)
+        if key not in _POSITIONS:  # a closed bag does not change: read each once per process
+            counted = [0, 0]
+            reader = Reader(bag)
+            reader.open()
+            try:
+                connections = [c for c in reader.connections if c.topic == TOPIC_STEP]
+                for _connection, _time, raw in reader.messages(connections=connections):
+                    counted[0] += 1
+                    counted[1] += bool(decode(raw, MSGTYPES[TOPIC_STEP]).first)
+            finally:
+                reader.close()
+            _POSITIONS[key] = (counted[0], counted[1])
+        steps += _POSITIONS[key][0]
+        episodes += _POSITIONS[key][1]
+    return steps, episodes
+
+
+_POSITIONS: dict[tuple[Path, int], tuple[int, int]] = {}
+
+
 def _recover_unfinished(out: Path, bags: Path) -> None:
     """Recover bags a kill left without metadata or footer; move aside those with no step.
 
@@ -104,14 +141,19 @@ def _recover_unfinished(out: Path, bags: Path) -> None:
 
 def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: int, *,
                    seed: int, checkpoint: Path | None, noise: float, pixels: bool,
-                   progress: bool, stochastic: bool = False, bag: Path | None = None) -> Path:
-    """One collection: random without a checkpoint, else the agent (sampled, or mode + noise)."""
+                   progress: bool, stochastic: bool = False, bag: Path | None = None,
+                   after: list[Path] = ()) -> Path:
+    """One collection: random without a checkpoint, else the agent (sampled, or mode + noise).
+
+    It continues the context schedule where the collections of the bags `after` stopped.
+    """
     bag = bag or next_bag_path(bags, append=True)
+    start = _schedule_position(list(after))
     stats = collect_bag(CollectJob(task_name, schedule, bag, steps, seed, checkpoint=checkpoint,
                                    noise=noise, stochastic=stochastic, pixels=pixels,
-                                   progress=progress))
+                                   progress=progress, schedule_start=start))
     print(f'loop: wrote {stats.steps} steps ({stats.episodes} episode starts) to {bag} '
-          f'in {stats.seconds:.1f} s')
+          f'in {stats.seconds:.1f} s (schedule from step {start[0]}, episode {start[1]})')
     return bag
 
 
@@ -150,7 +192,8 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
             print(f'\nloop: round {index + 1}/{rounds}: collect {count} steps with {what}')
             _collect_round(task, schedule, bags, count, seed=seed + index,
                            checkpoint=checkpoint, noise=noise, pixels=pixels,
-                           progress=progress, stochastic=stochastic)
+                           progress=progress, stochastic=stochastic,
+                           after=[b for i in range(index) for b in _round_bags(bags, i)])
         else:
             held = _round_bags(bags, index)
             have = sum(_bag_steps(b) for b in held)
@@ -163,7 +206,8 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
                                seed=seed + index + 7919 * part, checkpoint=checkpoint,
                                noise=noise, pixels=pixels, progress=progress,
                                stochastic=stochastic,
-                               bag=bags / f'bag_{index:03d}_rest{part}')
+                               bag=bags / f'bag_{index:03d}_rest{part}',
+                               after=[b for i in range(index + 1) for b in _round_bags(bags, i)])
         print(f'loop: round {index + 1}/{rounds}: train on {bags} up to update {total}')
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
                              resume=index > 0 or done_updates > 0
