@@ -211,20 +211,6 @@ def _spin_ring(executor: Any, ring: _Ring, cpu: Callable[[], float]) -> Round:
 
 
 @contextmanager
-def _own_context(domain_id: int) -> Iterator[Any]:
-    """An rclpy context of its own on `domain_id`: a caller's (a test's) default is untouched."""
-    import rclpy
-    from rclpy.context import Context
-
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    try:
-        yield context
-    finally:
-        rclpy.try_shutdown(context=context)
-
-
-@contextmanager
 def _helpers(argvs: Sequence[Sequence[str]], env: dict[str, str]) -> Iterator[list[Any]]:
     """Child processes of this script (relays, sinks), stopped on leaving; their log in /tmp."""
     from zeus_ros.processes import start_node, stop_nodes
@@ -244,14 +230,14 @@ def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_
     import rclpy
 
     from zeus_ros.nodes.common import EXECUTOR_ENV, make_executor
-    from zeus_ros.processes import ros_env
+    from zeus_ros.processes import ros_context, ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     env[EXECUTOR_ENV] = executor_kind
     members = len(work)
     argvs = [['--relay', str(index), '--members', str(members), '--relay-work', str(work[index]),
               *(['--relay-sender'] if sender else [])] for index in range(1, members)]
-    with _helpers(argvs, env) as relays, _own_context(int(env['ROS_DOMAIN_ID'])) as context:
+    with _helpers(argvs, env) as relays, ros_context(int(env['ROS_DOMAIN_ID'])) as context:
         node = rclpy.create_node('handover_0', context=context)
         ring = _Ring(node, members, rounds, payload_bytes, work[0], sender)
         executor = make_executor([node], executor_kind, context)
@@ -269,10 +255,10 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
 
     from zeus_ros.nodes.common import make_executor
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
-    from zeus_ros.processes import ros_env
+    from zeus_ros.processes import ros_context, ros_env
 
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
-    with _own_context(int(ros_env()['ROS_DOMAIN_ID'])) as context:
+    with ros_context(int(ros_env()['ROS_DOMAIN_ID'])) as context:
         members = len(work)
         nodes = [node_class(f'handover_{index}', context=context) for index in range(members)]
         ring = _Ring(nodes[0], members, rounds, payload_bytes, work[0], sender)
@@ -315,11 +301,11 @@ def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-
     from zeus_msgs.msg import Action
 
     from zeus_ros.nodes.common import step_qos
-    from zeus_ros.processes import ros_env
+    from zeus_ros.processes import ros_context, ros_env
 
     env = ros_env()
     sink = ['--relay', '1', '--members', '2']  # a relay whose link onwards nobody reads
-    with _helpers([sink] * readers, env), _own_context(int(env['ROS_DOMAIN_ID'])) as context:
+    with _helpers([sink] * readers, env), ros_context(int(env['ROS_DOMAIN_ID'])) as context:
         node = rclpy.create_node('publisher', context=context)
         publisher = node.create_publisher(Action, link_topic(0), step_qos())
         deadline = time.monotonic() + START_TIMEOUT

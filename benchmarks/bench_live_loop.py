@@ -41,7 +41,6 @@ import argparse
 import math
 import os
 from pathlib import Path
-import re
 import subprocess
 import sys
 import tempfile
@@ -172,13 +171,11 @@ def segment_times(sent: dict[str, dict[int, int]]) -> dict[str, float]:
     return out
 
 
-BRIDGE_LATENCY = re.compile(r'observation -> action p50 ([\d.]+|nan) ms p99 ([\d.]+|nan) ms')
-"""sim_bridge's closing log line: its own latency over the whole run (nodes/meters.py)."""
-
-
 def bridge_latency(log: str) -> dict[str, float]:
     """p50 / p99 ms of sim_bridge's own count in its log (nan where the run never said it)."""
-    found = BRIDGE_LATENCY.findall(log)
+    from zeus_ros.nodes.meters import SUMMARY
+
+    found = SUMMARY.findall(log)
     p50, p99 = (float(found[-1][0]), float(found[-1][1])) if found else (math.nan, math.nan)
     return {'p50_bridge': p50, 'p99_bridge': p99}
 

@@ -158,19 +158,8 @@ def python_module(module: str, *args: str) -> list[str]:
     return [sys.executable, '-m', module, *args]
 
 
-@contextlib.contextmanager
-def ros_context(domain_id: int) -> Iterator[Any]:
-    """An rclpy context of its own in the test process, on `domain_id`, localhost only."""
-    import rclpy
-    from rclpy.context import Context
-
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    try:
-        yield context
-    finally:
-        rclpy.shutdown(context=context)
+ros_context = processes.ros_context
+"""An rclpy context of its own in the test process (zeus_ros.processes)."""
 
 
 @contextlib.contextmanager

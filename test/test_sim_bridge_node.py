@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
-import re
 
 import pytest
 
@@ -145,8 +144,9 @@ def test_bad_actions_are_counted_and_the_node_keeps_running(
     assert seen.diagnostics, 'no /diagnostics from sim_bridge'
     # The loop's own latency (StepFeedback k out -> Action k in), over the answered steps only:
     # the silent step 120 has none.
-    found = re.search(r'observation -> action p50 ([\d.]+) ms p99 ([\d.]+) ms over (\d+) '
-                      r'answered steps', log)
+    from zeus_ros.nodes.meters import SUMMARY
+
+    found = SUMMARY.search(log)
     assert found, log[-3000:]
     p50, p99, answered = float(found[1]), float(found[2]), int(found[3])
     assert 0 < p50 <= p99 < 500 and answered == STEPS, found[0]

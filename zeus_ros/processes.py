@@ -9,7 +9,7 @@ after the grace period, then SIGKILL, so a node that ignores one signal still en
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 import contextlib
 import os
 from pathlib import Path
@@ -17,10 +17,10 @@ import random
 import signal
 import subprocess
 import time
-from typing import IO
+from typing import IO, Any
 
 __all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'fresh_domain_id', 'group_domain_id',
-           'ros_env', 'start_node', 'stop_nodes']
+           'ros_context', 'ros_env', 'start_node', 'stop_nodes']
 
 DOMAIN_RANGE_ENV = 'ZEUS_DOMAIN_RANGE'
 """'FIRST-LAST': where fresh domain ids are drawn (default 1-100), so parallel users keep apart."""
@@ -58,6 +58,25 @@ def ros_env(domain_id: int | None = None) -> dict[str, str]:
     env['PYTHONUNBUFFERED'] = '1'
     env.setdefault('MUJOCO_GL', 'egl')
     return env
+
+
+@contextlib.contextmanager
+def ros_context(domain_id: int) -> Iterator[Any]:
+    """An rclpy context of this process's own on `domain_id`, loopback-only discovery.
+
+    For a test or benchmark that talks to the nodes it started from its own process: the
+    caller's default context (a test's) is left alone, and the context is shut down on leaving.
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
 
 
 def start_node(argv: Sequence[str], env: dict[str, str], *, stdout: int | IO[bytes],

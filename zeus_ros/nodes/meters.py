@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from collections import deque
 import math
+import re
 import time
 
 import numpy as np
 
-__all__ = ['LatencyMeter', 'RateMeter']
+__all__ = ['SUMMARY', 'LatencyMeter', 'RateMeter']
 
 
 class RateMeter:
@@ -38,6 +39,11 @@ class RateMeter:
             return 0.0
         span = self._times[-1] - self._times[0]
         return (len(self._times) - 1) / span if span > 0 else 0.0
+
+
+SUMMARY = re.compile(r'observation -> action p50 ([\d.]+|nan) ms p99 ([\d.]+|nan) ms over '
+                     r'(\d+) answered steps')
+"""`LatencyMeter.summary()`'s line as a log reader finds it: p50, p99 (ms) and the count."""
 
 
 class LatencyMeter:
@@ -88,10 +94,11 @@ class LatencyMeter:
                 'latency_p50_ms_run': f'{run_p50:.2f}', 'latency_p99_ms_run': f'{run_p99:.2f}',
                 'latency_samples': str(samples)}
 
-    def summary(self, what: str = 'observation -> action') -> str:
-        """One line for a node's closing log: the run's p50 / p99 and how many were counted."""
+    def summary(self) -> str:
+        """One line for a node's closing log: the run's p50 / p99 and how many (SUMMARY)."""
         p50, p99 = self.percentiles_ms()
-        return f'{what} p50 {p50:.2f} ms p99 {p99:.2f} ms over {self.count} answered steps'
+        return (f'observation -> action p50 {p50:.2f} ms p99 {p99:.2f} ms over {self.count} '
+                'answered steps')
 
     def _percentiles(self, counts: np.ndarray, qs: tuple[float, ...]) -> list[float]:
         total = int(counts.sum())

@@ -18,6 +18,7 @@ Layout under --out:
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 import json
 from pathlib import Path
 import re
@@ -73,7 +74,7 @@ def _bag_steps(bag: Path) -> int:
         reader.close()
 
 
-def _schedule_position(bags: list[Path]) -> tuple[int, int]:
+def _schedule_position(bags: Sequence[Path]) -> tuple[int, int]:
     """(steps, episode starts) the collections in `bags` took of the context schedule.
 
     A round continues the schedule from here (CollectJob.schedule_start): counted from the
@@ -142,13 +143,13 @@ def _recover_unfinished(out: Path, bags: Path) -> None:
 def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: int, *,
                    seed: int, checkpoint: Path | None, noise: float, pixels: bool,
                    progress: bool, stochastic: bool = False, bag: Path | None = None,
-                   after: list[Path] = ()) -> Path:
+                   after: Sequence[Path] = ()) -> Path:
     """One collection: random without a checkpoint, else the agent (sampled, or mode + noise).
 
     It continues the context schedule where the collections of the bags `after` stopped.
     """
     bag = bag or next_bag_path(bags, append=True)
-    start = _schedule_position(list(after))
+    start = _schedule_position(after)
     stats = collect_bag(CollectJob(task_name, schedule, bag, steps, seed, checkpoint=checkpoint,
                                    noise=noise, stochastic=stochastic, pixels=pixels,
                                    progress=progress, schedule_start=start))
