@@ -21,7 +21,7 @@ def test_shipped_configs_load(name: str) -> None:
 def test_the_context_loss_weight_of_our_dynamics_families_is_the_measured_one() -> None:
     """'auto' alpha_psi: the paper's value on its tasks, 0 on Cheetah-Motor-v0 / Cheetah-Bias-v0.
 
-    There the context loss saturated psi in every default run (docs/results.md, sessions
+    There the context loss saturated psi in every default run (docs/results_notebook.md, sessions
     10-11); variants/alpha1.yaml reruns those runs, and the variants that study the context
     loss keep the weight their runs used.
     """
