@@ -20,6 +20,20 @@ def tree(source: str, target: str) -> list[tuple[str, list[str]]]:
     return entries
 
 
+def zoo_files() -> list[tuple[str, list[str]]]:
+    """data_files of the model zoo: checkpoints/<family>/ for every family of zoo.yaml."""
+    import yaml
+
+    with open(os.path.join('checkpoints', 'zoo.yaml'), encoding='utf-8') as handle:
+        families = yaml.safe_load(handle)['families']
+    entries = [(os.path.join('share', PACKAGE, 'checkpoints'),
+                ['checkpoints/README.md', 'checkpoints/zoo.yaml'])]
+    for name in families:
+        folder = name.lower().replace('-', '_')
+        entries += tree(os.path.join('checkpoints', folder), os.path.join('checkpoints', folder))
+    return entries
+
+
 setup(
     name=PACKAGE,
     version='0.1.0',
@@ -32,7 +46,9 @@ setup(
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
         ('share/' + PACKAGE + '/msg', glob('msg_defs/msg/*.msg')),
         *tree('params', 'params'),
-        *tree('checkpoints', 'checkpoints'),
+        # The model zoo only (checkpoints/README.md): one folder per family in zoo.yaml, the
+        # index and the manifest. The research archive beside it stays in the repository.
+        *zoo_files(),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

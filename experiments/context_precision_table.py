@@ -13,7 +13,8 @@ from __future__ import annotations
 import csv
 import sys
 
-SPLITS = ('train', 'interpolation', 'extrapolation')
+from sim_bridge.presets import SPLITS
+
 ROWS = (('default', 'oracle', 'oracle (exact context)', '∞'),
         ('oracle_noise03_slow', 'oracle', 'oracle + persistent error 0.3', '3.3'),
         ('oracle_noise06_slow', 'oracle', 'oracle + persistent error 0.6', '1.7'),

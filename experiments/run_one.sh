@@ -62,7 +62,7 @@ if [ ! -f "$run/run/final.pt" ] || ! finished "$run"; then
   state mark-trained "$run" $(( $(date +%s) - start ))
 fi
 if [ "${EVAL:-1}" = 0 ]; then echo "done: $run (train $(state seconds "$run") s)"; exit 0; fi
-for split in $(python -c "import yaml,sys; p=yaml.safe_load(open('params/contexts/$TASK.yaml')); print(' '.join(s for s in ('train','interpolation','extrapolation') if p.get(s)))"); do
+for split in $(python -c "from sim_bridge.families import family; print(' '.join(family('$TASK').presets))"); do
   if ! finished "$run" "$split"; then
     start=$(date +%s)
     zeus eval --checkpoint "$run/run/final.pt" --task "$TASK" --split "$split" \

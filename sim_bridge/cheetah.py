@@ -18,8 +18,8 @@ from dm_control.utils import rewards
 import mujoco
 import numpy as np
 
-from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
+from sim_bridge.families import DeclaredSpecs
 from sim_bridge.model_edit import load_suite_spec
 
 __all__ = ['CheetahBiasTask', 'CheetahMotorTask', 'CheetahRunTask', 'CheetahVelocityTask']
@@ -85,12 +85,7 @@ class CheetahRunTask(_Cheetah):
 
     name = 'Cheetah-Run-v0'
     episode_length = 500
-    specs = (
-        ContextSpec(
-            'torso_length', 0.5, 0.2, 2.0,
-            'half-length of the torso capsule [m]; legs and head move with its ends',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('torso_length',)
 
     def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
@@ -110,12 +105,7 @@ class CheetahVelocityTask(_Cheetah):
 
     name = 'Cheetah-Run-v1'
     episode_length = 40
-    specs = (
-        ContextSpec(
-            'target_velocity', 1.5, 0.0, 5.0,
-            'forward speed to match [m/s]; reward -|v - target| - 0.01 |a|^2 per control step',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ()
 
     def _reward(self, model: mujoco.MjModel, data: mujoco.MjData, action: np.ndarray) -> float:
@@ -136,12 +126,7 @@ class CheetahMotorTask(_Cheetah):
 
     name = 'Cheetah-Motor-v0'
     episode_length = 40
-    specs = (
-        ContextSpec(
-            'motor_gain', 1.0, 0.05, 3.0,
-            "torque per unit command of every motor, relative to the suite's gear",
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('motor_gain',)
 
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
@@ -175,12 +160,7 @@ class CheetahBiasTask(_Cheetah):
 
     name = 'Cheetah-Bias-v0'
     episode_length = 40
-    specs = (
-        ContextSpec(
-            'motor_bias', 0.0, -1.0, 1.0,
-            'constant torque of every motor, in units of its full command (added to the command)',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('motor_bias',)
 
     def _edit_spec(self, spec: mujoco.MjSpec, context: Mapping[str, float]) -> None:

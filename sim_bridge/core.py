@@ -20,6 +20,8 @@ class ContextSpec:
     low: float
     high: float
     doc: str = ''
+    unit: str = ''
+    """Physical unit of the value ('' when dimensionless); the read-outs print it."""
 
 
 @dataclass(frozen=True)

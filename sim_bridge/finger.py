@@ -22,8 +22,8 @@ from collections.abc import Mapping
 import mujoco
 import numpy as np
 
-from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
+from sim_bridge.families import DeclaredSpecs
 
 __all__ = ['FingerSpinTask', 'fingertip_radius']
 
@@ -50,12 +50,7 @@ class FingerSpinTask(DmcTask):
     n_sub_steps = 2  # control timestep 0.02 s / physics timestep 0.01 s
     action_repeat = 2
     episode_length = 500  # 1000 control steps = the suite's 20 s
-    specs = (
-        ContextSpec(
-            'finger_size', _DEFAULT_SIZE, 0.005, 0.6,
-            'touch-site x half-size (mtenv scale); fingertip radius = 0.03 + 0.2 (s - 0.025)',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('finger_size',)
 
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:

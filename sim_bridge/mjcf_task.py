@@ -50,7 +50,8 @@ __all__ = ['ContextParam', 'MjcfTask', 'MjcfTaskSpec', 'parse_mjcf_task']
 INITS = ('qpos0', 'random', 'random_all')
 MAPPINGS = ('set', 'scale')
 _KEYS = {'name', 'model', 'n_sub_steps', 'action_repeat', 'episode_length', 'init', 'camera',
-         'prepare', 'observation', 'reward', 'context', 'presets'}
+         'prepare', 'observation', 'reward', 'context', 'presets',
+         'varies', 'training', 'checkpoint', 'demo'}  # the last four: sim_bridge/families.py
 _ONE_DOF = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
 
@@ -124,10 +125,10 @@ def _context_param(name: str, entry: Any, where: str) -> ContextParam:
     where = f'{where}: context {name}'
     if not isinstance(entry, Mapping):
         raise ValueError(f'{where}: expected a mapping with paths, mapping, default, range')
-    unknown = sorted(set(entry) - {'paths', 'mapping', 'default', 'range', 'doc'})
+    unknown = sorted(set(entry) - {'paths', 'mapping', 'default', 'range', 'doc', 'unit'})
     if unknown:
         raise ValueError(f'{where}: unknown key(s) {unknown}; known: paths, mapping, default, '
-                         'range, doc')
+                         'range, doc, unit')
     mapping = entry.get('mapping', 'set')
     if mapping not in MAPPINGS:
         raise ValueError(f'{where}: mapping {mapping!r}: choose set (the value) or scale '
@@ -153,7 +154,8 @@ def _context_param(name: str, entry: Any, where: str) -> ContextParam:
     low, high = (float(b) for b in bounds)
     if not low <= default <= high:
         raise ValueError(f'{where}: default {default} outside range [{low}, {high}]')
-    return ContextParam(ContextSpec(name, default, low, high, str(entry.get('doc', ''))),
+    return ContextParam(ContextSpec(name, default, low, high, str(entry.get('doc', '')),
+                                    unit=str(entry.get('unit', ''))),
                         mapping, tuple(paths))
 
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from sim_bridge.core import ContextSpec, ContextualTask, StepResult
 from sim_bridge.dmc_base import validate_context
+from sim_bridge.families import DeclaredSpecs
 from sim_bridge.model_edit import SyncedRenderer
 
 __all__ = ['ACTION_SCALE', 'SawyerPegTask', 'peg_reward']
@@ -91,10 +92,7 @@ class SawyerPegTask(ContextualTask):
     name = 'Sawyer-Peg-v0'
     action_repeat = 1
     episode_length = 40
-    specs = (
-        ContextSpec('goal_x', 0.5, 0.35, 0.75, 'box (hole) x position [m], robot base at 0'),
-        ContextSpec('goal_y', 0.0, -0.25, 0.25, 'box (hole) y position [m]'),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
 
     def __init__(
         self, *, seed: int | None = None, context: Mapping[str, float] | None = None

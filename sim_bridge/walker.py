@@ -19,8 +19,8 @@ from dm_control.utils import rewards
 import mujoco
 import numpy as np
 
-from sim_bridge.core import ContextSpec
 from sim_bridge.dmc_base import DmcTask, randomize_joints
+from sim_bridge.families import DeclaredSpecs
 from sim_bridge.rewards import JointObservation
 
 __all__ = ['WalkerFootTask', 'WalkerFrictionTask', 'walk_reward']
@@ -82,12 +82,7 @@ class WalkerFrictionTask(_Walker):
     """Walker-Walk-v0: the sliding friction between the walker and the ground changes."""
 
     name = 'Walker-Walk-v0'
-    specs = (
-        ContextSpec(
-            'friction', 0.7, 0.01, 5.0,
-            'sliding friction of the floor (priority 1, so it sets every foot-ground contact)',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('friction',)
 
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
@@ -102,12 +97,7 @@ class WalkerFootTask(_Walker):
     """Walker-Walk-v1: the length of both feet changes."""
 
     name = 'Walker-Walk-v1'
-    specs = (
-        ContextSpec(
-            'foot_length', 0.1, 0.02, 0.3,
-            'half-length of both foot capsules [m] (suite default 0.1)',
-        ),
-    )
+    specs = DeclaredSpecs()  # params/tasks/<name>.yaml
     model_params = ('foot_length',)
 
     def _edit_spec(self, spec: mujoco.MjSpec, context: Mapping[str, float]) -> None:

@@ -96,25 +96,44 @@ def test_negative_batch_size_rejected() -> None:
         ZeusConfig(batch_size=0)
 
 
-def test_alpha_psi_auto_uses_paper_table() -> None:
-    """'auto' alpha_psi takes the paper's per-task value."""
+def test_alpha_psi_auto_uses_the_family_declaration() -> None:
+    """'auto' alpha_psi takes the family's `training:` value (the paper's table on its tasks)."""
     assert resolve_config(ZeusConfig(), 'Walker-Walk-v0').alpha_psi == 2.0
     assert resolve_config(ZeusConfig(), 'Walker-Walk-v1').alpha_psi == 0.1
 
 
 def test_alpha_psi_auto_unknown_task_fails() -> None:
-    """'auto' on a task outside the table asks for a number."""
-    with pytest.raises(ConfigError, match='set alpha_psi to a number'):
+    """'auto' on a task no family declares names the task and asks for numbers."""
+    with pytest.raises(ConfigError, match="unknown task 'Hopper-Hop-v0'.*set alpha_psi to a number"):
         resolve_config(ZeusConfig(), 'Hopper-Hop-v0')
 
 
 def test_no_context_loss_forces_alpha_zero() -> None:
     """zeus_no_context_loss is ZeUS with alpha_psi = 0."""
-    config = resolve_config(ZeusConfig(method='zeus_no_context_loss', alpha_psi=3.0), 'x')
+    config = resolve_config(ZeusConfig(method='zeus_no_context_loss', alpha_psi=3.0,
+                                       adam_beta1=0.9), 'x')
     assert config.alpha_psi == 0.0
 
 
 def test_adam_beta1_auto_by_task_family() -> None:
-    """Reward-varying tasks use beta1 0.5, dynamics-varying tasks 0.9."""
+    """Reward-varying tasks use beta1 0.5, dynamics-varying tasks 0.9 (their family files)."""
     assert resolve_config(ZeusConfig(), 'Sawyer-Peg-v0').adam_beta1 == 0.5
     assert resolve_config(ZeusConfig(), 'Finger-Spin-v0').adam_beta1 == 0.9
+
+
+def test_a_task_files_training_section_sets_the_auto_values(tmp_path: Path) -> None:
+    """A user's task file declares its training defaults the way a built-in family does."""
+    import yaml
+
+    source = Path(__file__).resolve().parents[1] / 'params' / 'tasks' / 'walker_friction.yaml'
+    data = yaml.safe_load(source.read_text())
+    data['name'] = 'Walker-Friction-Tuned-v0'  # registered by name: not the shared file's
+    data['training'] = {'alpha_psi': 0.25, 'adam_beta1': 0.7}
+    path = tmp_path / 'walker_friction_tuned.yaml'
+    path.write_text(yaml.safe_dump(data))
+    resolved = resolve_config(ZeusConfig(), str(path))
+    assert (resolved.alpha_psi, resolved.adam_beta1) == (0.25, 0.7)
+    data['training'] = {'alpha_psi': 'lots'}
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match='training: alpha_psi: expected a number'):
+        resolve_config(ZeusConfig(), str(path))

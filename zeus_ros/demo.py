@@ -1,14 +1,18 @@
-"""The live demo: the full system while the physics changes unannounced (default Cheetah-Run-v1).
+"""The live demo: the full system while the physics changes unannounced (default Cheetah-Bias-v0).
 
-sim_bridge switches the context (the target velocity by default; --task picks another family) in
-the middle of episodes through training and extrapolation values; context_estimator and policy
-run the task's shipped ZeUS checkpoint; this process watches the topics (subscribe only, like
-`zeus inspect`), then prints the per-segment summary and saves the inspection figure and
-per-step CSV under --out.
+sim_bridge switches the context (a constant torque bias on every motor by default; --task picks
+another family) in the middle of episodes, between training and beyond-range values;
+context_estimator and policy run the family's zoo checkpoint (params/tasks/<Task>.yaml names it,
+checkpoints/README.md lists them); this process watches the topics (subscribe only, like
+`zeus inspect`), prints the live view and the per-segment summary, and saves the inspection
+figure and per-step CSV under --out.
 
-Then it runs the same schedule again with the policy's context FROZEN at the mean context of
-the first run (policy parameter frozen_context) and prints the per-segment returns side by
-side: the value of adaptation, live. `--no-frozen` skips the second run.
+Then it runs the same schedule again with the policy's context FROZEN at the mean context the
+policy infers on its training values (stored in the zoo checkpoint; policy parameter
+frozen_context) and prints the per-segment returns side by side: the value of adaptation,
+live. With --seeds N it does both for N schedule seeds (other initial states, the same
+switches) and reports the paired difference with its standard error, split into training and
+beyond-range values (value_of_adaptation.csv / .png). `--no-frozen` skips the frozen runs.
 """
 
 from __future__ import annotations
@@ -25,78 +29,45 @@ import numpy as np
 
 from sim_bridge.registry import TASK_NAMES
 from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.demo_summary import (
+    adaptation_rows,
+    plot_adaptation,
+    summarize_adaptation,
+    write_rows,
+)
 from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import RECORDED_ANSWERS, start_args
+from zeus_ros.launch_defaults import RECORDED_ANSWERS, start_args, zoo_checkpoint
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
 
-DEMO_CHECKPOINTS = {
-    'Cheetah-Run-v0': 'cheetah_run_v0_zeus_state.pt',
-    'Walker-Walk-v0': 'comparison/walker_walk_v0_10k/zeus_s0.pt',
-    'Walker-Walk-v1': 'comparison/walker_walk_v1_10k/zeus_s0.pt',
-    'Finger-Spin-v0': 'comparison/finger_spin_v0_10k/zeus_s0.pt',
-    'Cheetah-Run-v1': 'issue10_episodes/k10/cheetah_run_v1_50k/zeus_s0.pt',
-    # A dynamics family where the actor reads psi: seed 0 of its default (no context loss
-    # since session 11; with it psi saturates there), trained for 20k updates (session 12).
-    'Cheetah-Bias-v0': 'issue10_episodes/default/cheetah_bias_v0_20k/zeus_no_context_loss_s0.pt',
-}
-DEFAULT_TASK = 'Cheetah-Run-v1'
-"""The demo's family: where a ZeUS policy measurably gains from its context (docs/results.md);
-its checkpoint is seed 0 of the default config trained for 50k updates with one target per
-collected episode (session 7), whose value of adaptation under the demo's mid-episode switches
-is +700 (-646 live, -1346 frozen)."""
-"""Checkpoint (under checkpoints/) each task's demo deploys; checkpoints/README.md says why."""
-
-# Cheetah-Run-v0: values of the training range (0.6-1.15 in the preset; the demo uses 0.7-1.1)
-# alternating with extrapolation values (1.2-1.5).
-# The shipped checkpoint fails on the shortest torsos (0.3-0.6, see its card), so the demo shows
-# the range it handles. Other tasks alternate their train and extrapolation presets.
-CHEETAH_VALUES = [0.75, 1.25, 1.0, 1.5, 0.7, 1.4, 1.1, 1.2]
+DEFAULT_TASK = 'Cheetah-Bias-v0'
+"""The demo's family: physics that changes (a motor bias), where the zoo's ZeUS policy reads its
+context and beyond the training range takes the oracle's headroom (docs/results.md)."""
 
 
 def default_checkpoint(task: str = DEFAULT_TASK) -> Path:
-    """The task's shipped checkpoint: in this checkout, else in share/zeus_ros of a prefix."""
-    name = DEMO_CHECKPOINTS[task]
-    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / name]
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if prefix:
-            candidates.append(Path(prefix) / 'share' / 'zeus_ros' / 'checkpoints' / name)
-    return next((path for path in candidates if path.is_file()), candidates[0])
+    """The family's zoo checkpoint (ValueError when the family has none)."""
+    return zoo_checkpoint(task)
 
 
-def schedule_values(task: str) -> list[float]:
-    """Context values the demo cycles through, alternating between two splits.
+def schedule_values(task: str) -> list[float] | str:
+    """Context values the demo cycles through (the family's `demo:` declaration)."""
+    from sim_bridge.families import family
 
-    Cheetah-Run-v0: CHEETAH_VALUES. Cheetah-Run-v1: train and interpolation values (the target
-    velocities where adapting is measured to pay at this budget; beyond 3 m/s not even the
-    oracle gains from knowing it, docs/results.md). Others: train and extrapolation values.
-    """
-    if task == 'Cheetah-Run-v0':
-        return list(CHEETAH_VALUES)
-    from sim_bridge.presets import load_preset
-
-    other = 'interpolation' if task == 'Cheetah-Run-v1' else 'extrapolation'
-    train = [next(iter(v.values())) for v in load_preset(task, 'train')]
-    extra = [next(iter(v.values())) for v in load_preset(task, other)]
-    values = []
-    for index in range(max(len(train), len(extra))):
-        values += [train[index % len(train)], extra[index % len(extra)]]
-    return values
+    return family(task).demo_schedule()[1]
 
 
 def schedule_lengths(task: str) -> tuple[int, int]:
-    """(steps between switches, steps of the run) of the task's demo.
+    """(steps between switches, steps of the run): 10 switches' worth of the family's schedule.
 
     Short episodes (the 40-step cheetah families): a switch mid-episode, 10 episodes. Long
     ones: every 150 steps, 2000 steps.
     """
-    from sim_bridge.registry import task_class
+    from sim_bridge.families import family
 
-    episode = int(getattr(task_class(task), 'episode_length', 0) or 0)
-    if 0 < episode <= 100:
-        return episode // 2, 10 * episode
-    return 150, 2000
+    every = family(task).demo_schedule()[0]
+    return every, (20 * every if every < 150 else 2000)
 
 
 VIEWER = 'zeus_demo_view'
@@ -120,7 +91,9 @@ def viewer_expects(group: Sequence[str]) -> list[str]:
 def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
                 frozen: str = '') -> list[NodeProcess]:
     """The node processes of the demo with their parameters (`frozen`: policy frozen_context)."""
-    values = '[' + ','.join(f'{float(v)}' for v in schedule_values(args.task)) + ']'
+    schedule = schedule_values(args.task)
+    values = schedule if isinstance(schedule, str) else (
+        '[' + ','.join(f'{float(v)}' for v in schedule) + ']')
     bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
@@ -154,36 +127,40 @@ def main(argv: list[str] | None = None) -> int:
     parser = ZeusArgumentParser(prog='zeus demo', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--task', choices=TASK_NAMES, default=DEFAULT_TASK,
-                        help='task family (default: %(default)s; shipped checkpoints for '
-                        f'{", ".join(DEMO_CHECKPOINTS)}; for another pass --checkpoint or '
-                        '--random-policy)')
+                        help='task family (default: %(default)s); its zoo checkpoint unless '
+                        '--checkpoint (checkpoints/README.md lists the families that have one)')
     parser.add_argument('--checkpoint', type=Path, default=None,
-                        help="default: the task's shipped checkpoint (checkpoints/README.md)")
+                        help="default: the family's zoo checkpoint")
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
     parser.add_argument('--steps', type=int,
-                        help='control steps to run (default 2000; 400 for 40-step episodes)')
+                        help='control steps per run (default 400 for 40-step episodes, else 2000)')
     parser.add_argument('--every', type=int,
-                        help='steps between switches (default 150; 20 for 40-step episodes)')
-    parser.add_argument('--seed', type=int, default=0)
+                        help="steps between switches (default: the family's demo schedule)")
+    parser.add_argument('--seed', type=int, default=0, help='first schedule seed')
+    parser.add_argument('--seeds', type=int, default=3,
+                        help='schedule seeds, each run live and frozen (paired; default 3)')
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')
     parser.add_argument('--out', type=Path, default=Path('out/demo'))
     parser.add_argument('--no-frozen', action='store_true',
-                        help='skip the second run with the context frozen')
+                        help='skip the runs with the context frozen')
     args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error(f'--seeds {args.seeds}: give at least 1')
     every, steps = schedule_lengths(args.task)
     args.every = every if args.every is None else args.every
     args.steps = steps if args.steps is None else args.steps
     checkpoint = None
-    if not args.random_policy and args.checkpoint is None and args.task not in DEMO_CHECKPOINTS:
-        print(f'zeus demo: --task {args.task}: no shipped checkpoint for {args.task}; pass '
-              '--checkpoint FILE or --random-policy', file=sys.stderr)
-        return 2
     if not args.random_policy:
-        checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
+        try:
+            checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
+        except ValueError as error:
+            print(f'zeus demo: --task {args.task}: {error} (--checkpoint FILE) or pass '
+                  '--random-policy', file=sys.stderr)
+            return 2
     if checkpoint is not None and not checkpoint.is_file():
-        print(f'zeus demo: checkpoint {checkpoint} not found; train one (README, "Record -> '
-              'retrain -> redeploy") or pass --random-policy', file=sys.stderr)
+        print(f'zeus demo: checkpoint {checkpoint} not found; train one (docs/training.md) or '
+              'pass --random-policy', file=sys.stderr)
         return 2
     if checkpoint is not None:
         from zeus_ros.learning.checkpoint import load_checkpoint
@@ -194,7 +171,6 @@ def main(argv: list[str] | None = None) -> int:
         except CheckpointError as error:
             print(f'zeus demo: --checkpoint: {error}', file=sys.stderr)
             return 2
-    if checkpoint is not None:
         checkpoint = with_readout(checkpoint, args.out)
     domain = group_domain_id()
     env = ros_env(domain)
@@ -203,30 +179,76 @@ def main(argv: list[str] | None = None) -> int:
     print(f'[demo] {args.task}, context switching every {args.every} steps through '
           f'{schedule_values(args.task)}; policy: {checkpoint or "random"}; '
           f'ROS_DOMAIN_ID={domain}', flush=True)
-    log, failed = _run(args, checkpoint, env, args.out, label='context live')
-    if failed is None and checkpoint is not None and not args.no_frozen:
-        estimates = [r.estimate for r in log.ordered() if r.estimate is not None
-                     and r.estimate.size]
-        if not estimates:
-            print('[demo] the live run published no context estimate that the viewer heard: '
-                  'no frozen run to compare with', file=sys.stderr)
-            return 1
-        mean = np.mean(np.stack(estimates), axis=0)
-        frozen = ','.join(f'{v:.6g}' for v in mean)
-        print(f"\n[demo] the same schedule again, the policy's context FROZEN at the mean "
-              f'context of the live run ({len(mean)} values)', flush=True)
-        frozen_log, failed = _run(args, checkpoint, env, args.out / 'frozen',
-                                  label='context frozen', frozen=frozen)
+    frozen = ''
+    if checkpoint is not None and not args.no_frozen:
+        frozen = frozen_context(checkpoint)
+    rows: list[Any] = []
+    names: tuple[str, ...] = ()
+    first_seed = args.seed
+    for index in range(args.seeds):
+        args.seed = first_seed + index
+        out = args.out if index == 0 else args.out / f'seed_{args.seed}'
+        log, failed = _run(args, checkpoint, env, out,
+                           label=f'context live, schedule seed {args.seed}')
+        if failed is not None or not frozen:
+            break
+        names = log.context_names
+        print(f"\n[demo] the same schedule again, the policy's context FROZEN at its "
+              f'training mean (schedule seed {args.seed})', flush=True)
+        frozen_log, failed = _run(args, checkpoint, env, out / 'frozen',
+                                  label=f'context frozen, schedule seed {args.seed}',
+                                  frozen=frozen, reference=log.segments())
+        if failed is not None:
+            break
         print('\n[demo] value of adaptation: per-segment return with the context live '
-              'and frozen (same schedule and seed)')
-        print(format_comparison(log.segments(), frozen_log.segments(),
-                                log.context_names))
+              f'and frozen (schedule seed {args.seed})')
+        print(format_comparison(log.segments(), frozen_log.segments(), names))
+        rows += adaptation_rows(args.seed, log.segments(), frozen_log.segments(),
+                                train_values(args.task))
+    if rows:
+        summary, sentence = summarize_adaptation(rows, args.every)
+        write_rows(rows, names, args.out / 'value_of_adaptation.csv')
+        figure = plot_adaptation(rows, names, args.out / 'value_of_adaptation.png',
+                                 f'zeus demo {args.task}: context live - frozen, '
+                                 f'{len(summary["seeds"])} schedule seed(s)')
+        print(f'\n[demo] {sentence}\n[demo] per seed (whole run): '
+              + ', '.join(f'{t:+.1f}' for t in summary['seed_totals'])
+              + f'\n[demo] table {args.out / "value_of_adaptation.csv"}, figure {figure}')
     if failed == ('demo', 130):
         return 130
     if failed is not None:
         print(f'[demo] node {failed[0]!r} died with exit code {failed[1]}', file=sys.stderr)
         return 1
     return 0
+
+
+def train_values(task: str) -> list[tuple[float, ...]]:
+    """The family's training values (segments on them count as 'training values')."""
+    from sim_bridge.families import family
+
+    return [tuple(value.values()) for value in family(task).preset('train')]
+
+
+def frozen_context(checkpoint: Path) -> str:
+    """The policy parameter frozen_context: the checkpoint's training-mean context.
+
+    Stored in zoo checkpoints (scripts/build_zoo.py); for another checkpoint it is measured
+    now on the train values (deterministic episodes), never on the demo's own run.
+    """
+    from zeus_ros.offline.evaluation.readout import stored_train_mean
+
+    mean = stored_train_mean(checkpoint.read_bytes())
+    if mean is None:
+        from zeus_ros.learning.inference import InferenceAgent
+        from zeus_ros.offline.evaluation.evaluate import train_mean_context
+
+        print(f'[demo] measuring the training-mean context of {checkpoint.name} on its train '
+              'values (3 episodes each) ...', flush=True)
+        mean = train_mean_context(InferenceAgent.from_checkpoint(checkpoint), episodes=3,
+                                  seed=200)
+    if mean is None:
+        return ''
+    return ','.join(f'{v:.6g}' for v in np.asarray(mean).ravel())
 
 
 def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
@@ -255,6 +277,20 @@ def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
     return store_readout(checkpoint, readout, out / 'checkpoint_with_readout.pt', novelty)
 
 
+def running_adaptation(log: Any, reference: Sequence[Any]) -> str:
+    """'value of adaptation so far: ...' over the segments both runs finished ('' without)."""
+    if not reference:
+        return ''
+    live = {s.segment: s for s in reference}
+    done = log.segments()[:-1]  # the newest segment is still running
+    gains = [live[s.segment].total_return - s.total_return for s in done
+             if s.segment in live and live[s.segment].steps == s.steps]
+    if not gains:
+        return ''
+    return (f'\n          value of adaptation so far: live - frozen {sum(gains):+.1f} over '
+            f'{len(gains)} segments ({np.mean(gains):+.1f} per segment)')
+
+
 def format_comparison(live: list[Any], frozen: list[Any], names: Sequence[str]) -> str:
     """Side-by-side per-segment returns of the live and the frozen run, and their sum."""
     header = (f'{"seg":>4} {"context":<28} {"live":>9} {"frozen":>9} {"live - frozen":>14}')
@@ -277,8 +313,13 @@ def format_comparison(live: list[Any], frozen: list[Any], names: Sequence[str]) 
 
 
 def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str], out: Path,
-         *, label: str, frozen: str = '') -> tuple[Any, tuple[str, int] | None]:
-    """One run of the system; prints live views and the summary, writes CSV and figure."""
+         *, label: str, frozen: str = '', reference: Sequence[Any] = ()
+         ) -> tuple[Any, tuple[str, int] | None]:
+    """One run of the system; prints live views and the summary, writes CSV and figure.
+
+    `reference`: the live run's segments; the view then adds the running value of adaptation
+    over the segments this run has finished.
+    """
     out.mkdir(parents=True, exist_ok=True)
     inspector = Inspector(name=VIEWER, expect=viewer_expects(demo_group(args, checkpoint)))
     supervisor = Supervisor(build_nodes(args, checkpoint, frozen), env)
@@ -299,7 +340,8 @@ def _run(args: argparse.Namespace, checkpoint: Path | None, env: dict[str, str],
                     inspector.executor.spin_once(timeout_sec=0.02)
                 break
             if time.monotonic() >= next_draw and inspector.current() is not None:
-                print(inspector.view(), flush=True)
+                print(inspector.view() + running_adaptation(inspector.log, reference),
+                      flush=True)
                 next_draw = time.monotonic() + 5.0
     except KeyboardInterrupt:
         print('[demo] Ctrl-C: stopping', flush=True)

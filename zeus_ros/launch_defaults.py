@@ -23,7 +23,7 @@ __all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CON
            'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'param_args', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir', 'start_args',
-           'start_parameters']
+           'start_parameters', 'task_overrides', 'zoo_checkpoint']
 
 PACKAGE = 'zeus_ros'
 NODES: dict[str, str] = {
@@ -81,8 +81,11 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    'publishes'),
     LaunchArgument('params_file', '', 'ROS 2 params file for all nodes (empty: the installed '
                    'share/zeus_ros/params/zeus.yaml)'),
+    LaunchArgument('task', '', "task family to run (empty: the params file's): sim_bridge runs "
+                   'its demo schedule and the agent nodes its zoo checkpoint '
+                   '(params/tasks/<task>.yaml)'),
     LaunchArgument('checkpoint', '', 'checkpoint for context_estimator AND policy (empty: '
-                   'the one in the params file)'),
+                   "the one in the params file, or the task's zoo checkpoint)"),
     LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
     LaunchArgument('log_level', 'info', 'log level of every node: ' + ', '.join(LOG_LEVELS)),
     LaunchArgument('robot', 'false', "robot_bridge in sim_bridge's place (params_file: the "
@@ -186,6 +189,52 @@ def share_dir() -> Path:
         return Path(get_package_share_directory(PACKAGE))
     except PackageNotFoundError:
         return Path(__file__).resolve().parents[1]
+
+
+def task_overrides(task: str, checkpoint: str = '') -> dict[str, Any]:
+    """Per node, the parameters that make the group run `task` (ValueError when unknown).
+
+    sim_bridge gets the family's demo schedule (switch every N steps through its values);
+    estimator and policy the task name; 'checkpoint' the family's zoo checkpoint unless one is
+    given.
+    """
+    from sim_bridge.families import family
+
+    try:
+        every, values = family(task).demo_schedule()
+    except ValueError as error:
+        raise ValueError(f'task {task!r}: {error}') from None
+    bridge = {'task': task, 'schedule.kind': 'switch', 'schedule.every': every,
+              'schedule.values': values}
+    overrides: dict[str, Any] = {'sim_bridge': bridge, 'robot_bridge': {},
+                                 **{node: {'task': task} for node in AGENT_NODES}}
+    if not checkpoint:
+        overrides['checkpoint'] = str(zoo_checkpoint(task))
+    return overrides
+
+
+def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
+    """The family's zoo checkpoint (`<family>/<method>.pt`): this checkout's, else the share's.
+
+    ValueError naming the families that have one when `task` has none.
+    """
+    from sim_bridge.families import family
+
+    declared = family(task).checkpoint
+    if declared is None:
+        from sim_bridge.registry import TASK_NAMES
+
+        zoo = [name for name in TASK_NAMES if family(name).checkpoint]
+        raise ValueError(f'{task} has no zoo checkpoint (families with one: {", ".join(zoo)}); '
+                         'pass a checkpoint you trained')
+    relative = Path(declared).with_name(f'{method}.pt') if method != 'zeus' else Path(declared)
+    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / relative,
+                  share_dir() / 'checkpoints' / relative]
+    found = next((path for path in candidates if path.is_file()), None)
+    if found is None:
+        raise ValueError(f'{task}: zoo checkpoint {relative} not found; looked in '
+                         + ', '.join(str(c.parent) for c in candidates))
+    return found
 
 
 def default_params_file() -> Path:
@@ -309,6 +358,7 @@ def plan(
     use_sim_time: bool = False,
     params_file: Path | str | None = None,
     checkpoint: str = '',
+    task: str = '',
     record: bool = False,
     log_level: str = 'info',
     nodes: Sequence[str] = DEFAULT_NODES,
@@ -325,7 +375,9 @@ def plan(
     recording is made by the random policy alone (no estimator), which reads the robot's shape
     from the params file. `single_process` changes only how the nodes are hosted (one process,
     see LaunchPlan.container_args), never their parameters; `intra_process` (single_process
-    only) whether the container's nodes hand each other messages in process.
+    only) whether the container's nodes hand each other messages in process. `task` runs
+    another family than the params file's: its demo schedule on sim_bridge, its zoo checkpoint
+    on the agent nodes (unless `checkpoint` is given).
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -348,6 +400,9 @@ def plan(
         for section in _node_sections(params, node))
     if random_robot:
         names = [name for name in names if name != 'context_estimator']
+    family_overrides = task_overrides(task, checkpoint) if task else {}
+    if task and not checkpoint:
+        checkpoint = str(family_overrides.pop('checkpoint'))
     ns = namespace.strip().strip('/')
     planned = []
     for name in names:
@@ -361,6 +416,7 @@ def plan(
             if values:
                 overrides[key] = str(resolve_path(str(values[-1]), path.parent,
                                                   f'{name} {key} (params file {path})'))
+        overrides.update(family_overrides.get(name, {}))
         if random_robot and name == 'policy':
             overrides['task'] = str(path)  # the robot's params file declares its task
         if use_sim_time:
@@ -380,7 +436,7 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
     get = {argument.name: values.get(argument.name, argument.default) for argument in ARGUMENTS}
     return plan(namespace=get['namespace'], use_sim_time=parse_bool('use_sim_time',
                                                                     get['use_sim_time']),
-                params_file=get['params_file'], checkpoint=get['checkpoint'],
+                params_file=get['params_file'], checkpoint=get['checkpoint'], task=get['task'],
                 record=parse_bool('record', get['record']), log_level=get['log_level'],
                 robot=parse_bool('robot', get['robot']),
                 single_process=parse_bool('single_process', get['single_process']),

@@ -262,9 +262,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--robot', action='store_true',
                         help="robot_bridge in sim_bridge's place (--params: the robot's, e.g. "
                         'params/robot_bridge.yaml)')
+    parser.add_argument('--task', default='',
+                        help="task family to run (default: the params file's, Cheetah-Bias-v0): "
+                        "its demo schedule and its zoo checkpoint (checkpoints/README.md)")
     parser.add_argument('--checkpoint', default='',
-                        help='checkpoint for context_estimator and policy (default: the params '
-                        "file's)")
+                        help="checkpoint for context_estimator and policy (default: the params "
+                        "file's, or the --task family's zoo checkpoint)")
     parser.add_argument('--log-level', default='info', choices=launch_defaults.LOG_LEVELS,
                         help='log level of every node')
     parser.add_argument('--domain-id', type=int, default=None,
@@ -290,7 +293,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         launch = launch_defaults.plan(
             namespace=args.namespace, use_sim_time=args.sim_time, params_file=args.params,
-            checkpoint=args.checkpoint, record=args.record, log_level=args.log_level,
+            checkpoint=args.checkpoint, task=args.task, record=args.record,
+            log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
             intra_process=not args.no_intra_process)
     except ValueError as error:

@@ -16,7 +16,6 @@ from zeus_ros.learning.checkpoint import (
 )
 from zeus_ros.learning.config import (
     AGGREGATIONS,
-    ALPHA_PSI_BY_TASK,
     METHODS,
     ZeusConfig,
     config_from_dict,
@@ -30,7 +29,6 @@ from zeus_ros.learning.spec import AgentSpec
 
 __all__ = [
     'AGGREGATIONS',
-    'ALPHA_PSI_BY_TASK',
     'FORMAT_VERSION',
     'METHODS',
     'PSI_METHODS',

@@ -2,7 +2,7 @@
 
 Defaults follow the paper's hyper-parameter tables (appendix B) where the paper gives a value and
 mtrl (the paper's starting codebase) where it does not. `alpha_psi` and `adam_beta1` may be
-`'auto'`; `resolve_config(config, task)` replaces them with the per-task values of the paper.
+`'auto'`; `resolve_config(config, task)` replaces them with the task family's training defaults.
 """
 
 from __future__ import annotations
@@ -19,14 +19,12 @@ from zeus_ros.learning.methods import METHODS
 
 __all__ = [
     'AGGREGATIONS',
-    'ALPHA_PSI_BY_TASK',
     'CONTEXT_LOSSES',
     'CONTEXT_NORMS',
     'EXPLORATIONS',
     'LEGACY_CONFIG',
     'METHODS',
     'MODEL_TARGETS',
-    'REWARD_VARYING_TASKS',
     'ZeusConfig',
     'config_from_dict',
     'load_config',
@@ -58,25 +56,6 @@ AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
 CONTEXT_HEADS = ('linear', 'mlp')
 """What maps psi's aggregated transition codes to the context (context.ContextEncoder)."""
 
-ALPHA_PSI_BY_TASK: dict[str, float] = {
-    'Cheetah-Run-v0': 1.0,
-    'Finger-Spin-v0': 0.5,
-    'Walker-Walk-v0': 2.0,
-    'Walker-Walk-v1': 0.1,
-    'Cheetah-Run-v1': 1.0,
-    'Sawyer-Peg-v0': 1.0,
-    # Our families, not in the paper: measured (docs/results.md, sessions 10-11; 10k updates,
-    # 5 seeds, paired by seed). With 1.0 psi's codes saturate in every run and the actor
-    # ignores psi (sensitivity 0.000); with 0 (the ablation) psi orders the context (Spearman
-    # 0.95 / 0.97) and the actor reads it (0.28 / 0.19), returns +26 / +15 on the train
-    # values; 0.1 lies between (Spearman 0.73 / 0.90). Until session 10 these were 1.0.
-    'Cheetah-Motor-v0': 0.0,
-    'Cheetah-Bias-v0': 0.0,
-}
-"""alpha_psi per task from the paper's ZeUS hyper-parameter table (and our own families)."""
-
-REWARD_VARYING_TASKS = frozenset({'Cheetah-Run-v1', 'Sawyer-Peg-v0'})
-"""Tasks whose context changes the reward; the paper uses Adam beta1 0.5 there, 0.9 elsewhere."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +77,7 @@ class ZeusConfig:
     context_hidden_dim: int = 128
     """Width of the two hidden layers of psi's per-transition MLP."""
     alpha_psi: float | str = 'auto'
-    """Weight of the context loss (eq. 1); 'auto' = the paper's per-task value."""
+    """Weight of the context loss (eq. 1); 'auto' = the task family's `training: alpha_psi`."""
     context_loss: str = 'scale_free'
     """'paper': MSE(||psi1 - psi2||, d) as eq. 1 writes it, which psi can satisfy by shrinking
     towards a constant (d is computed at psi itself); 'scale_free': both distance vectors divided
@@ -233,7 +212,7 @@ class ZeusConfig:
     alpha_lr: float = 1e-4
     """Adam learning rate of the temperature."""
     adam_beta1: float | str = 'auto'
-    """Adam beta1 of policy, Q and temperature; 'auto': 0.5 on reward-varying tasks, else 0.9."""
+    """Adam beta1 of policy, Q and temperature; 'auto' = the task family's `training:` value."""
     init_temperature: float = 0.1
     """Initial SAC temperature."""
     actor_log_std_min: float = -10.0
@@ -419,17 +398,24 @@ def _read_config_data(path: Path, children: tuple[Path, ...]) -> Any:
 
 
 def resolve_config(config: ZeusConfig, task: str) -> ZeusConfig:
-    """Replace 'auto' values with the paper's per-task values and apply method overrides."""
-    alpha_psi = config.alpha_psi
-    if alpha_psi == 'auto':
-        if task not in ALPHA_PSI_BY_TASK:
-            raise ConfigError(f"alpha_psi: 'auto' needs a task from the paper's table "
-                              f'({", ".join(ALPHA_PSI_BY_TASK)}), got task {task!r}; '
-                              'set alpha_psi to a number')
-        alpha_psi = ALPHA_PSI_BY_TASK[task]
+    """Replace 'auto' values with the task family's training defaults; apply method overrides.
+
+    The family declares them (params/tasks/<task>.yaml or a task file's `training:`): the
+    paper's hyper-parameter table on its tasks, our measured values on ours.
+    """
+    alpha_psi, beta1 = config.alpha_psi, config.adam_beta1
+    if alpha_psi == 'auto' or beta1 == 'auto':
+        from sim_bridge.families import DEFAULT_TRAINING, family
+
+        try:
+            defaults = family(task).training
+        except ValueError as error:
+            if alpha_psi == 'auto':  # no safe guess: it changes what psi learns
+                raise ConfigError(f"alpha_psi 'auto' needs the task family's training "
+                                  f'defaults: {error}; or set alpha_psi to a number') from None
+            defaults = DEFAULT_TRAINING  # beta1 of every dynamics family in the paper
+        alpha_psi = defaults['alpha_psi'] if alpha_psi == 'auto' else alpha_psi
+        beta1 = defaults['adam_beta1'] if beta1 == 'auto' else beta1
     if config.method == 'zeus_no_context_loss':
         alpha_psi = 0.0
-    beta1 = config.adam_beta1
-    if beta1 == 'auto':
-        beta1 = 0.5 if task in REWARD_VARYING_TASKS else 0.9
     return config.replace(alpha_psi=float(alpha_psi), adam_beta1=float(beta1))

@@ -31,6 +31,7 @@ from zeus_ros.atomic_file import atomic_write
 __all__ = [
     'EXTRA_KEY',
     'NOVELTY_KEY',
+    'TRAIN_MEAN_KEY',
     'ContextReadout',
     'NoveltyMonitor',
     'NoveltyTracker',
@@ -40,11 +41,15 @@ __all__ = [
     'held_back',
     'readout_from_checkpoint_bytes',
     'store_readout',
+    'store_train_mean',
     'stored_monitors',
+    'stored_train_mean',
 ]
 
 EXTRA_KEY = 'context_readout'
 NOVELTY_KEY = 'context_novelty'
+TRAIN_MEAN_KEY = 'train_mean_context'
+"""The agent's mean context over its train values: what a frozen-context run freezes to."""
 RIDGE = 1e-3
 """Ridge penalty (relative to the mean psi variance): keeps the map stable when psi is flat."""
 NOVELTY_WINDOW = 10
@@ -295,6 +300,29 @@ def stored_monitors(data: bytes) -> tuple[ContextReadout | None, NoveltyMonitor 
     readout, novelty = extra.get(EXTRA_KEY), extra.get(NOVELTY_KEY)
     return (None if readout is None else ContextReadout.from_dict(readout),
             None if novelty is None else NoveltyMonitor.from_dict(novelty))
+
+
+def stored_train_mean(data: bytes) -> np.ndarray | None:
+    """The train-mean context stored in a checkpoint file's bytes (None: absent)."""
+    import torch
+
+    payload = torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
+    extra = payload.get('extra', {}) if isinstance(payload, dict) else {}
+    mean = extra.get(TRAIN_MEAN_KEY)
+    return None if mean is None else np.asarray(mean, dtype=np.float64)
+
+
+def store_train_mean(checkpoint: str | os.PathLike[str], mean: np.ndarray) -> Path:
+    """Write the train-mean context into the checkpoint's `extra`, in place, atomically."""
+    import torch
+
+    path = Path(checkpoint)
+    payload = torch.load(path, map_location='cpu', weights_only=True)
+    payload['extra'] = {**payload.get('extra', {}),
+                        TRAIN_MEAN_KEY: [float(v) for v in np.asarray(mean).ravel()]}
+    with atomic_write(path, 'wb') as handle:
+        torch.save(payload, handle)
+    return path
 
 
 def readout_from_checkpoint_bytes(data: bytes) -> ContextReadout | None:

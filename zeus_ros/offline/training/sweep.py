@@ -26,6 +26,7 @@ import sys
 import time
 from typing import Any
 
+from sim_bridge.presets import SPLITS
 from zeus_ros.offline.training.collect_workers import portable_task
 from zeus_ros.offline.training.run_state import RunStateError
 from zeus_ros.offline.training.trial import (
@@ -40,7 +41,6 @@ from zeus_ros.offline.training.trial import (
 __all__ = ['SweepResult', 'group_name', 'main', 'parse_seeds', 'parse_sets', 'plan',
            'run_sweep', 'write_tables']
 
-SPLITS = ('train', 'interpolation', 'extrapolation')
 
 
 class SweepError(ValueError):
@@ -110,7 +110,7 @@ def _task_splits(task: str, wanted: Sequence[str] | None) -> tuple[str, ...]:
     missing = [s for s in wanted if not defined(s)]
     if missing:
         raise SweepError(f'--eval-splits: {task} defines no {", ".join(missing)} split '
-                         f'(params/contexts/{task}.yaml); leave it out or pick others')
+                         f'(params/tasks/{task}.yaml); leave it out or pick others')
     return tuple(wanted)
 
 

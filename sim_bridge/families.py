@@ -1,0 +1,235 @@
+"""A task family is one declaration: `params/tasks/<Task>.yaml` (built-in) or a user task file.
+
+Everything the tools know about a family is read here and nowhere else: its context parameters
+(unit, default, range), the preset value lists per split, the training defaults that a config's
+`auto` values resolve to, the zoo checkpoint it deploys and the schedule its demo runs.
+A built-in family's file names the Python class that simulates it (`builtin:`); a user task file
+declares the model itself (`model:`, sim_bridge/mjcf_task.py) and may carry the same `training:`,
+`checkpoint:` and `demo:` sections.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cache
+import math
+from pathlib import Path
+from typing import Any
+
+from sim_bridge.core import ContextSpec
+from sim_bridge.presets import SPLITS, find_params_dir
+
+__all__ = ['DEFAULT_TRAINING', 'DeclaredSpecs', 'TaskFamily', 'builtin_family_file',
+           'family', 'parse_presets']
+
+DEFAULT_TRAINING: Mapping[str, float] = {'alpha_psi': 1.0, 'adam_beta1': 0.9}
+"""Training defaults of a family that declares none: the paper's most common values."""
+
+_FILE_KEYS = {'task', 'varies', 'context', 'presets', 'training', 'checkpoint', 'demo'}
+_TRAINING_KEYS = {'alpha_psi', 'adam_beta1'}
+_DEMO_KEYS = {'values', 'every'}
+
+
+@dataclass(frozen=True)
+class TaskFamily:
+    """One family's declaration, validated."""
+
+    name: str
+    source: Path
+    specs: tuple[ContextSpec, ...]
+    """Context parameters with unit, default and the range the task accepts."""
+    presets: Mapping[str, tuple[dict[str, float], ...]]
+    """Context values per split (SPLITS), each as {parameter: value}."""
+    training: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_TRAINING))
+    """What `alpha_psi: auto` and `adam_beta1: auto` resolve to for this family."""
+    checkpoint: str | None = None
+    """The zoo checkpoint it deploys, relative to checkpoints/ (None: not in the zoo)."""
+    varies: str = ''
+    """What changes, in a few words (the zoo index and --help print it)."""
+    demo_values: tuple[Any, ...] = ('train', 'extrapolation')
+    """What the demo's schedule alternates between: split names or values."""
+    demo_every: int | None = None
+    """Steps between the demo's switches (None: half an episode for short episodes)."""
+
+    def preset(self, split: str) -> list[dict[str, float]]:
+        """Context values of one split; ValueError naming the splits this family has."""
+        if split not in SPLITS or split not in self.presets:
+            available = [s for s in SPLITS if s in self.presets]
+            raise ValueError(f'{self.name}: unknown preset split {split!r}; choose one of '
+                             f'{available} ({self.source})')
+        return [dict(value) for value in self.presets[split]]
+
+    def demo_schedule(self) -> tuple[int, list[float] | str]:
+        """(steps between switches, values) of the family's demo and `zeus launch --task`.
+
+        Values alternate between the demo's splits (or are its own list); a family with several
+        context parameters cycles through its first split by name (sim_bridge's preset form).
+        Short episodes switch mid-episode (half an episode); long ones every 150 steps.
+        """
+        from sim_bridge.registry import task_class
+
+        episode = int(getattr(task_class(self.name), 'episode_length', 0) or 0)
+        every = self.demo_every or (episode // 2 if 0 < episode <= 100 else 150)
+        lists = [[float(next(iter(v.values()))) for v in self.preset(item)]
+                 if isinstance(item, str) else [float(item)] for item in self.demo_values]
+        if len(self.specs) > 1:
+            first = next((i for i in self.demo_values if isinstance(i, str)), 'train')
+            return every, first
+        if all(not isinstance(item, str) for item in self.demo_values):
+            return every, [float(item) for item in self.demo_values]
+        values = []
+        for index in range(max(len(values_) for values_ in lists)):
+            values += [values_[index % len(values_)] for values_ in lists]
+        return every, values
+
+    def unit(self, parameter: str) -> str:
+        """The unit of one context parameter ('' when dimensionless or undeclared)."""
+        return next((s.unit for s in self.specs if s.name == parameter), '')
+
+
+class DeclaredSpecs:
+    """A built-in task class's `specs`, read from its family file on first use.
+
+    `specs = DeclaredSpecs()` in the class body: the file is the one place that states them.
+    """
+
+    def __get__(self, instance: object, owner: type) -> tuple[ContextSpec, ...]:
+        """The owner class's context parameters (by its `name`)."""
+        return family(owner.name).specs  # type: ignore[attr-defined]
+
+
+def builtin_family_file(task: str) -> Path:
+    """`params/tasks/<task>.yaml` of this checkout or the installed share."""
+    return find_params_dir() / 'tasks' / f'{task}.yaml'
+
+
+def family(task: str) -> TaskFamily:
+    """The family of a task name or task file; ValueError naming the file and the entry."""
+    from sim_bridge.registry import declared_task
+    from sim_bridge.task_files import read_yaml
+
+    declared = declared_task(task)
+    if declared is not None:  # read each time: task_files re-reads a file that changed
+        data = read_yaml(declared.source)
+        return _family(declared.name, declared.source, data, declared.factory.specs)
+    return _builtin_family(task)
+
+
+@cache
+def _builtin_family(task: str) -> TaskFamily:
+    from sim_bridge.registry import TASK_NAMES
+    from sim_bridge.task_files import read_yaml
+
+    if task not in TASK_NAMES:
+        raise ValueError(f'unknown task {task!r}: choose one of {", ".join(TASK_NAMES)}, '
+                         'or pass a task file (docs/tasks.md)')
+    path = builtin_family_file(task)
+    data = read_yaml(path, what='task family file')
+    if not isinstance(data, Mapping):
+        raise ValueError(f'task family file {path}: expected a mapping of keys')
+    unknown = sorted(set(data) - _FILE_KEYS)
+    if unknown:
+        raise ValueError(f'task family file {path}: unknown key(s) {unknown}; known: '
+                         f'{sorted(_FILE_KEYS)}')
+    if data.get('task') != task:
+        raise ValueError(f'task family file {path}: task is {data.get("task")!r}, '
+                         f'expected {task!r} (the file name)')
+    specs = _specs(data.get('context'), f'task family file {path}')
+    return _family(task, path, data, specs)
+
+
+def _family(name: str, path: Path, data: Mapping[str, Any],
+            specs: tuple[ContextSpec, ...]) -> TaskFamily:
+    where = f'{path}'
+    names = tuple(s.name for s in specs)
+    presets = parse_presets(data.get('presets') or {}, names, where)
+    for split, values in presets.items():
+        for value in values:
+            for spec in specs:
+                v = value.get(spec.name)
+                if v is not None and not spec.low <= v <= spec.high:
+                    raise ValueError(f'{where}: presets: {split}: {spec.name} {v} outside '
+                                     f'its range [{spec.low}, {spec.high}]')
+    training = dict(DEFAULT_TRAINING)
+    raw_training = data.get('training') or {}
+    if not isinstance(raw_training, Mapping) or set(raw_training) - _TRAINING_KEYS:
+        raise ValueError(f'{where}: training: expected a mapping with keys '
+                         f'{sorted(_TRAINING_KEYS)}, got {raw_training!r}')
+    for key, value in raw_training.items():
+        training[key] = _number(value, f'{where}: training: {key}')
+    if not 0.0 <= training['adam_beta1'] < 1.0 or training['alpha_psi'] < 0.0:
+        raise ValueError(f'{where}: training: alpha_psi must be >= 0 and adam_beta1 in [0, 1)')
+    demo = data.get('demo') or {}
+    if not isinstance(demo, Mapping) or set(demo) - _DEMO_KEYS:
+        raise ValueError(f'{where}: demo: expected a mapping with keys {sorted(_DEMO_KEYS)}')
+    values = tuple(demo.get('values', ('train', 'extrapolation')))
+    for item in values:
+        if isinstance(item, str) and item not in presets:
+            raise ValueError(f'{where}: demo: values: {item!r} is not a preset split here '
+                             f'({", ".join(presets) or "none declared"})')
+    every = demo.get('every')
+    if every is not None and (not isinstance(every, int) or every < 1):
+        raise ValueError(f'{where}: demo: every must be a positive number of steps')
+    checkpoint = data.get('checkpoint')
+    if checkpoint is not None and not isinstance(checkpoint, str):
+        raise ValueError(f'{where}: checkpoint must be a path under checkpoints/')
+    return TaskFamily(name=name, source=path, specs=specs, presets=presets, training=training,
+                      checkpoint=checkpoint, varies=str(data.get('varies', '')),
+                      demo_values=values, demo_every=every)
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+        raise ValueError(f'{where}: expected a number, got {value!r}')
+    return float(value)
+
+
+def _specs(context: Any, where: str) -> tuple[ContextSpec, ...]:
+    if not isinstance(context, Mapping) or not context:
+        raise ValueError(f'{where}: context: declare each parameter, e.g. motor_bias: '
+                         '{unit: ..., default: 0.0, range: [-1, 1], doc: ...}')
+    specs = []
+    for name, entry in context.items():
+        here = f'{where}: context {name}'
+        if not isinstance(entry, Mapping) or set(entry) - {'unit', 'default', 'range', 'doc'}:
+            raise ValueError(f'{here}: expected a mapping with unit, default, range, doc')
+        bounds = entry.get('range')
+        if not isinstance(bounds, list) or len(bounds) != 2:
+            raise ValueError(f'{here}: range must be [low, high]')
+        low, high = (_number(b, f'{here}: range') for b in bounds)
+        default = _number(entry.get('default'), f'{here}: default')
+        if not low <= default <= high:
+            raise ValueError(f'{here}: default {default} outside range [{low}, {high}]')
+        specs.append(ContextSpec(str(name), default, low, high, str(entry.get('doc', '')),
+                                 unit=str(entry.get('unit', ''))))
+    return tuple(specs)
+
+
+def parse_presets(raw: Any, parameters: tuple[str, ...], where: str
+                  ) -> dict[str, tuple[dict[str, float], ...]]:
+    """Preset lists per split as {parameter: value} dicts (a bare number: the only parameter)."""
+    if not isinstance(raw, Mapping) or set(raw) - set(SPLITS):
+        raise ValueError(f'{where}: presets: splits are {", ".join(SPLITS)}; got '
+                         f'{sorted(raw) if isinstance(raw, Mapping) else raw!r}')
+    single = parameters[0] if len(parameters) == 1 else None
+    presets: dict[str, tuple[dict[str, float], ...]] = {}
+    for split in SPLITS:
+        if split not in raw:
+            continue
+        values = []
+        for entry in raw[split] or []:
+            if isinstance(entry, Mapping):
+                unknown = sorted(set(map(str, entry)) - set(parameters))
+                if unknown:
+                    raise ValueError(f'{where}: presets: {split}: unknown parameter(s) '
+                                     f'{unknown}; this task has {list(parameters)}')
+                values.append({str(k): _number(v, f'{where}: presets: {split}')
+                               for k, v in entry.items()})
+            elif single is not None:
+                values.append({single: _number(entry, f'{where}: presets: {split}')})
+            else:
+                raise ValueError(f'{where}: presets: {split}: with several parameters each '
+                                 f'value is a mapping, e.g. {{{parameters[0]}: ...}}')
+        presets[split] = tuple(values)
+    return presets
