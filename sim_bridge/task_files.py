@@ -46,7 +46,7 @@ class DeclaredTask:
     simulated: bool = True
     """False for a robot: only robot_bridge steps it."""
     presets: Mapping[str, list[Any]] = field(default_factory=dict)
-    """Context values per split (train / interpolation / extrapolation), as in params/tasks/<Task>.yaml."""
+    """Context values per split (train / interpolation / extrapolation), as a family file's."""
     parameters: tuple[str, ...] = ()
 
 

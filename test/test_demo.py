@@ -20,22 +20,28 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     require_ros()
     assert default_checkpoint(DEFAULT_TASK).is_file()
     out = tmp_path / 'demo'
-    done = subprocess.run(python_module('zeus_ros.demo', '--steps', '60', '--out', str(out)),
+    done = subprocess.run(python_module('zeus_ros.demo', '--steps', '60', '--seeds', '1',
+                                        '--out', str(out)),
                           env=ros_environment(fresh_domain_id()), capture_output=True,
                           text=True, timeout=360, check=False)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     live, frozen = read_csv(out / 'steps.csv'), read_csv(out / 'frozen' / 'steps.csv')
     assert len(live) >= 55 and len(frozen) >= 55
-    assert [r['true_target_velocity'] for r in live[:55]] == [
-        r['true_target_velocity'] for r in frozen[:55]]
+    assert [r['true_motor_bias'] for r in live[:55]] == [
+        r['true_motor_bias'] for r in frozen[:55]]
     assert 'context FROZEN' in done.stdout + done.stderr
     table = done.stdout.split('value of adaptation:')[1]
     assert 'live - frozen' in table and '\n all ' in table
     assert (out / 'inspection.png').is_file() and (out / 'frozen' / 'inspection.png').is_file()
-    # The shipped checkpoint has no read-out: the demo calibrates one on the train contexts
-    # (not on its own run) and the estimator publishes the estimate in m/s.
-    assert 'context read-out (target_velocity RMSE' in done.stdout
-    assert sum('estimated_target_velocity' in r for r in live) >= 50
+    # The zoo checkpoint carries its read-out and its train-mean context: nothing is calibrated
+    # or measured at start, and the estimator publishes the estimate in the bias's units.
+    assert 'calibrating' not in done.stdout and 'measuring the training-mean' not in done.stdout
+    assert sum(bool(r.get('estimated_motor_bias')) for r in live) >= 50
+    # The paired value of adaptation: a sentence, a table and a picture.
+    assert 'Adapting earned' in done.stdout and 'segments over 1 schedule seed' in done.stdout
+    rows = read_csv(out / 'value_of_adaptation.csv')
+    assert len(rows) >= 2 and {'return_live', 'return_frozen', 'gain'} <= set(rows[0])
+    assert (out / 'value_of_adaptation.png').is_file()
     # The demo's viewer is one of the nodes sim_bridge waits for, and it takes the steps only
     # once it hears the estimator: every step of both runs has its context.
     assert all(r['psi'] for r in live) and all(r['psi'] for r in frozen)
@@ -48,6 +54,16 @@ def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> No
     assert schedule_lengths('Cheetah-Run-v1') == (20, 400)  # 40-step episodes
     assert schedule_lengths('Cheetah-Bias-v0') == (20, 400)
     assert schedule_lengths('Cheetah-Run-v0') == (150, 2000)  # 500-step episodes
+
+
+def test_a_family_without_a_zoo_checkpoint_is_refused_in_one_line() -> None:
+    """`zeus demo --task Walker-Walk-v0` names the families that have one; nothing starts."""
+    done = subprocess.run(python_module('zeus_ros.demo', '--task', 'Walker-Walk-v0'),
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2
+    assert 'has no zoo checkpoint (families with one: Cheetah-Run-v1, Cheetah-Motor-v0, ' \
+        'Cheetah-Bias-v0)' in done.stderr
+    assert 'Traceback' not in done.stderr
 
 
 def test_sim_bridge_waits_for_the_demo_viewer_which_waits_for_the_answers() -> None:

@@ -104,7 +104,8 @@ def test_alpha_psi_auto_uses_the_family_declaration() -> None:
 
 def test_alpha_psi_auto_unknown_task_fails() -> None:
     """'auto' on a task no family declares names the task and asks for numbers."""
-    with pytest.raises(ConfigError, match="unknown task 'Hopper-Hop-v0'.*set alpha_psi to a number"):
+    with pytest.raises(ConfigError,
+                       match=r"unknown task 'Hopper-Hop-v0'.*set alpha_psi to a number"):
         resolve_config(ZeusConfig(), 'Hopper-Hop-v0')
 
 

@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
               f'and frozen (schedule seed {args.seed})')
         print(format_comparison(log.segments(), frozen_log.segments(), names))
         rows += adaptation_rows(args.seed, log.segments(), frozen_log.segments(),
-                                train_values(args.task))
+                                train_values(args.task), min_steps=args.every)
     if rows:
         summary, sentence = summarize_adaptation(rows, args.every)
         write_rows(rows, names, args.out / 'value_of_adaptation.csv')

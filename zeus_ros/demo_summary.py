@@ -37,14 +37,20 @@ class AdaptationRow:
 
 
 def adaptation_rows(seed: int, live: Sequence[Any], frozen: Sequence[Any],
-                    train_values: Sequence[Sequence[float]]) -> list[AdaptationRow]:
-    """Pair the SegmentSummary lists of one seed's two runs (segments cut short are dropped)."""
+                    train_values: Sequence[Sequence[float]], min_steps: int = 1
+                    ) -> list[AdaptationRow]:
+    """Pair the SegmentSummary lists of one seed's two runs.
+
+    Dropped: segments cut short in either run, and segments under `min_steps` (the run's last
+    step opening a new segment).
+    """
     frozen_by_segment = {s.segment: s for s in frozen}
     train = {tuple(round(v, 9) for v in value) for value in train_values}
     rows = []
     for seg in live:
         other = frozen_by_segment.get(seg.segment)
-        if other is None or other.steps != seg.steps or not seg.context:
+        if (other is None or other.steps != seg.steps or not seg.context
+                or seg.steps < min_steps):
             continue
         context = tuple(float(v) for v in seg.context)
         rows.append(AdaptationRow(seed, seg.segment, context,
@@ -86,7 +92,8 @@ def summarize_adaptation(rows: Sequence[AdaptationRow], every: int) -> tuple[dic
     for name, label in (('train', 'on training values'), ('beyond', 'beyond the training range')):
         m, s, k = stats[name]
         if k:
-            parts.append(f'{label} {m:+.1f} ± {s:.1f} ({k} segments)')
+            spread = f' ± {s:.1f}' if np.isfinite(s) else ''
+            parts.append(f'{label} {m:+.1f}{spread} ({k} segment{"s" if k > 1 else ""})')
     return summary, '; '.join(parts) + '.'
 
 

@@ -18,7 +18,7 @@ class AgentSpec:
     """The task side of an agent; stored in checkpoints so nodes can rebuild the networks."""
 
     task: str
-    """Task name, e.g. 'Cheetah-Run-v0' (selects alpha_psi / Adam beta1 when 'auto')."""
+    """Task name, e.g. Cheetah-Bias-v0; its family file sets what 'auto' config values become."""
     context_names: tuple[str, ...]
     """Names of the true context parameters (order of `HistoryBatch.context` columns)."""
     obs_kind: str

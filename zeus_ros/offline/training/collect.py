@@ -36,7 +36,7 @@ turn (docs/results.md, session 7: the critic can value a context that holds for 
 SCHEDULE_HELP = """\
 context schedule: a YAML file (as accepted by sim_bridge.schedules.schedule_from_config), or
 the inline form KIND[:PRESET][:KEY=VALUE[,KEY=VALUE...]] where KIND is a schedule kind
-(constant, switch, drift, random_walk), PRESET names a value list of params/tasks/<Task>.yaml (train,
+(constant, switch, drift, random_walk), PRESET names a preset split of the family (train,
 interpolation, extrapolation; it becomes `values`) and KEY=VALUE are the kind's options, e.g.
   constant                                the task's default context, never changing
   constant:value=0.8                      one fixed value
