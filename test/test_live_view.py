@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
+import signal
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -18,7 +21,7 @@ from live_fixtures import tiny_checkpoint
 from ros_harness import REPO, ros_environment
 
 # This file's own domain ids (the issue-12 range), so parallel runs do not meet.
-DOMAIN_EMPTY, DOMAIN_LIVE, DOMAIN_QUIET = 131, 132, 133
+DOMAIN_EMPTY, DOMAIN_LIVE, DOMAIN_QUIET, DOMAIN_CTRL_C = 131, 132, 133, 134
 
 
 def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
@@ -74,6 +77,88 @@ def test_inspect_with_nothing_running_hints_once_and_exits_1(tmp_path: Path) -> 
     assert err[0].startswith('zeus inspect: saw no step on /zeus/* in ')
     assert f'ROS_DOMAIN_ID={DOMAIN_EMPTY}' in err[0]
     assert not (tmp_path / 'x.png').exists()
+
+
+def _inspect_until(process: subprocess.Popen[str], prefix: str, timeout: float = 60.0) -> None:
+    """Read the inspector's output until a line starts with `prefix` (its view is running)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if line.startswith(prefix):
+            return
+        if not line and process.poll() is not None:
+            break
+    raise AssertionError(f'zeus inspect printed no {prefix!r} line: {process.stderr.read()}')
+
+
+def _publish_steps(stop: threading.Event) -> None:
+    """A real publisher of steps and true contexts (no estimator) at about 50 Hz."""
+    from rclpy.executors import SingleThreadedExecutor
+    from zeus_msgs.msg import ContextTruth, StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.processes import ros_context
+
+    with ros_context(DOMAIN_CTRL_C) as context:
+        import rclpy
+
+        node = rclpy.create_node('fake_sim_bridge', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        steps = node.create_publisher(StepFeedback, TOPICS.STEP, step_qos())
+        truths = node.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, step_qos())
+        step = 0
+        while not stop.is_set():
+            truths.publish(ContextTruth(step=step, segment=step // 50, names=['torso_length'],
+                                        values=[0.6]))
+            steps.publish(StepFeedback(step=step, episode=0, first=step == 0, reward=0.5))
+            executor.spin_once(timeout_sec=0.02)
+            step += 1
+        node.destroy_node()
+
+
+@pytest.mark.ros
+def test_ctrl_c_stops_inspect_cleanly_also_during_its_shutdown(tmp_path: Path) -> None:
+    """Ctrl-C ends `zeus inspect` without a traceback (it once ended in a 20-line RCLError).
+
+    Watching a system: one SIGINT prints the segment summary and exits 0. Watching nothing:
+    SIGINTs every few ms until it is gone, so some land while it shuts rclpy down and while
+    it reports: exit 130 and one line on stderr, as rclpy tools do.
+    """
+    env = ros_environment(DOMAIN_CTRL_C)
+    stop = threading.Event()
+    publisher = threading.Thread(target=_publish_steps, args=(stop,), daemon=True)
+    publisher.start()
+    inspect = subprocess.Popen(
+        [sys.executable, '-m', 'zeus_ros.cli', 'inspect', '--refresh', '0.3'], cwd=tmp_path,
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _inspect_until(inspect, '[inspect] step')
+        inspect.send_signal(signal.SIGINT)
+        out, err = inspect.communicate(timeout=30)
+    finally:
+        stop.set()
+        inspect.kill()
+        publisher.join(timeout=10)
+    assert inspect.returncode == 0, out[-2000:] + err
+    assert 'Traceback' not in err and 'RCLError' not in err, err
+    assert ' seg  steps' in out and 'torso_length=0.6' in out, out[-2000:]  # the summary
+
+    empty = subprocess.Popen(
+        [sys.executable, '-m', 'zeus_ros.cli', 'inspect', '--refresh', '0.3'], cwd=tmp_path,
+        env=ros_environment(DOMAIN_EMPTY), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    try:
+        _inspect_until(empty, '[inspect] waiting for')
+        deadline = time.monotonic() + 20
+        while empty.poll() is None and time.monotonic() < deadline:
+            empty.send_signal(signal.SIGINT)
+            time.sleep(0.005)
+        _out, err = empty.communicate(timeout=30)
+    finally:
+        empty.kill()
+    assert empty.returncode == 130, err
+    assert len(err.splitlines()) == 1 and err.startswith('zeus inspect: interrupted'), err
 
 
 @pytest.mark.ros

@@ -6,15 +6,18 @@ checkpoint holds one; psi otherwise), the current segment's return, the step rat
 observation-to-action latency and the health counters that the nodes publish on /diagnostics.
 `--png` saves the inspection figure and `--csv` the per-step log when the inspector stops
 (Ctrl-C, `--duration` or `--steps`). With nothing publishing it waits quietly after one hint
-(domain, namespace) and exits 1 when it stops without having seen a step.
+(domain, namespace) and exits 1 when it stops without having seen a step (130 when Ctrl-C
+stopped it: one line, never a traceback, however often Ctrl-C is pressed).
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+import contextlib
 import os
 from pathlib import Path
+import signal
 import sys
 import time
 from typing import Any
@@ -60,6 +63,7 @@ class Inspector:
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StepFeedback
 
         from zeus_ros.nodes.common import STEP_BACKLOG, TOPICS, step_qos
@@ -69,7 +73,11 @@ class Inspector:
         unknown = sorted(set(expect) - set(readable))
         if unknown:  # before rclpy.init: nothing to clean up
             raise ValueError(f'Inspector: expect names {unknown}; it reads {list(readable)}')
-        rclpy.init()
+        # The signals are the owner's (a KeyboardInterrupt, or `zeus inspect`'s stop flag):
+        # rclpy's own handler would shut the context down under the running view, and every
+        # call after that (spin, count_publishers, close) raises.
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        self.stop_signal: int | None = None
         self.namespace = namespace
         self.started = time.monotonic()
         self.first_step_at: float | None = None
@@ -158,14 +166,14 @@ class Inspector:
 
     def spin(self, duration: float | None, steps: int | None, refresh: float,
              quiet: bool) -> None:
-        """Spin until the limit or Ctrl-C, redrawing the view every `refresh` seconds."""
+        """Spin until the limit, a stop signal or Ctrl-C, redrawing every `refresh` seconds."""
         import rclpy
 
         start = time.monotonic()
         next_draw = start + refresh
         hinted = False
         try:
-            while rclpy.ok():
+            while rclpy.ok() and self.stop_signal is None:
                 self.executor.spin_once(timeout_sec=0.05)
                 now = time.monotonic()
                 if duration is not None and now - start > duration:
@@ -292,6 +300,27 @@ class Inspector:
         rclpy.try_shutdown()
 
 
+@contextlib.contextmanager
+def stop_on_signals(inspector: Inspector) -> Iterator[None]:
+    """SIGINT / SIGTERM only set `inspector.stop_signal` inside: the loop ends between spins.
+
+    No exception can then land inside rclpy (the spin, the node's destruction), and more
+    Ctrl-C while the inspector shuts down, reports and exits change nothing: it is stopping
+    already (ignored, not merely noted: Python gives SIGINT its default action back while the
+    interpreter exits). Stopped by a limit instead (--duration, --steps), the previous handlers
+    come back, so a Ctrl-C during the summary and figure is an ordinary KeyboardInterrupt.
+    """
+    def note(signum: int, _frame: object) -> None:
+        inspector.stop_signal = signum
+
+    previous = {sig: signal.signal(sig, note) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if inspector.stop_signal is None else signal.SIG_IGN)
+
+
 def _is_zero(text: str) -> bool:
     try:
         return float(text) == 0.0
@@ -312,18 +341,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--namespace', default='',
                         help='watch the system in this namespace (e.g. r1 for /r1/zeus/...)')
     args = parser.parse_args(argv)
-    inspector = Inspector(namespace='/' + args.namespace.strip('/'))
-    seen = False
     try:
-        inspector.spin(args.duration, args.steps, args.refresh, args.quiet)
-        seen = inspector.current(settled=False) is not None
-    finally:
-        inspector.close()
+        return _inspect(args)
+    except KeyboardInterrupt:  # a Ctrl-C after the view stopped (summary, CSV, figure)
+        print('zeus inspect: interrupted', file=sys.stderr)
+        return 130
+
+
+def _inspect(args: argparse.Namespace) -> int:
+    """Watch until a limit or a stop signal, then print the summary and write the files."""
+    inspector = Inspector(namespace='/' + args.namespace.strip('/'))
+    with stop_on_signals(inspector):
+        try:
+            inspector.spin(args.duration, args.steps, args.refresh, args.quiet)
+            seen = inspector.current(settled=False) is not None
+        finally:
+            inspector.close()
     log = inspector.log
     if not seen:
-        print(f'zeus inspect: saw no step on {inspector.listening()} in '
-              f'{time.monotonic() - inspector.started:.0f} s; {NOTHING_HINT}', file=sys.stderr)
-        return 1
+        interrupted = inspector.stop_signal == signal.SIGINT
+        print(f'zeus inspect: {"interrupted; " if interrupted else ""}saw no step on '
+              f'{inspector.listening()} in {time.monotonic() - inspector.started:.0f} s; '
+              f'{NOTHING_HINT}', file=sys.stderr)
+        return 130 if interrupted else 1
     print(format_segments(log.segments(), log.context_names))
     if args.csv:
         print(f'[inspect] per-step log: {log.save_csv(args.csv)}')
