@@ -22,16 +22,20 @@ from pathlib import Path
 import re
 import shutil
 import sys
-from typing import Any
 
-import numpy as np
 import yaml
+
+from zeus_ros.offline.evaluation.adaptation import (
+    EVAL_SEED,
+    AdaptationReport,
+    fmt,
+    measure_adaptation,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 CHECKPOINTS = ROOT / 'checkpoints'
 MANIFEST = CHECKPOINTS / 'zoo.yaml'
 INDEX = CHECKPOINTS / 'README.md'
-EVAL_SEED = 200
 EPISODES = 3
 BEGIN, END = '<!-- zoo index: scripts/build_zoo.py -->', '<!-- end zoo index -->'
 
@@ -46,9 +50,22 @@ class Measured:
     source: Path
     seed: int
     train_returns: dict[int, float]
-    returns: dict[str, tuple[float, float]]
-    voa: dict[str, tuple[float, float]]
-    sensitivity: float
+    report: AdaptationReport
+
+    @property
+    def returns(self) -> dict[str, tuple[float, float]]:
+        """Mean return ± s.e. per split."""
+        return self.report.returns
+
+    @property
+    def voa(self) -> dict[str, tuple[float, float]]:
+        """Value of adaptation ± s.e. per split (empty without a context)."""
+        return self.report.adaptation
+
+    @property
+    def sensitivity(self) -> float:
+        """Mean |delta action| when psi of one extreme train value replaces the other's."""
+        return self.report.sensitivity
 
 
 def family_dir(task: str) -> str:
@@ -73,19 +90,6 @@ def choose_seed(prefix: Path) -> tuple[Path, dict[int, float]]:
     returns = {seed: card_train_return(path.with_suffix('.md')) for seed, path in seeds.items()}
     best = max(returns, key=lambda s: returns[s])
     return seeds[best], returns
-
-
-def mean_se(values: np.ndarray) -> tuple[float, float]:
-    """Mean and standard error (ddof 1) of per-value numbers."""
-    values = np.asarray(values, dtype=float)
-    se = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else float('nan')
-    return float(values.mean()), se
-
-
-def per_value(rows: list[dict[str, Any]]) -> np.ndarray:
-    """Mean return per context value (rows come value by value, EPISODES each)."""
-    returns = np.array([row['return'] for row in rows], dtype=float)
-    return returns.reshape(-1, EPISODES).mean(axis=1)
 
 
 def learned_context(path: Path) -> bool:
@@ -113,46 +117,9 @@ def prepare(target: Path) -> None:
     store_train_mean(target, train_mean_context(agent, episodes=EPISODES, seed=EVAL_SEED))
 
 
-def measure(family: str, method: str, target: Path, source: Path,
-            train_returns: dict[int, float], seed: int) -> Measured:
-    """Fresh returns, value of adaptation and context sensitivity (evaluation seed 200)."""
-    from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.diagnostics import context_sensitivity
-    from zeus_ros.offline.evaluation.evaluate import (
-        evaluate_contexts,
-        overall_mean_context,
-        split_values,
-    )
-
-    agent = InferenceAgent.from_checkpoint(target)
-    returns, voa, sensitivity = {}, {}, float('nan')
-    train_mean = None
-    for split in ('train', 'extrapolation'):
-        values = split_values(family, split)
-        traces: list[Any] = []
-        live = per_value(evaluate_contexts(agent, values, episodes=EPISODES, seed=EVAL_SEED,
-                                           traces=traces))
-        returns[split] = mean_se(live)
-        if agent.context_dim == 0:
-            continue
-        if split == 'train':
-            train_mean = overall_mean_context(agent, traces)
-            sensitivity = context_sensitivity(agent, traces, values)
-        frozen = per_value(evaluate_contexts(agent, values, episodes=EPISODES, seed=EVAL_SEED,
-                                             frozen=[train_mean] * len(values)))
-        voa[split] = mean_se(live - frozen)
-    return Measured(family, method, target, source, seed, train_returns, returns, voa,
-                    sensitivity)
-
-
 def sha256(path: Path) -> str:
     """Hex digest of a file."""
     return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def fmt(pair: tuple[float, float] | None) -> str:
-    """'mean ± se' or '-'."""
-    return '-' if pair is None else f'{pair[0]:.1f} ± {pair[1]:.1f}'
 
 
 def method_note(m: Measured) -> str:
@@ -246,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
             shutil.copyfile(source, target)
             if learned_context(target):
                 prepare(target)
-            measured = measure(name, method, target, source, train_returns, seed)
+            measured = Measured(name, method, target, source, seed, train_returns,
+                                measure_adaptation(target, episodes=EPISODES))
             write_card(measured, entry['budget'])
             built.append(measured)
             print(f'[zoo]   train {fmt(measured.returns["train"])}, beyond the range '

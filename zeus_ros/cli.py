@@ -16,6 +16,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                'read bags as training does; report what they hold'),
     'train': ('zeus_ros.offline.training.train', 'train a checkpoint from bags'),
     'eval': ('zeus_ros.offline.evaluation.evaluate', 'evaluate checkpoints in-process (+ tables)'),
+    'adaptation': ('zeus_ros.offline.evaluation.adaptation',
+                   "a checkpoint's value of adaptation next to the zoo's"),
     'report': ('zeus_ros.offline.evaluation.report', 'mean ± s.e. over seeds of evaluations'),
     'export': ('zeus_ros.offline.evaluation.export', 'small deployment checkpoint + card'),
     'loop': ('zeus_ros.offline.training.loop', 'random collection -> train -> collect -> retrain'),
@@ -30,7 +32,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
 def usage() -> str:
     """The top-level help text."""
     lines = ['usage: zeus <command> [options]', '', 'commands:']
-    lines += [f'  {name:<9} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
+    lines += [f'  {name:<10} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
     lines += ['', "run 'zeus <command> --help' for a command's options"]
     return '\n'.join(lines)
 

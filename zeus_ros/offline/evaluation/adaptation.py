@@ -1,0 +1,168 @@
+"""Does a checkpoint adapt? Its value of adaptation next to the zoo's, paired, in one command.
+
+    zeus adaptation --checkpoint runs/bias/run/final.pt
+
+For each checkpoint: mean return on the family's train and beyond-range values, and the value of
+adaptation there: return with the context live minus the same episodes with the context frozen
+at the checkpoint's own training-mean context (same initial states, paired per value and
+episode; mean ± s.e. over the values), plus the context sensitivity (mean |delta action| when
+psi of one extreme train value replaces the other's). The family's zoo checkpoint is measured
+the same way beside it (--against none skips it). scripts/build_zoo.py writes the zoo's cards
+with this function.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+
+__all__ = ['AdaptationReport', 'format_reports', 'main', 'measure_adaptation']
+
+EVAL_SEED = 200
+"""Initial states that chose nothing: the archive cards and the zoo's choice used seed 100."""
+SPLITS = ('train', 'extrapolation')
+
+
+@dataclass
+class AdaptationReport:
+    """What one checkpoint earns and what adapting adds, per split (mean ± s.e. over values)."""
+
+    checkpoint: Path
+    task: str
+    method: str
+    returns: dict[str, tuple[float, float]] = field(default_factory=dict)
+    adaptation: dict[str, tuple[float, float]] = field(default_factory=dict)
+    """Live minus frozen at the training-mean context; empty without a context."""
+    sensitivity: float = float('nan')
+
+
+def mean_se(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and standard error (ddof 1) of per-value numbers."""
+    array = np.asarray(values, dtype=float)
+    se = float(array.std(ddof=1) / np.sqrt(len(array))) if len(array) > 1 else float('nan')
+    return float(array.mean()), se
+
+
+def _per_value(rows: Sequence[dict[str, Any]], episodes: int) -> np.ndarray:
+    returns = np.array([row['return'] for row in rows], dtype=float)
+    return returns.reshape(-1, episodes).mean(axis=1)
+
+
+def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_SEED,
+                       splits: Sequence[str] = SPLITS, progress: bool = True
+                       ) -> AdaptationReport:
+    """Returns and value of adaptation of one checkpoint on its family's splits."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.diagnostics import context_sensitivity
+    from zeus_ros.offline.evaluation.evaluate import (
+        evaluate_contexts,
+        overall_mean_context,
+        split_values,
+    )
+
+    agent = InferenceAgent.from_checkpoint(checkpoint)
+    report = AdaptationReport(Path(checkpoint), agent.task, agent.method)
+    train_mean = None
+    if agent.context_dim:
+        traces: list[Any] = []
+        values = split_values(agent.task, 'train')
+        evaluate_contexts(agent, values, episodes=episodes, seed=seed, traces=traces,
+                          progress=progress)
+        train_mean = overall_mean_context(agent, traces)
+        report.sensitivity = context_sensitivity(agent, traces, values)
+    for split in splits:
+        values = split_values(agent.task, split)
+        live = _per_value(evaluate_contexts(agent, values, episodes=episodes, seed=seed,
+                                            progress=progress), episodes)
+        report.returns[split] = mean_se(live)
+        if train_mean is not None:
+            frozen = _per_value(evaluate_contexts(
+                agent, values, episodes=episodes, seed=seed, frozen=[train_mean] * len(values),
+                progress=progress), episodes)
+            report.adaptation[split] = mean_se(live - frozen)
+    return report
+
+
+def fmt(pair: tuple[float, float] | None) -> str:
+    """'mean ± se', or '-' when not measured."""
+    return '-' if pair is None else f'{pair[0]:.1f} ± {pair[1]:.1f}'
+
+
+def format_reports(reports: Sequence[tuple[str, AdaptationReport]]) -> str:
+    """A table, one row per checkpoint, and a sentence per learned-context checkpoint."""
+    header = ['', 'method', *(f'return {s}' for s in SPLITS),
+              *(f'adaptation {s}' for s in SPLITS), 'sensitivity']
+    rows = [header]
+    for label, r in reports:
+        rows.append([label, r.method, *(fmt(r.returns.get(s)) for s in SPLITS),
+                     *(fmt(r.adaptation.get(s)) for s in SPLITS),
+                     '-' if np.isnan(r.sensitivity) else f'{r.sensitivity:.3f}'])
+    widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
+    lines = ['  '.join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()
+             for row in rows]
+    lines.insert(1, '-' * len(lines[0]))
+    for label, r in reports:
+        if 'extrapolation' in r.adaptation:
+            m, se = r.adaptation['extrapolation']
+            verdict = ('adapts: more than 2 s.e. above zero' if m > 2 * se else
+                       'no adaptation measurable (within 2 s.e. of zero)' if m > -2 * se else
+                       'its context hurts beyond the range (more than 2 s.e. below zero)')
+            lines.append(f'{label}: beyond the training range, its live context earns '
+                         f'{m:+.1f} ± {se:.1f} per episode over the same policy with the context '
+                         f'frozen at its training mean: {verdict}.')
+    return '\n'.join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus adaptation`."""
+    from zeus_ros.cli_args import ZeusArgumentParser
+
+    parser = ZeusArgumentParser(prog='zeus adaptation', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--checkpoint', type=Path, required=True, help='your checkpoint')
+    parser.add_argument('--against', default='zoo',
+                        help="'zoo' (the family's zoo checkpoint, default), 'none', or a file")
+    parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
+    parser.add_argument('--seed', type=int, default=EVAL_SEED, help='evaluation seed')
+    parser.add_argument('--no-progress', action='store_true')
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f'--episodes {args.episodes}: give at least 1')
+    from zeus_ros.learning.errors import CheckpointError
+
+    try:
+        mine = measure_adaptation(args.checkpoint, episodes=args.episodes, seed=args.seed,
+                                  progress=not args.no_progress)
+        reports = [('yours', mine)]
+        other = None
+        if args.against == 'zoo':
+            from zeus_ros.launch_defaults import zoo_checkpoint
+
+            try:
+                other = zoo_checkpoint(mine.task)
+            except ValueError as error:
+                print(f'zeus adaptation: no comparison: {error}', file=sys.stderr)
+        elif args.against != 'none':
+            other = Path(args.against)
+        if other is not None:
+            reports.append(('zoo' if args.against == 'zoo' else str(other),
+                            measure_adaptation(other, episodes=args.episodes, seed=args.seed,
+                                               progress=not args.no_progress)))
+    except (CheckpointError, ValueError, FileNotFoundError) as error:
+        print(f'zeus adaptation: {error}', file=sys.stderr)
+        return 2
+    print(f'{mine.task}: {args.episodes} episode(s) per value, evaluation seed {args.seed}; '
+          'mean ± s.e. over the context values; adaptation = live - frozen at the training-mean '
+          'context, paired')
+    print(format_reports(reports))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
