@@ -71,6 +71,13 @@ export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 export LD_LIBRARY_PATH="$VENV/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 mkdir -p "$ROOT/log"
+# A symlink install keeps links to files the tree no longer has (a moved params file fails the
+# build: "can't copy ... not a regular file"), and installed data files that setup.py stopped
+# listing (the research checkpoints before the zoo): drop both, colcon lays the rest anew.
+for stale in "$ROOT/build/zeus_ros" "$ROOT/install/zeus_ros"; do
+  [ -d "$stale" ] && find "$stale" -xtype l -delete
+done
+rm -rf "$ROOT/install/zeus_ros/share/zeus_ros/checkpoints"
 say "colcon build (zeus_msgs, zeus_ros)"
 colcon --log-base "$ROOT/log" build --base-paths "$ROOT" "$ROOT/msg_defs" \
   --build-base "$ROOT/build" --install-base "$ROOT/install" --symlink-install \

@@ -147,7 +147,8 @@ def _documented_commands(text: str) -> list[tuple[str, list[str]]]:
     return found
 
 
-@pytest.mark.parametrize('doc', ['README.md', 'docs/training.md', 'docs/recording.md'])
+@pytest.mark.parametrize('doc', ['README.md', 'docs/usage.md', 'docs/training.md',
+                                 'docs/recording.md'])
 def test_the_docs_use_only_commands_and_flags_the_help_lists(
         doc: str, capsys: pytest.CaptureFixture) -> None:
     """Docs and --help say the same: every documented command and flag exists."""
@@ -166,8 +167,8 @@ def test_the_docs_use_only_commands_and_flags_the_help_lists(
 
 
 def test_readme_names_every_command() -> None:
-    """The README's `zeus --help` comment and executables table list every subcommand."""
-    text = (Path(__file__).resolve().parents[1] / 'README.md').read_text()
+    """The guide's `zeus --help` comment and executables table list every subcommand."""
+    text = (Path(__file__).resolve().parents[1] / 'docs' / 'usage.md').read_text()
     comment = next(line for line in text.splitlines() if line.startswith('zeus --help'))
     row = next(line for line in text.splitlines() if line.startswith('| `zeus` |'))
     for name in SUBCOMMANDS:

@@ -45,7 +45,7 @@ def test_every_import_has_a_rosdep_key_or_the_documented_pip_step() -> None:
 
     declared = {dep.name for dep in parse_package(str(REPO / 'package.xml')).exec_depends}
     assert {'launch', 'launch_ros', 'ament_index_python'} <= declared
-    readme = (REPO / 'README.md').read_text()
+    readme = (REPO / 'docs' / 'usage.md').read_text()
     [pip_line] = re.findall(r'^python3 -m pip install .*$', readme, flags=re.MULTILINE)
     missing = []
     for name in sorted(_imports()):
