@@ -134,3 +134,13 @@ def test_launch_with_a_task_runs_its_schedule_and_zoo_checkpoint() -> None:
     given = launch_defaults.plan(task='Walker-Walk-v0', checkpoint=str(
         ROOT / 'checkpoints' / 'cheetah_bias_v0' / 'zeus.pt'))
     assert {n.name for n in given.nodes} >= {'sim_bridge', 'policy'}
+
+
+def test_every_params_file_the_docs_name_exists() -> None:
+    """A config, task or params file named in the README or docs/ is one a user can open."""
+    named = set()
+    for doc in [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md'))]:
+        named |= {(doc.name, m) for m in re.findall(r'params/[\w/.-]+\.(?:yaml|xml)',
+                                                     doc.read_text())}
+    missing = sorted((doc, path) for doc, path in named if not (ROOT / path).is_file())
+    assert not missing, missing
