@@ -664,3 +664,46 @@ def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys
     assert '--namespace r1' in capsys.readouterr().err
     assert train([*argv, '--out', str(tmp_path / 'run1'), '--namespace', 'r1']) == 0
     assert (tmp_path / 'run1' / 'final.pt').is_file()
+
+
+def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
+                                                                 capsys: Any) -> None:
+    """`zeus launch --record` writes bags/zeus_<date>/zeus_<date>_000/: `--bags bags` finds it.
+
+    Every bag below the folder is found (split bags, sqlite3, deeper), a bag folder is taken
+    whole, hidden folders are skipped; ingest, train and recover share this one search. A
+    folder without bags is one error naming where it searched and what a bag is.
+    """
+    from zeus_ros.offline.data.ingest import find_bags
+    from zeus_ros.offline.data.ingest import main as ingest_main
+    from zeus_ros.offline.data.recover import main as recover_main
+    from zeus_ros.offline.training.train import main as train_main
+
+    bags = tmp_path / 'bags'
+    run = bags / 'zeus_20260101_120000'
+    first = _write_synthetic(run / 'zeus_20260101_120000_000', 12)
+    split = _write_synthetic(run / 'zeus_20260101_120000_001', 12)
+    deeper = _write_synthetic(bags / 'robot1' / 'day2' / 'run', 12, storage='sqlite3')
+    _write_synthetic(first / 'not_searched_inside_a_bag', 12)
+    _write_synthetic(bags / '.trash' / 'old', 12)
+    assert find_bags(bags) == [deeper, first, split]
+    assert find_bags([run, deeper / 'run.db3']) == [first, split, deeper / 'run.db3']
+    assert ingest_main(['--bags', str(bags)]) == 0
+    assert 'Toy-v0: 6 episode piece(s), 30 transitions' in capsys.readouterr().out
+    assert recover_main([str(bags), '--dry-run']) == 0
+    assert capsys.readouterr().out.count('closed properly, nothing to recover') == 3
+
+    empty = tmp_path / 'nothing' / 'here'
+    empty.mkdir(parents=True)
+    (empty / 'notes.txt').write_text('no bag')
+    assert ingest_main(['--bags', str(tmp_path / 'nothing')]) == 1
+    error = capsys.readouterr().err.strip()
+    assert error == (f'zeus ingest: {tmp_path / "nothing"}: no bags found: searched '
+                     f'{(tmp_path / "nothing").resolve()} and every folder below it for '
+                     'rosbag2 bags: folders with metadata.yaml, or .mcap / .db3 files'), error
+    from tiny_config import TINY, write_config
+
+    config = write_config(tmp_path / 'tiny.yaml', TINY)
+    assert train_main(['--bags', str(tmp_path / 'nothing'), '--config', str(config), '--out',
+                       str(tmp_path / 'run'), '--no-progress']) == 2
+    assert 'no bags found: searched' in capsys.readouterr().err

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import gc
 from itertools import compress
 from operator import attrgetter, itemgetter
+import os
 from pathlib import Path
 import re
 import sys
@@ -53,8 +54,8 @@ from zeus_ros.offline.data.schema import (
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
-__all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue', 'bag_topic',
-           'find_bags', 'ingest_bags', 'main']
+__all__ = ['BAG_FILES', 'Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue',
+           'bag_topic', 'find_bags', 'ingest_bags', 'main']
 
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
@@ -194,33 +195,63 @@ class Dataset:
         return int(self.episodes[0].action.shape[1])
 
 
+BAG_FILES = ('.mcap', '.db3')
+"""Storage files of rosbag2 bags (mcap, sqlite3)."""
+WHAT_BAGS_ARE = 'rosbag2 bags: folders with metadata.yaml, or .mcap / .db3 files'
+
+
 def find_bags(paths: Path | str | Sequence[Path | str]) -> list[Path]:
-    """Expand a bag directory, a .mcap/.db3 file or a directory of bags into bag paths."""
+    """Every bag at or below each path: a bag folder, a .mcap/.db3 file, or any folder of bags.
+
+    Folders are searched at any depth (hidden ones skipped), because `zeus launch --record`
+    writes bags/zeus_<date>/zeus_<date>_000/ and a user passes `bags`; a bag folder is taken
+    whole, never searched further. The one place that decides what a bag is (ingest, train,
+    recover).
+    """
     items = [paths] if isinstance(paths, str | Path) else list(paths)
     found: list[Path] = []
     for item in map(Path, items):
         if not item.exists():
-            raise BagError(item, 'no such file or directory')
+            raise BagError(item, f'no such file or directory (looked in {Path.cwd()})')
         if item.is_file():
-            if item.suffix not in {'.mcap', '.db3'}:
+            if item.suffix not in BAG_FILES:
                 raise BagError(item, 'not a bag: expected a .mcap or .db3 file or a bag directory')
             found.append(item)
-        elif (item / 'metadata.yaml').exists() or _holds_storage(item):
-            found.append(item)
-        else:
-            children = sorted(
-                c for c in item.iterdir()
-                if (c.is_dir() and ((c / 'metadata.yaml').exists() or _holds_storage(c)))
-                or (c.is_file() and c.suffix in {'.mcap', '.db3'})
-            )
-            if not children:
-                raise BagError(item, 'no bags found (no metadata.yaml, .mcap or .db3 inside)')
-            found.extend(children)
+            continue
+        below = _bags_below(item)
+        if not below:
+            raise BagError(item, f'no bags found: searched {item.resolve()} and every folder '
+                                 f'below it for {WHAT_BAGS_ARE}')
+        found.extend(below)
     return found
 
 
+def _is_bag(folder: Path) -> bool:
+    return (folder / 'metadata.yaml').exists() or _holds_storage(folder)
+
+
+def _bags_below(folder: Path) -> list[Path]:
+    """`folder` if it is a bag, else the bags in its subfolders at any depth, sorted."""
+    if _is_bag(folder):
+        return [folder]
+    bags: list[Path] = []
+    for root, dirs, _files in os.walk(folder):
+        dirs.sort()
+        keep = []
+        for name in dirs:
+            child = Path(root) / name
+            if name.startswith('.'):
+                continue
+            if _is_bag(child):
+                bags.append(child)
+            else:
+                keep.append(name)
+        dirs[:] = keep  # a bag is taken whole; other folders are searched further
+    return sorted(bags)
+
+
 def _holds_storage(folder: Path) -> bool:
-    return any(folder.glob('*.mcap')) or any(folder.glob('*.db3'))
+    return any(f.suffix in BAG_FILES for f in folder.iterdir() if f.is_file())
 
 
 def bag_topic(topic: str, namespace: str = '') -> str:
@@ -758,8 +789,9 @@ def main(argv: list[str] | None = None) -> int:
         prog='zeus ingest', description='Read bags exactly as `zeus train` does and report '
         'steps, episodes and every gap, duplicate or count mismatch (exit 1 if unusable).')
     flag_or_positional(parser, '--bags', many=True, type=Path,
-                       help='bag directories, .mcap/.db3 files, or directories of bags (as '
-                       '`zeus train --bags`; also accepted without --bags)')
+                       help='bag directories, .mcap/.db3 files, or folders of bags, searched at '
+                       'any depth (bags/ of `zeus launch --record`; as `zeus train --bags`; also '
+                       'accepted without --bags)')
     parser.add_argument('--namespace', default='',
                         help='namespace of the recorded system: reads /<ns>/zeus/... topics')
     parser.add_argument('--strict', action='store_true', help='any issue is an error')

@@ -316,14 +316,10 @@ def recover_bag(path: Path | str, *, dry_run: bool = False,
 
 
 def _bag_dirs(path: Path) -> list[Path]:
-    """A bag directory, or a recorder output directory holding split bags."""
-    if path.is_file() or any(path.glob('*.mcap')) or any(path.glob('*.db3')):
-        return [path]
-    found = sorted(p for p in path.iterdir() if p.is_dir() and not p.name.startswith('.')
-                   and (any(p.glob('*.mcap')) or any(p.glob('*.db3'))))
-    if not found:
-        raise BagError(path, 'no bag here (no .mcap or .db3 file, nor bag directories)')
-    return found
+    """The bag folders at or below `path` (ingest.find_bags: a bag, or folders of bags)."""
+    from zeus_ros.offline.data.ingest import find_bags
+
+    return list(dict.fromkeys(bag.parent if bag.is_file() else bag for bag in find_bags(path)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -333,8 +329,9 @@ def main(argv: list[str] | None = None) -> int:
         'power loss of the process): rebuild the mcap summary / metadata.yaml from the data '
         'on disk. Bags closed properly are left untouched.')
     flag_or_positional(parser, '--bags', many=True, type=Path,
-                       help='bag directories, or a recorder output directory of split bags '
-                       '(also accepted without --bags, the old spelling)')
+                       help='bag directories, or folders of bags (searched at any depth, e.g. '
+                       'bags/ of `zeus launch --record`); also accepted without --bags, the old '
+                       'spelling')
     parser.add_argument('--dry-run', action='store_true', help='report only, change nothing')
     parser.add_argument('--keep-original', action='store_true',
                         help='keep the damaged mcap next to the rebuilt one as *.mcap.orig')

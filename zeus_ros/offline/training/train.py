@@ -478,7 +478,8 @@ def _build_parser() -> argparse.ArgumentParser:
     parser = ZeusArgumentParser(
         prog='zeus train', description='Train a ZeUS (or baseline) agent from bags.')
     parser.add_argument('--bags', nargs='+', required=True,
-                        help='bag directories, .mcap/.db3 files, or folders of bags')
+                        help='bag directories, .mcap/.db3 files, or folders of bags (searched '
+                        'at any depth: bags/ of `zeus launch --record` works)')
     parser.add_argument('--config', type=Path, required=True,
                         help='training config YAML, e.g. params/train/state_cpu.yaml')
     parser.add_argument('--out', type=Path, required=True, help='run directory, e.g. runs/x')
