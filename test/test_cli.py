@@ -174,3 +174,21 @@ def test_readme_names_every_command() -> None:
     for name in SUBCOMMANDS:
         assert f' {name} ' in comment.replace('/', ' ') + ' ', name
         assert f'`{name}`' in row, name
+
+
+@pytest.mark.parametrize(('command', 'args', 'flag'), [
+    ('train', ['--bags', 'b', '--config', 'c.yaml', '--out', 'o', '--threads', '-2'], '--threads'),
+    ('loop', ['--out', 'o', '--rounds', '0'], '--rounds'),
+    ('launch', ['--domain-id', '999'], '--domain-id'),
+    ('demo', ['--seeds', 'abc'], '--seeds'),
+    ('adaptation', ['--checkpoint', 'x.pt', '--episodes', '0'], '--episodes'),
+    ('inspect', ['--refresh', '-1'], '--refresh'),
+    ('sweep', ['--out', 'o', '--retries', '-1'], '--retries'),
+])
+def test_numeric_flags_out_of_range_are_one_line_exit_2(
+        command: str, args: list[str], flag: str, capsys: pytest.CaptureFixture) -> None:
+    """A negative thread count or zero rounds is refused before anything starts."""
+    assert _run(command, args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f'zeus {command}: argument {flag}: ') and '\n' not in err
+    assert 'must be' in err or 'is not an integer' in err

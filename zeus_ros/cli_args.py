@@ -9,7 +9,7 @@ where a user expects it: in the working directory, else in the installed package
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 import difflib
 import os
 from pathlib import Path
@@ -68,6 +68,28 @@ def input_path(value: str | os.PathLike[str], flag: str) -> Path:
         return shared
     raise ValueError(f'{flag} {value}: not found in {Path.cwd()} nor in the package share '
                      f'{share_dir()}')
+
+
+def at_least(minimum: float, kind: type = int, maximum: float | None = None
+             ) -> Callable[[str], Any]:
+    """An argparse `type`: a number of `kind` within [minimum, maximum], else a one-line error.
+
+    `--threads -2` or `--rounds 0` would otherwise start and fail later, or run silently wrong.
+    """
+    what = 'an integer' if kind is int else 'a number'
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not {what}') from None
+        if not value >= minimum or (maximum is not None and not value <= maximum):
+            bound = f'>= {minimum:g}' if maximum is None else f'in [{minimum:g}, {maximum:g}]'
+            raise argparse.ArgumentTypeError(f'{text} must be {what} {bound}')
+        return value
+
+    parse.__name__ = f'{kind.__name__} >= {minimum:g}'
+    return parse
 
 
 class ZeusArgumentParser(argparse.ArgumentParser):

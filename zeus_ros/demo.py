@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from sim_bridge.registry import TASK_NAMES
-from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.cli_args import ZeusArgumentParser, at_least
 from zeus_ros.demo_summary import (
     adaptation_rows,
     plot_adaptation,
@@ -133,12 +133,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="default: the family's zoo checkpoint")
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
-    parser.add_argument('--steps', type=int,
+    parser.add_argument('--steps', type=at_least(1),
                         help='control steps per run (default 400 for 40-step episodes, else 2000)')
-    parser.add_argument('--every', type=int,
+    parser.add_argument('--every', type=at_least(1),
                         help="steps between switches (default: the family's demo schedule)")
-    parser.add_argument('--seed', type=int, default=0, help='first schedule seed')
-    parser.add_argument('--seeds', type=int, default=3,
+    parser.add_argument('--seed', type=at_least(0), default=0, help='first schedule seed')
+    parser.add_argument('--seeds', type=at_least(1), default=3,
                         help='schedule seeds, each run live and frozen (paired; default 3)')
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')
     parser.add_argument('--out', type=Path, default=Path('out/demo'))

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.cli_args import ZeusArgumentParser, at_least
 from zeus_ros.step_log import (
     SeenStep,
     StepLog,
@@ -332,11 +332,13 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus inspect`; 1 when it saw no step."""
     parser = ZeusArgumentParser(prog='zeus inspect', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--duration', type=float, default=None, help='stop after N seconds')
-    parser.add_argument('--steps', type=int, default=None, help='stop after N steps')
+    parser.add_argument('--duration', type=at_least(0.0, float), default=None,
+                        help='stop after N seconds')
+    parser.add_argument('--steps', type=at_least(1), default=None, help='stop after N steps')
     parser.add_argument('--png', type=Path, default=None, help='save the figure here at the end')
     parser.add_argument('--csv', type=Path, default=None, help='save the per-step log here')
-    parser.add_argument('--refresh', type=float, default=1.0, help='seconds between redraws')
+    parser.add_argument('--refresh', type=at_least(0.05, float), default=1.0,
+                        help='seconds between redraws')
     parser.add_argument('--quiet', action='store_true', help='no live view, only the summary')
     parser.add_argument('--namespace', default='',
                         help='watch the system in this namespace (e.g. r1 for /r1/zeus/...)')

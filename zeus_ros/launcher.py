@@ -26,7 +26,7 @@ import time
 from typing import IO
 
 from zeus_ros import launch_defaults
-from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.cli_args import ZeusArgumentParser, at_least
 from zeus_ros.launch_defaults import (
     CONTAINER,
     CONTAINER_MODULE,
@@ -270,9 +270,9 @@ def main(argv: list[str] | None = None) -> int:
                         "file's, or the --task family's zoo checkpoint)")
     parser.add_argument('--log-level', default='info', choices=launch_defaults.LOG_LEVELS,
                         help='log level of every node')
-    parser.add_argument('--domain-id', type=int, default=None,
+    parser.add_argument('--domain-id', type=at_least(0, int, 232), default=None,
                         help='ROS_DOMAIN_ID for the group (default: $ROS_DOMAIN_ID or random)')
-    parser.add_argument('--timeout', type=float, default=None,
+    parser.add_argument('--timeout', type=at_least(0.0, float), default=None,
                         help='stop everything after this many seconds')
     parser.add_argument('--namespace', default='',
                         help='run the group in this namespace (zeus/* topics move with it; '

@@ -93,7 +93,8 @@ class ZeusConfig:
     context_head: str = 'linear'
     """After the aggregation: 'linear' (psi a linear map of the aggregated codes, the paper's
     reading) or 'mlp' (Deep Sets' rho: a ReLU MLP of context_hidden_dim, so psi can combine what
-    the transitions say instead of averaging it; measured in docs/results_notebook.md, session 5)."""
+    the transitions say instead of averaging it; measured in docs/results_notebook.md,
+    session 5)."""
     context_code_norm: bool = False
     """True: psi's per-transition pre-activations are layer-normalised (no learned scale)
     before the tanh, so the codes cannot saturate. Why (session 9): on Cheetah-Motor-v0 every
@@ -132,7 +133,8 @@ class ZeusConfig:
     """> 0 (a diagnostic): Gaussian noise of this standard deviation is added to the context at
     the actor/critic input, after the normaliser (so in units of the context's spread), at every
     use: updates, collection, evaluation and deployment. On the oracle it answers how exact an
-    inferred context must be for knowing it to pay (docs/results_notebook.md, session 5). 0: off."""
+    inferred context must be for knowing it to pay (docs/results_notebook.md, session 5).
+    0: off."""
     context_noise_steps: int = 0
     """How long one `context_noise` error persists. 0: drawn fresh at every use (c_t and c_{t+1}
     of one TD target get independent errors). > 0: an error that persists like an estimate's:

@@ -121,15 +121,16 @@ def format_reports(reports: Sequence[tuple[str, AdaptationReport]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus adaptation`."""
-    from zeus_ros.cli_args import ZeusArgumentParser
+    from zeus_ros.cli_args import ZeusArgumentParser, at_least
 
     parser = ZeusArgumentParser(prog='zeus adaptation', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--checkpoint', type=Path, required=True, help='your checkpoint')
     parser.add_argument('--against', default='zoo',
                         help="'zoo' (the family's zoo checkpoint, default), 'none', or a file")
-    parser.add_argument('--episodes', type=int, default=3, help='episodes per context value')
-    parser.add_argument('--seed', type=int, default=EVAL_SEED, help='evaluation seed')
+    parser.add_argument('--episodes', type=at_least(1), default=3,
+                        help='episodes per context value')
+    parser.add_argument('--seed', type=at_least(0), default=EVAL_SEED, help='evaluation seed')
     parser.add_argument('--no-progress', action='store_true')
     args = parser.parse_args(argv)
     if args.episodes < 1:

@@ -27,7 +27,7 @@ import signal
 import sys
 from typing import Any
 
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.training.collect import (
@@ -239,15 +239,15 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='training config YAML, e.g. params/train/state_cpu.yaml (found in '
                         'the package share too; required unless --resume)')
     parser.add_argument('--out', type=Path, required=True, help='folder for bags/ and run/')
-    parser.add_argument('--rounds', type=int, default=2, help='collect+train rounds')
-    parser.add_argument('--random-steps', type=int,
+    parser.add_argument('--rounds', type=at_least(1), default=2, help='collect+train rounds')
+    parser.add_argument('--random-steps', type=at_least(0),
                         help="uniform-random steps of round 1 (default 1500, the paper's seed "
                         'steps)')
-    parser.add_argument('--steps', type=int,
+    parser.add_argument('--steps', type=at_least(0),
                         help='steps collected with the policy in each later round (default 1500)')
-    parser.add_argument('--updates', type=int,
+    parser.add_argument('--updates', type=at_least(0),
                         help='updates per round (default: the config num_updates)')
-    parser.add_argument('--noise', type=float,
+    parser.add_argument('--noise', type=at_least(0.0, float),
                         help='exploration noise, fraction of half the action range (default 0.2; '
                         "with the config's exploration: noise; exploration: stochastic samples "
                         'the SAC policy instead)')
@@ -259,7 +259,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--set', nargs='+', action='extend', metavar='KEY=VALUE',
                         help=f'{SET_HELP}; on --resume added to the stored ones')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
-    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--seed', type=at_least(0), help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
                         help='continue the loop in --out up to --rounds with its stored flags')

@@ -307,7 +307,7 @@ def _default_config() -> Path:
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
     from zeus_ros.learning.methods import METHODS
 
     parser = ZeusArgumentParser(
@@ -323,28 +323,29 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--config', type=Path,
                         help='base training config (default: params/train/state_cpu.yaml)')
     parser.add_argument('--out', type=Path, required=True, help='sweep folder (shared)')
-    parser.add_argument('--rounds', type=int, default=5, help='loop rounds (default: 5)')
-    parser.add_argument('--random-steps', type=int, default=1500)
-    parser.add_argument('--steps', type=int, default=2000, help='policy steps per later round')
-    parser.add_argument('--updates', type=int, default=2000, help='updates per round')
-    parser.add_argument('--noise', type=float, default=0.2)
+    parser.add_argument('--rounds', type=at_least(1), default=5, help='loop rounds (default: 5)')
+    parser.add_argument('--random-steps', type=at_least(0), default=1500)
+    parser.add_argument('--steps', type=at_least(0), default=2000,
+                        help='policy steps per later round')
+    parser.add_argument('--updates', type=at_least(0), default=2000, help='updates per round')
+    parser.add_argument('--noise', type=at_least(0.0, float), default=0.2)
     parser.add_argument('--schedule', help='collection schedule (default: switch:train, '
                         'every min(100, episode/2) steps)')
     parser.add_argument('--eval-splits', help='comma-separated (default: every split the '
                         'task defines)')
-    parser.add_argument('--eval-episodes', type=int, help="episodes per context value "
+    parser.add_argument('--eval-episodes', type=at_least(1), help="episodes per context value "
                         "(default: zeus eval's)")
     parser.add_argument('--no-eval', action='store_true', help='train only')
-    parser.add_argument('--cpus-per-trial', type=int, default=1,
+    parser.add_argument('--cpus-per-trial', type=at_least(1), default=1,
                         help='CPUs (= torch threads) per trial (default: 1)')
-    parser.add_argument('--gpus-per-trial', type=float,
+    parser.add_argument('--gpus-per-trial', type=at_least(0.0, float),
                         help='GPUs per trial (default: 1 for pixel configs when the cluster '
                         'has GPUs, else 0)')
-    parser.add_argument('--num-cpus', type=int,
+    parser.add_argument('--num-cpus', type=at_least(1),
                         help='CPUs of a local Ray instance (default: all cores)')
     parser.add_argument('--address', help='Ray cluster to join (default: RAY_ADDRESS; '
                         'none: a local loopback-only instance)')
-    parser.add_argument('--retries', type=int, default=1, help='retries of a failed trial')
+    parser.add_argument('--retries', type=at_least(0), default=1, help='retries of a failed trial')
     parser.add_argument('--dry-run', action='store_true', help='list the trials and stop')
     return parser
 

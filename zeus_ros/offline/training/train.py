@@ -23,7 +23,7 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, input_path, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.config import METHODS, ZeusConfig, load_config, resolve_config
 from zeus_ros.learning.errors import CheckpointError, ConfigError
@@ -497,15 +497,15 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--set', nargs='+', action='extend', default=[], metavar='KEY=VALUE',
                         help=SET_HELP)
     parser.add_argument('--method', choices=METHODS, help='override the config method')
-    parser.add_argument('--updates', type=int,
+    parser.add_argument('--updates', type=at_least(0),
                         help='total updates of the run (overrides num_updates; a resumed run '
                         'counts from its checkpoint step)')
-    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--seed', type=at_least(0), help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
                         help='continue from OUT/checkpoint.pt (optimizers and step count)')
     parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
-    parser.add_argument('--threads', type=int, default=0,
+    parser.add_argument('--threads', type=at_least(0), default=0,
                         help='torch CPU threads (0: torch default)')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
     return parser
