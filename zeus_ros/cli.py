@@ -20,6 +20,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                    "a checkpoint's value of adaptation next to the zoo's"),
     'report': ('zeus_ros.offline.evaluation.report', 'mean ± s.e. over seeds of evaluations'),
     'export': ('zeus_ros.offline.evaluation.export', 'small deployment checkpoint + card'),
+    'distill': ('zeus_ros.offline.training.distill',
+                'a pixel student from a state teacher (DAgger rounds, no RL)'),
     'loop': ('zeus_ros.offline.training.loop', 'random collection -> train -> collect -> retrain'),
     'sweep': ('zeus_ros.offline.training.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),

@@ -1,0 +1,139 @@
+"""`zeus distill`: a pixel student learns from the zoo's state teacher (real renders, tiny)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from zeus_ros.learning.config import load_config
+from zeus_ros.learning.frames import FrameStack
+from zeus_ros.learning.inference import InferenceAgent
+from zeus_ros.offline.training.collect import parse_schedule
+from zeus_ros.offline.training.distill import (
+    SCHEDULE,
+    distill_loss,
+    main,
+    make_student,
+    random_shift,
+)
+from zeus_ros.offline.training.distill_data import Episode, EpisodeStore, collect_round
+
+torch.set_num_threads(1)
+REPO = Path(__file__).resolve().parents[1]
+TEACHER = REPO / 'checkpoints' / 'cheetah_bias_v0' / 'zeus.pt'
+TASK = 'Cheetah-Bias-v0'
+TINY = {'method': 'zeus_no_context_loss', 'obs_kind': 'pixels', 'k': 10, 'context_dim': 10,
+        'transition_dim': 8, 'context_hidden_dim': 16, 'feature_dim': 8, 'num_conv_layers': 1,
+        'num_filters': 4, 'hidden_dim': 32, 'model_hidden_dim': 16, 'batch_size': 16,
+        'device': 'cpu', 'seed': 0}
+
+
+@pytest.fixture(scope='module')
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp('distill') / 'tiny.yaml'
+    path.write_text(yaml.safe_dump(TINY))
+    return path
+
+
+def test_a_tiny_run_writes_a_student_that_acts_from_frames(tiny: Path, tmp_path: Path) -> None:
+    """Round 0 (teacher acts) + round 1 (student acts): a deployable pixel checkpoint."""
+    out = tmp_path / 'run'
+    code = main(['--task', TASK, '--teacher', str(TEACHER), '--config', str(tiny),
+                 '--out', str(out), '--rounds', '2', '--first-steps', '45',
+                 '--round-steps', '42', '--updates', '2', '--window', '8', '--no-progress'])
+    assert code == 0
+    agent = InferenceAgent.from_checkpoint(out / 'student.pt', expect_task=TASK,
+                                           expect_obs_kind='pixels')
+    assert agent.context_dim == 10 and agent.k == 10
+    frames = FrameStack()
+    history = agent.new_history()
+    rng = np.random.default_rng(0)
+    obs = frames.reset(rng.integers(0, 255, (84, 84, 3), dtype=np.uint8))
+    for _ in range(3):
+        action = agent.act(obs, agent.context(history))
+        nxt = frames.push(rng.integers(0, 255, (84, 84, 3), dtype=np.uint8))
+        history.push(obs, action, 0.0, nxt)
+        obs = nxt
+    assert action.shape == (6,) and np.isfinite(action).all()
+    rounds = (out / 'rounds.csv').read_text().splitlines()
+    assert rounds[1].split(',')[1] == 'teacher' and rounds[2].split(',')[1] == 'student'
+
+
+class _Spy(InferenceAgent):
+    """Records every action it returns."""
+
+    def __init__(self, agent: InferenceAgent) -> None:
+        super().__init__(agent.agent)
+        self.actions: list[np.ndarray] = []
+
+    def act(self, *args: object, **kwargs: object) -> np.ndarray:
+        action = super().act(*args, **kwargs)
+        self.actions.append(action)
+        return action
+
+
+def test_in_a_dagger_round_the_student_acts_and_the_teacher_labels(tiny: Path) -> None:
+    """The env applies the student's actions; every step carries the teacher's own action/psi."""
+    teacher = _Spy(InferenceAgent.from_checkpoint(TEACHER))
+    student = _Spy(InferenceAgent(make_student(load_config(tiny), teacher, TASK)))
+    episodes, returns = collect_round(TASK, parse_schedule(SCHEDULE), teacher, student, 42,
+                                      seed=3, noise=0.0, progress=False)
+    assert len(episodes) == 1 and len(returns) == 1
+    ep = episodes[0]
+    n = len(ep)
+    assert ep.frames.shape == (n, 3, 84, 84) and ep.frames.dtype == np.uint8
+    np.testing.assert_allclose(ep.applied[1:], np.stack(student.actions[:n - 1]), atol=1e-6)
+    np.testing.assert_allclose(ep.teacher_action, np.stack(teacher.actions[:n]), atol=1e-6)
+    assert not np.allclose(ep.teacher_action[:n - 1], ep.applied[1:], atol=1e-2)
+    assert ep.teacher_psi.shape == (n, 10) and np.isfinite(ep.teacher_psi).all()
+
+
+def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
+    """Action + psi regression through conv phi and psi learns (random frames, fixed labels)."""
+    teacher = InferenceAgent.from_checkpoint(TEACHER)
+    student = make_student(load_config(tiny), teacher, TASK)
+    rng = np.random.default_rng(0)
+    store = EpisodeStore(1000)
+    store.add(Episode(frames=rng.integers(0, 255, (20, 3, 84, 84), dtype=np.uint8),
+                      applied=rng.uniform(-1, 1, (20, 6)).astype(np.float32),
+                      reward=rng.standard_normal(20).astype(np.float32),
+                      teacher_action=rng.uniform(-0.8, 0.8, (20, 6)).astype(np.float32),
+                      teacher_psi=rng.standard_normal((20, 10)).astype(np.float32),
+                      context=np.zeros((20, 1))))
+    batch = store.sample(rng, 2, 8, 10)
+    assert batch.stacks.shape == (2, 18, 9, 84, 84)
+    assert random_shift(batch.stacks, 4, rng).shape == batch.stacks.shape
+    params = [p for name in ('encoder', 'psi', 'actor')
+              for p in student.modules[name].parameters()]
+    optimizer = torch.optim.Adam(params, lr=3e-3)
+    scale = torch.from_numpy(store.psi_scale())
+    losses = []
+    for _ in range(60):
+        loss, metrics = distill_loss(student, batch, 10, scale, 1.0)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(float(loss.detach()))
+    assert {'loss/action', 'loss/psi'} <= set(metrics)
+    assert losses[-1] < 0.75 * losses[0], losses[::10]
+
+
+@pytest.mark.parametrize(('args', 'message'), [
+    (['--teacher', str(REPO / 'checkpoints' / 'cheetah_motor_v0' / 'zeus.pt')],
+     "trained on 'Cheetah-Motor-v0', not 'Cheetah-Bias-v0'"),
+    (['--teacher', str(TEACHER), '--config', str(REPO / 'params' / 'train' / 'state_cpu.yaml')],
+     "obs_kind 'state'"),
+    (['--teacher', str(REPO / 'nowhere.pt')], 'no such file'),
+])
+def test_bad_input_is_one_clear_line(args: list[str], message: str, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A teacher of another task, a state config, a missing file: exit 2, one line, no run."""
+    code = main(['--task', TASK, '--out', str(tmp_path / 'run'), '--no-progress', *args])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err and len(err.splitlines()) == 1
+    assert not (tmp_path / 'run' / 'student.pt').exists()

@@ -1,0 +1,299 @@
+"""`zeus distill`: a pixel student distilled from a state teacher, in DAgger rounds.
+
+    zeus distill --task Cheetah-Bias-v0 --teacher checkpoints/cheetah_bias_v0/zeus.pt
+        --out runs/pixels_student/s0
+
+Why: pixel RL does not fit this CPU (0.083 ZeUS updates/s), but the zoo's state agents already
+adapt. Following privileged-teacher distillation (Chen et al. 2019, "Learning by Cheating"), RMA
+(Kumar et al. 2021: an adaptation module regresses the teacher's latent context from the
+history) and DAgger (Ross et al. 2011: the student acts, the teacher labels every visited step),
+the student is a regular pixel ZeusAgent (conv phi on stacked frames, psi over the last k
+transitions, actor on [phi(o), psi]) trained by regression instead of RL:
+
+    loss = MSE(a_student, a_teacher) + psi_weight * MSE(psi_student, psi_teacher) / var(psi_t)
+
+on the same step; the teacher sees the state and its own state history. Frames get one random
+shift per window (DrQ, Kostrikov et al. 2020). Round 0: the teacher acts with a little noise;
+later rounds: the student acts. The result is a deployment checkpoint that every consumer of
+pixel checkpoints loads unchanged (InferenceAgent, zeus eval, zeus adaptation, the live nodes).
+Its `method` names the architecture (the teacher's psi method, or `no_context` for the student
+without psi); `extra['distill']` says how it was trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from dataclasses import asdict, dataclass
+import hashlib
+from pathlib import Path
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F  # noqa: N812
+from tqdm import tqdm
+
+from zeus_ros.learning.config import ZeusConfig
+from zeus_ros.learning.context import HistoryFeatures
+from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.offline.training.distill_data import EpisodeStore, WindowBatch, collect_round
+
+__all__ = ['DistillSettings', 'distill', 'distill_loss', 'main', 'make_student',
+           'random_shift']
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / 'params' / 'train' / 'pixels_student.yaml'
+SCHEDULE = 'switch:train:every_episodes=1'
+"""One train value per episode, in turn, as `zeus loop` collects."""
+
+
+@dataclass(frozen=True)
+class DistillSettings:
+    """What the regression and the DAgger rounds do (the networks are the ZeusConfig's)."""
+
+    rounds: int = 3
+    """DAgger rounds: round 0 the teacher acts, rounds 1.. the student acts."""
+    first_steps: int = 4000
+    """Rendered steps of round 0."""
+    round_steps: int = 1000
+    """Rendered steps of every later round."""
+    updates: int = 2000
+    """Regression updates after each round (on everything stored)."""
+    window: int = 20
+    """Consecutive observations per sampled window (batch_size // window windows)."""
+    psi_weight: float = 1.0
+    """Weight of the psi regression (in units of the teacher psi's variance)."""
+    noise: float = 0.1
+    """Exploration noise of whoever acts, a fraction of half the action range."""
+    shift: int = 4
+    """Random-shift padding in pixels (0: no augmentation)."""
+    max_steps: int = 20000
+    """Stored observations at most (about 21 kB each)."""
+    no_context: bool = False
+    """A student without psi (the pixel `no_context` reference)."""
+
+
+def _fail(message: str) -> ConfigError:
+    return ConfigError(message)
+
+
+def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: bool = False
+                 ) -> Any:
+    """A fresh pixel ZeusAgent whose psi has the teacher's k and context size."""
+    from zeus_ros.learning.agent import make_agent
+    from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
+
+    if config.obs_kind != 'pixels':
+        raise _fail(f"the student sees frames: the config has obs_kind '{config.obs_kind}'; "
+                    'use a pixel config (params/train/pixels_student.yaml)')
+    if teacher.obs_kind != 'state':
+        raise _fail(f'the teacher must be a state checkpoint (it sees the state); this one '
+                    f'has obs_kind {teacher.obs_kind!r}')
+    if teacher.task != task:
+        raise _fail(f"the teacher was trained on '{teacher.task}', not '{task}'")
+    spec = teacher.agent.spec
+    pixel_spec = AgentSpec(task=task, context_names=spec.context_names, obs_kind='pixels',
+                           obs_shape=PIXEL_SHAPE, action_dim=spec.action_dim,
+                           action_low=spec.action_low, action_high=spec.action_high)
+    psi_teacher = 'psi' in teacher.agent.modules
+    if no_context or not psi_teacher:
+        changes: dict[str, Any] = {'method': 'no_context'}
+    else:
+        changes = {'method': teacher.method, 'k': teacher.k, 'context_dim': teacher.context_dim}
+    return make_agent(config.replace(context_norm='none', **changes), pixel_spec,
+                      device='cpu')
+
+
+def random_shift(stacks: torch.Tensor, pad: int, rng: np.random.Generator) -> torch.Tensor:
+    """One random shift per window (DrQ's augmentation; the camera moves, not each frame)."""
+    if pad <= 0:
+        return stacks
+    e, n, c, h, w = stacks.shape
+    padded = F.pad(stacks.reshape(e, n * c, h, w).float(), (pad,) * 4, mode='replicate')
+    dx, dy = rng.integers(0, 2 * pad + 1, size=(2, e))
+    out = torch.stack([padded[i, :, dy[i]:dy[i] + h, dx[i]:dx[i] + w] for i in range(e)])
+    return out.reshape(e, n, c, h, w)
+
+
+def distill_loss(student: Any, batch: WindowBatch, k: int, psi_scale: torch.Tensor,
+                 psi_weight: float) -> tuple[torch.Tensor, dict[str, float]]:
+    """Action MSE (in [-1, 1] units) + weighted psi MSE over every labelled position.
+
+    Each frame stack is encoded once; position p's history is the k positions before it
+    (AgentPolicy's: transition j = (o_j, a applied at j + 1, r at j + 1, o_{j + 1})).
+    """
+    m = student.modules
+    e, n = batch.valid.shape
+    window = n - k
+    feat = m['encoder'](batch.stacks.flatten(0, 1)).view(e, n, -1)
+    pos = torch.arange(window)[:, None] + torch.arange(k)[None]  # (L, k): slots j
+    current = feat[:, k:].reshape(e * window, -1)
+    if 'psi' in m:
+        history = HistoryFeatures(
+            feat=feat[:, pos].flatten(0, 1), next_feat=feat[:, pos + 1].flatten(0, 1),
+            action=student.normalize_action(batch.applied[:, pos + 1]).flatten(0, 1),
+            reward=batch.reward[:, pos + 1].flatten(0, 1).unsqueeze(-1),
+            mask=batch.valid[:, pos].flatten(0, 1))
+        psi = m['psi'](history)
+        context = student.policy_context(psi)
+    else:
+        psi = context = current.new_zeros(e * window, 0)
+    action = torch.tanh(m['actor'](torch.cat([current, context], dim=-1)).mu)
+    target = student.normalize_action(batch.teacher_action.flatten(0, 1))
+    action_loss = F.mse_loss(action, target)
+    metrics = {'loss/action': float(action_loss.detach())}
+    total = action_loss
+    if psi.shape[-1]:
+        psi_loss = (((psi - batch.teacher_psi.flatten(0, 1)) / psi_scale) ** 2).mean()
+        total = total + psi_weight * psi_loss
+        metrics['loss/psi'] = float(psi_loss.detach())
+    return total, metrics
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: DistillSettings,
+            out: Path, *, data_cache: Path | None = None, progress: bool = True) -> Path:
+    """Run the DAgger rounds; write out/student.pt (deployment export) and out/rounds.csv."""
+    from zeus_ros.learning.checkpoint import export_for_deployment, save_checkpoint
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.training.collect import parse_schedule
+
+    teacher = InferenceAgent.from_checkpoint(teacher_path)
+    student = make_student(config, teacher, task, no_context=settings.no_context)
+    k = student.config.k
+    m = student.modules
+    params = [{'params': m['encoder'].parameters(), 'lr': config.encoder_lr},
+              {'params': m['actor'].parameters(), 'lr': config.actor_lr}]
+    if 'psi' in m:
+        params.append({'params': m['psi'].parameters(), 'lr': config.context_lr})
+    optimizer = torch.optim.Adam(params)
+    store = EpisodeStore(settings.max_steps)
+    rng = np.random.default_rng(config.seed)
+    schedule = parse_schedule(SCHEDULE)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    windows = max(1, config.batch_size // settings.window)
+    step = 0
+    for round_ in range(settings.rounds):
+        started = time.perf_counter()
+        cached = round_ == 0 and data_cache is not None and data_cache.is_file()
+        returns: list[float] = []
+        if cached:
+            store.load(data_cache)
+        else:
+            acting = None if round_ == 0 else InferenceAgent(student, reuse_features=True)
+            episodes, returns = collect_round(
+                task, schedule, teacher, acting,
+                settings.first_steps if round_ == 0 else settings.round_steps,
+                seed=config.seed * 1000 + round_ + (0 if data_cache is None else 10**6),
+                noise=settings.noise, progress=progress)
+            for episode in episodes:
+                store.add(episode)
+            if round_ == 0 and data_cache is not None:
+                store.save(data_cache)
+        if not store.episodes:
+            raise ValueError('no complete episode collected: give more steps per round')
+        collect_s = time.perf_counter() - started
+        psi_scale = torch.from_numpy(store.psi_scale())
+        started = time.perf_counter()
+        sums: dict[str, float] = {}
+        for _ in tqdm(range(settings.updates), desc=f'round {round_}', unit='upd',
+                      disable=not progress, leave=False):
+            batch = store.sample(rng, windows, settings.window, k)
+            batch.stacks = random_shift(batch.stacks, settings.shift, rng)
+            loss, metrics = distill_loss(student, batch, k, psi_scale, settings.psi_weight)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            step += 1
+            for name, value in metrics.items():
+                sums[name] = sums.get(name, 0.0) + value
+        train_s = time.perf_counter() - started
+        row = {'round': round_, 'actor': 'teacher' if round_ == 0 else 'student',
+               'episodes_stored': len(store.episodes), 'updates': step,
+               'return_acting': float(np.mean(returns)) if returns else float('nan'),
+               'collect_s': round(collect_s, 1), 'train_s': round(train_s, 1),
+               **{name: value / max(settings.updates, 1) for name, value in sums.items()}}
+        rows.append(row)
+        if progress:
+            print(f'round {round_}: ' + ', '.join(
+                f'{key} {value:.4g}' if isinstance(value, float) else f'{key} {value}'
+                for key, value in row.items() if key != 'round'), flush=True)
+    _write_rows(out / 'rounds.csv', rows)
+    extra = {'distill': {'teacher': str(teacher_path), 'teacher_sha256': _sha256(teacher_path),
+                         'teacher_method': teacher.method, 'settings': asdict(settings),
+                         'schedule': SCHEDULE, 'rounds': rows}}
+    full = save_checkpoint(out / 'student_full.pt', student, step=step, extra=extra)
+    target = export_for_deployment(full, out / 'student.pt')
+    full.unlink()
+    return target
+
+
+def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    names = sorted({key for row in rows for key in row}, key=lambda key: (
+        list(rows[0]).index(key) if key in rows[0] else len(rows[0])))
+    with path.open('w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=names)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+
+    parser = ZeusArgumentParser(prog='zeus distill', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
+    parser.add_argument('--teacher', type=Path, required=True,
+                        help="a state checkpoint of the task (the zoo's zeus.pt)")
+    parser.add_argument('--out', type=Path, required=True, help='folder for student.pt')
+    parser.add_argument('--config', type=Path, default=DEFAULT_CONFIG,
+                        help='pixel network config (default: params/train/pixels_student.yaml)')
+    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--data-cache', type=Path,
+                        help="round 0's teacher data: read when the file exists, else "
+                        'written (the seeds of a comparison share it)')
+    defaults = DistillSettings()
+    for name, value in asdict(defaults).items():
+        flag = '--' + name.replace('_', '-')
+        if isinstance(value, bool):
+            parser.add_argument(flag, action='store_true', help='student without psi')
+        else:
+            parser.add_argument(flag, type=type(value), default=value,
+                                help=f'(default: {value})')
+    parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
+    parser.add_argument('--no-progress', action='store_true')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus distill`; one line on stderr for bad input."""
+    args = _build_parser().parse_args(argv)
+    from zeus_ros.learning.config import load_config
+
+    torch.set_num_threads(args.threads)
+    settings = DistillSettings(**{name: getattr(args, name)
+                                  for name in DistillSettings.__dataclass_fields__})
+    if settings.rounds < 1 or settings.first_steps < 1 or settings.window < 1:
+        print('zeus distill: --rounds, --first-steps and --window must be >= 1', file=sys.stderr)
+        return 2
+    try:
+        config = load_config(args.config)
+        if args.seed is not None:
+            config = config.replace(seed=args.seed)
+        path = distill(args.task, args.teacher, config, settings, args.out,
+                       data_cache=args.data_cache, progress=not args.no_progress)
+    except (CheckpointError, ConfigError, ValueError) as error:
+        print(f'zeus distill: {error}', file=sys.stderr)
+        return 2
+    print(f'wrote {path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
