@@ -609,3 +609,81 @@ def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
         with pytest.raises(ValueError, match=f'context_lag={refused}: must be between 0 and'):
             evaluate_contexts(agent, values, episodes=1, seed=3, progress=False,
                               context_lag=refused)
+
+
+def test_readme_order_train_eval_export_report_finds_the_evaluations(
+        trained: Any, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Train -> eval -> export / report, each with its defaults: they meet.
+
+    The card and the report see the evaluations `zeus eval` wrote (by default beside the
+    checkpoint, or in any --out below the run folder); a checkpoint retrained since is 'Not
+    evaluated yet' again.
+    """
+    from zeus_ros.cli import main as zeus
+    from zeus_ros.learning.checkpoint import save_checkpoint
+
+    run = tmp_path / 'runs' / 'cheetah'
+    run.mkdir(parents=True)
+    shutil.copy(trained.out / 'final.pt', run / 'final.pt')
+    protocol = ['--episodes', '1', '--probe-steps', '0', '--switch-every', '120',
+                '--no-progress']
+    assert zeus(['eval', '--checkpoint', str(run / 'final.pt'), '--task', TASK,
+                 '--split', 'interpolation', *protocol]) == 0
+    assert zeus(['eval', '--checkpoint', str(run / 'final.pt'), '--split', 'train',
+                 '--out', str(run / 'eval'), *protocol]) == 0  # the README's --out
+    record = json.loads((run / 'eval_interpolation' / 'eval.json').read_text())
+    assert (record['split'], record['method'], record['seed']) == ('interpolation', 'zeus', 0)
+    capsys.readouterr()
+
+    card_path = tmp_path / 'ship' / 'cheetah.pt'
+    assert zeus(['export', '--checkpoint', str(run / 'final.pt'), '--out', str(card_path),
+                 '--readout-steps', '0']) == 0
+    assert 'the card shows the evaluations of train' in capsys.readouterr().out
+    card = card_path.with_suffix('.md').read_text()
+    assert 'Not evaluated yet' not in card
+    for split, folder in (('train', 'eval'), ('interpolation', 'eval_interpolation')):
+        agent = next(r for r in read_csv(run / folder / 'summary.csv') if r['policy'] == 'agent')
+        assert f'| {split} | {agent["mean_return"]:.1f} |' in card, card
+
+    assert zeus(['report', str(run)]) == 0
+    table = (run / 'report' / 'table.md').read_text()
+    assert '| zeus | train | 1 |' in table and '| zeus | interpolation | 1 |' in table, table
+    runs = read_csv(run / 'report' / 'runs.csv')
+    assert sorted(r['split'] for r in runs) == ['interpolation', 'train']
+    assert all(r['eval_seconds'] > 0 for r in runs)
+
+    loaded = load_checkpoint(run / 'final.pt')  # retrained: other weights, same path
+    save_checkpoint(run / 'final.pt', loaded.agent, step=loaded.step + 1, extra=loaded.extra)
+    capsys.readouterr()
+    assert zeus(['export', '--checkpoint', str(run / 'final.pt'), '--out', str(card_path),
+                 '--readout-steps', '0']) == 0
+    assert f'no evaluation of {run / "final.pt"} found' in capsys.readouterr().out
+    assert 'Not evaluated yet' in card_path.with_suffix('.md').read_text()
+
+
+def test_losses_png_of_a_short_run_has_no_empty_panels(trained: Any, bags: Path,
+                                                       tiny_config: Path,
+                                                       tmp_path: Path) -> None:
+    """losses.png shows a panel only for a loss with a curve.
+
+    A run shorter than log_interval logs each loss once: one compact text panel, not 13
+    empty-looking ones; a longer run gets a panel with a curve per loss, nothing else.
+    """
+    from PIL import Image
+
+    from zeus_ros.offline.evaluation.metrics import metric_series
+
+    config = load_config(tiny_config).replace(num_updates=30, log_interval=1000)
+    short = train([bags], config, tmp_path / 'short', evaluate=False, progress=False,
+                  log=lambda _m: None)
+    rows = read_csv(short.out / 'metrics.csv')
+    keys = [k for k in rows[0] if k.startswith(('loss/', 'train/')) or k == 'updates_per_s']
+    curves, single, empty = metric_series(rows, keys)
+    assert len(rows) == 1 and not curves and len(single) + len(empty) == len(keys) > 10
+    width, height = Image.open(short.out / 'losses.png').size
+    assert width <= 700 and height <= 400, (width, height)  # one text panel (was 1386x1540)
+
+    rows = read_csv(trained.out / 'metrics.csv')  # 12 logged rows
+    curves, single, empty = metric_series(rows, keys)
+    assert {key for key, _xs, ys in curves} == set(keys) and not single and not empty
+    assert all(len(ys) == len(rows) for _key, _xs, ys in curves)

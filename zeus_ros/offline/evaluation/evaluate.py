@@ -25,23 +25,25 @@ import itertools
 import json
 from pathlib import Path
 import sys
+import time
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
+from sim_bridge.presets import SPLITS
 from zeus_ros.atomic_file import replace_text
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
 from zeus_ros.labels import context_label
 from zeus_ros.offline.evaluation.metrics import format_table, plot_heatmaps, write_csv
 from zeus_ros.offline.evaluation.probe import ProbeResult, Rollout, probe_context
+from zeus_ros.offline.evaluation.records import checkpoint_sha256, write_record
 from zeus_ros.offline.training.collect import AgentPolicy, Policy, random_policy
 
 __all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
            'evaluate_contexts', 'main', 'mid_episode_switches', 'parse_values', 'run_steps',
            'split_values', 'switching_order']
 
-SPLITS = ('train', 'interpolation', 'extrapolation')
 RECOVERY_TOLERANCE = 0.10
 """A switch is absorbed once the reward is within 10% of its steady value on the new context."""
 NEGLIGIBLE_REWARD = 1e-3
@@ -103,15 +105,22 @@ class Trace:
 
 
 def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = '',
-              progress: bool = True) -> Trace:
-    """Drive `env` for `steps` observations with `policy`, as collect.collect does."""
+              progress: bool = True, bar: tqdm | None = None) -> Trace:
+    """Drive `env` for `steps` observations with `policy`, as collect.collect does.
+
+    `bar`: a progress bar of a longer phase to advance instead of a bar of its own.
+    """
     from zeus_ros.offline.training.collect import _record
 
     cols: dict[str, list[Any]] = {k: [] for k in ('reward', 'first', 'context', 'segment',
                                                    'psi', 'hist', 'obs', 'action')}
     es = env.reset()
     names = task.context_names
-    for n in tqdm(range(steps), desc=desc, unit='step', disable=not progress, leave=False):
+    own = bar is None
+    bar = tqdm(total=steps, desc=desc, unit='step', disable=not progress, leave=False) \
+        if own else bar
+    for n in range(steps):
+        bar.update()
         rec = _record(es, task, pixels=getattr(policy, 'frames', None) is not None)
         out = policy(es, rec)
         obs = es.observation
@@ -125,6 +134,8 @@ def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = ''
         cols['action'].append(np.asarray(out.action, np.float32))
         if n < steps - 1:
             es = env.step(out.action)
+    if own:
+        bar.close()
     psi = None if any(p is None for p in cols['psi']) else np.stack(cols['psi'])
     return Trace(np.asarray(cols['reward']), np.asarray(cols['first']),
                  np.asarray(cols['context'], float), np.asarray(cols['segment']), psi,
@@ -148,7 +159,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
                       frozen: Sequence[np.ndarray] | None = None,
                       blind_steps: int = 0, live_steps: int = 0,
                       context_transform: Callable[[np.ndarray], np.ndarray] | None = None,
-                      context_lag: int = 0) -> list[dict[str, Any]]:
+                      context_lag: int = 0, desc: str = 'contexts') -> list[dict[str, Any]]:
     """Deterministic episodes at a constant context per value; one row per episode.
 
     `agent` is an InferenceAgent, or None for the uniform random policy (task_name needed).
@@ -157,17 +168,22 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
     value i at every step, or with `blind_steps` only in the first that many of each episode,
     or with `live_steps` only after the first that many; `context_transform` maps the live
     context before the policy acts and `context_lag` acts on an older one (AgentPolicy).
+    `desc` names the phase on its progress bar (steps of all values).
     """
     name = agent.task if agent is not None else task_name
     rows = []
-    for index, value in enumerate(tqdm(values, desc='contexts', disable=not progress)):
+    bar = tqdm(desc=desc, unit='step', disable=not progress)
+    for index, value in enumerate(values):
         env, task = _make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
+        steps = episodes * task.episode_length + 1
+        if bar.total is None:  # known once a task is built
+            bar.total = steps * len(values)
+            bar.refresh()
         try:
             policy = _policy(agent, task, seed + index,
                              None if frozen is None else frozen[index], blind_steps,
                              live_steps, context_transform, context_lag)
-            trace = run_steps(env, task, policy,
-                              episodes * task.episode_length + 1, progress=False)
+            trace = run_steps(env, task, policy, steps, bar=bar)
         finally:
             task.close()
         if traces is not None:
@@ -175,6 +191,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
         for episode, ret in enumerate(trace.episode_returns()[:episodes]):
             rows.append({**{f'context/{k}': v for k, v in value.items()},
                          'episode': episode, 'return': ret})
+    bar.close()
     return rows
 
 
@@ -309,14 +326,15 @@ def parse_values(text: str, names: Sequence[str]) -> list[dict[str, float]]:
     return values
 
 
-def train_mean_context(agent: Any, *, episodes: int, seed: int) -> np.ndarray | None:
+def train_mean_context(agent: Any, *, episodes: int, seed: int,
+                       progress: bool = False) -> np.ndarray | None:
     """The agent's mean context over its task's train values: what it acts on in training.
 
     Same protocol as the split's episodes (deterministic, `episodes` per value, `seed`).
     """
     traces: list[Trace] = []
     evaluate_contexts(agent, split_values(agent.task, 'train'), episodes=episodes, seed=seed,
-                      progress=False, traces=traces)
+                      progress=progress, traces=traces, desc='train values (mean context)')
     return overall_mean_context(agent, traces)
 
 
@@ -338,7 +356,7 @@ def _train_mean_key(checkpoint: Path, episodes: int, seed: int) -> dict[str, Any
 
 
 def cached_train_mean_context(agent: Any, checkpoint: Path, folder: Path, *, episodes: int,
-                              seed: int) -> np.ndarray | None:
+                              seed: int, progress: bool = False) -> np.ndarray | None:
     """train_mean_context, read from `folder` when this checkpoint and protocol stored it there.
 
     `zeus eval --split all` evaluates every split in its own job and each held-out split needs
@@ -352,7 +370,7 @@ def cached_train_mean_context(agent: Any, checkpoint: Path, folder: Path, *, epi
             return None if stored['context'] is None else np.asarray(stored['context'])
     except (OSError, ValueError, KeyError, TypeError):
         pass  # missing, from another checkpoint or protocol, or unreadable: compute it
-    mean = train_mean_context(agent, episodes=episodes, seed=seed)
+    mean = train_mean_context(agent, episodes=episodes, seed=seed, progress=progress)
     store_train_mean_context(mean, key, folder)
     return mean
 
@@ -371,6 +389,14 @@ def switching_order(values: Sequence[dict[str, float]], seed: int) -> list[dict[
     """The split's values in a seeded shuffled order (no neighbour-to-neighbour sweep)."""
     order = np.random.default_rng(seed).permutation(len(values))
     return [dict(values[i]) for i in order]
+
+
+def default_out(checkpoint: str | Path, split: str) -> Path:
+    """Where an evaluation goes without --out: eval_<split>/ beside the checkpoint.
+
+    `zeus export` and `zeus report` look there (and in any folder below the run's) by default.
+    """
+    return Path(checkpoint).parent / f'eval_{split}'
 
 
 def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
@@ -393,17 +419,20 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     )
     from zeus_ros.offline.evaluation.metrics import plot_bars, plot_trace
 
+    started = time.perf_counter()
     agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
-    out = Path(out) if out is not None else Path(checkpoint).parent / f'eval_{split}'
+    out = Path(out) if out is not None else default_out(checkpoint, split)
     values_given = values is not None
     values = split_values(agent.task, split) if values is None else list(values)
     name = agent.context_names[0]
     labels = [', '.join(f'{v:g}' for v in value.values()) for value in values]
     traces: list[Trace] = []
     rows = [{'policy': 'agent', **r} for r in evaluate_contexts(
-        agent, values, episodes=episodes, seed=seed, progress=progress, traces=traces)]
+        agent, values, episodes=episodes, seed=seed, progress=progress, traces=traces,
+        desc='agent')]
     rows += [{'policy': 'random', **r} for r in evaluate_contexts(
-        None, values, episodes=episodes, seed=seed, task_name=agent.task, progress=False)]
+        None, values, episodes=episodes, seed=seed, task_name=agent.task, progress=progress,
+        desc='random policy')]
     steady = {tuple(np.round(list(v.values()), 6)): steady_reward(t)
               for v, t in zip(values, traces, strict=True)}
     if switch_every is None:
@@ -440,7 +469,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     on_train_values = split == 'train' and not values_given
     if diagnostics and agent.context_dim and not on_train_values:
         train_mean = cached_train_mean_context(agent, checkpoint, out.parent,
-                                               episodes=episodes, seed=seed)
+                                               episodes=episodes, seed=seed, progress=progress)
     elif diagnostics and agent.context_dim:  # the train split's own traces give it
         store_train_mean_context(overall_mean_context(agent, traces),
                                  _train_mean_key(checkpoint, episodes, seed), out.parent)
@@ -451,7 +480,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     live = np.asarray([r['return'] for r in rows if r['policy'] == 'agent'])
     for kind, contexts in (frozen or {}).items():
         frozen_rows = evaluate_contexts(agent, values, episodes=episodes, seed=seed,
-                                        progress=False, frozen=contexts)
+                                        progress=progress, frozen=contexts,
+                                        desc=f'frozen_{kind}')
         rows += [{'policy': f'frozen_{kind}', **r} for r in frozen_rows]
         adaptation[kind] = float(np.mean(live - np.asarray([r['return'] for r in frozen_rows])))
     if on_train_values:  # the split's mean is the train values' mean
@@ -459,7 +489,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     steady_anchor = (frozen or {}).get('mean' if on_train_values else 'train_mean')
     if steady_anchor is not None:  # frozen there only once psi's history is full
         steady_rows = evaluate_contexts(agent, values, episodes=episodes, seed=seed,
-                                        progress=False, frozen=steady_anchor, live_steps=agent.k)
+                                        progress=progress, frozen=steady_anchor,
+                                        live_steps=agent.k, desc='frozen_steady')
         rows += [{'policy': 'frozen_steady', **r} for r in steady_rows]
         adaptation['steady'] = float(np.mean(live - np.asarray([r['return']
                                                                for r in steady_rows])))
@@ -498,6 +529,10 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                marks=[s['step'] for s in switches], path=out / 'switching.png',
                title=f'{agent.task} {split}: per-step reward, {len(switches)} switches every '
                f'{switch_every} steps ({len(judged)} judged, {len(recovered)} recovered)')
+    # Last: the record says this folder is complete (export's card and report read it).
+    write_record(out, checkpoint, sha256=checkpoint_sha256(checkpoint), task=agent.task,
+                 method=agent.method, seed=int(agent.agent.config.seed), split=split,
+                 seconds=time.perf_counter() - started)
     return {'out': out, 'summary': summary, 'per_value': per_value, 'values': labels,
             'switches': switches, 'probe': probe}
 
@@ -527,11 +562,19 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--probe-steps', type=int, default=4000,
                         help='random-policy steps for the identifiability probe (0: skip)')
     parser.add_argument('--seed', type=int, default=100)
-    parser.add_argument('--out', type=Path, help='output folder (default: next to checkpoint)')
+    parser.add_argument('--out', type=Path,
+                        help='output folder (default: eval_<split>/ next to the checkpoint); '
+                        'zeus export and zeus report find the results in any folder below the '
+                        "checkpoint's (eval.json names the checkpoint evaluated)")
     parser.add_argument('--jobs', type=int, default=1,
                         help='evaluations in parallel (several checkpoints)')
     parser.add_argument('--force', action='store_true',
                         help='re-run evaluations that already finished (several checkpoints)')
+    parser.add_argument('--threads', type=at_least(1), default=1,
+                        help='torch CPU threads (default 1: these networks act on one '
+                        'observation at a time, where more threads only wait on each other, '
+                        'several times slower on a busy machine; the nodes and --jobs use 1 '
+                        'too, so the numbers agree)')
     parser.add_argument('--no-progress', action='store_true')
     return parser
 
@@ -545,6 +588,9 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
+    import torch
+
+    torch.set_num_threads(args.threads)
     if args.values is not None and args.split == 'all':
         print('zeus eval: --values replaces the split: drop --split all', file=sys.stderr)
         return 2

@@ -5,8 +5,9 @@
 
 The export keeps what acting needs (phi, psi, actor: checkpoint.DEPLOY_MODULES), ~10x smaller
 than a training checkpoint; `zeus eval` gives it the same numbers. The card (<out>.md) says what
-it is, how it was made (data, command, seed, commit) and what it scored (the run's eval_<split>
-summaries, when present next to the run).
+it is, how it was made (data, command, seed, commit) and what it scored: the evaluations of this
+very checkpoint that `zeus eval` wrote below its folder (eval_<split>/ by default; each names
+its checkpoint in eval.json), or those in --evals.
 """
 
 from __future__ import annotations
@@ -17,11 +18,10 @@ from pathlib import Path
 import sys
 from typing import Any
 
+from sim_bridge.presets import SPLITS
 from zeus_ros.cli_args import ZeusArgumentParser
 
-__all__ = ['card_text', 'export', 'main']
-
-_SPLITS = ('train', 'interpolation', 'extrapolation')
+__all__ = ['card_text', 'export', 'find_evaluations', 'main']
 
 
 def _fmt(value: str | None, digits: int = 1) -> str:
@@ -30,13 +30,57 @@ def _fmt(value: str | None, digits: int = 1) -> str:
     return f'{float(value):.{digits}f}'
 
 
-def _eval_rows(evals: Path | None) -> list[tuple[str, dict[str, str], dict[str, str]]]:
-    """(split, agent row, random row) of every finished eval_<split>/summary.csv in `evals`."""
+def _legacy_summaries(evals: Path) -> dict[str, Path]:
+    """eval_<split>/summary.csv in `evals`, as runs from before eval.json hold them."""
+    found = {split: evals / f'eval_{split}' / 'summary.csv' for split in SPLITS}
+    return {split: path for split, path in found.items() if path.is_file()}
+
+
+def find_evaluations(checkpoint: Path, evals: Path | None = None) -> dict[str, Path]:
+    """Split -> summary.csv of the evaluations of `checkpoint`, for its card.
+
+    Without `evals`: those whose eval.json names this very checkpoint (by sha256), in any
+    folder below the checkpoint's (`zeus eval` writes eval_<split>/ there by default; any
+    --out below it counts too) or in the sweep's trial folder above it (<trial>/run/final.pt,
+    <trial>/eval_<split>/, also without eval.json as older trials left them). Evaluations of a
+    checkpoint retrained since do not count. With `evals`: this checkpoint's below it, else
+    what it holds (eval_<split>/summary.csv, or summary.csv of one evaluation), as given.
+    """
+    from zeus_ros.offline.evaluation.records import checkpoint_sha256, find_records, read_record
+
+    sha = checkpoint_sha256(checkpoint)
+    if evals is not None:
+        records, older = find_records(evals, sha), _legacy_summaries(evals)
+        if (evals / 'summary.csv').is_file():
+            older[_split_of(evals / 'summary.csv')] = evals / 'summary.csv'
+    else:
+        trial = checkpoint.parent.parent
+        records = find_records(checkpoint.parent, sha) + [
+            record for folder in sorted(trial.glob('eval_*'))
+            if (record := read_record(folder)) is not None and record.checkpoint_sha256 == sha]
+        older = {split: path for split, path in _legacy_summaries(trial).items()
+                 if not (path.parent / 'eval.json').is_file()}  # with one: judged by its sha
+    found: dict[str, Path] = {}
+    for record in sorted(records, key=lambda r: r.written_ns, reverse=True):
+        found.setdefault(record.split, record.summary)
+    for split, path in older.items():
+        found.setdefault(split, path)
+    return {split: found[split] for split in sorted(found, key=_split_rank)}
+
+
+def _split_rank(split: str) -> tuple[int, str]:
+    return (SPLITS.index(split) if split in SPLITS else len(SPLITS), split)
+
+
+def _split_of(summary: Path) -> str:
+    with summary.open(newline='') as handle:
+        return next(csv.DictReader(handle), {}).get('split') or summary.parent.name
+
+
+def _eval_rows(summaries: dict[str, Path]) -> list[tuple[str, dict[str, str], dict[str, str]]]:
+    """(split, agent row, random row) of every evaluation summary found."""
     rows = []
-    for split in _SPLITS:
-        path = None if evals is None else evals / f'eval_{split}' / 'summary.csv'
-        if path is None or not path.is_file():
-            continue
+    for split, path in summaries.items():
         with path.open(newline='') as handle:
             by_policy = {row['policy']: row for row in csv.DictReader(handle)}
         if 'agent' in by_policy:
@@ -44,9 +88,9 @@ def _eval_rows(evals: Path | None) -> list[tuple[str, dict[str, str], dict[str, 
     return rows
 
 
-def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
-              commit: str | None) -> str:
-    """The markdown card of an exported checkpoint."""
+def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str | None,
+              commit: str | None, source: Path | None = None) -> str:
+    """The markdown card of an exported checkpoint; `summaries`: split -> eval summary.csv."""
     from sim_bridge.presets import load_preset
 
     config, spec, extra = loaded.config, loaded.spec, loaded.extra
@@ -98,7 +142,7 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
         novelty = NoveltyMonitor.from_dict(extra['context_novelty']).describe()
         novelty = novelty.removeprefix('context novelty monitor (').split('; fitted on')[0]
         lines.insert(-1, f'| context novelty monitor | {novelty} |')
-    rows = _eval_rows(evals)
+    rows = _eval_rows(summaries)
     if rows:
         episodes = rows[0][1].get('episodes') or 1
         lines += ['', f'Measured (`zeus eval`, {_fmt(episodes, 0)} deterministic episode(s) per '
@@ -117,15 +161,20 @@ def card_text(pt: Path, loaded: Any, *, evals: Path | None, command: str | None,
                          f'{_fmt(agent.get("sensitivity"), 3)} | '
                          f'{_fmt(agent.get("adaptation_value_mean"))} |')
     else:
-        lines += ['', 'Not evaluated yet: `zeus eval --checkpoint '
-                  f'{pt} --split all --out <folder>`.']
+        trained = source or pt
+        lines += ['', f'Not evaluated yet: `zeus eval --checkpoint {trained} --split SPLIT` '
+                  f'(results in {trained.parent}/eval_SPLIT/), then export again.']
     return '\n'.join(lines) + '\n'
 
 
 def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
            command: str | None = None, commit: str | None = None,
-           readout_steps: int = 0) -> tuple[Path, Path]:
+           readout_steps: int = 0, summaries: dict[str, Path] | None = None
+           ) -> tuple[Path, Path]:
     """Write the deployment checkpoint and its card; returns (pt, md).
+
+    The card's returns: `summaries` (split -> summary.csv), else find_evaluations in `evals`
+    (none without).
 
     `readout_steps` > 0 calibrates the context read-out (readout.py) on that many steps of
     the policy on the train contexts and stores it in the export (state agents with a learned
@@ -134,6 +183,8 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
     from zeus_ros.learning.methods import method_spec
 
+    if summaries is None:
+        summaries = {} if evals is None else find_evaluations(checkpoint, evals)
     export_for_deployment(checkpoint, out)
     loaded = load_checkpoint(out)
     if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
@@ -151,7 +202,8 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
             store_readout(out, readout, novelty=novelty)
             loaded = load_checkpoint(out)
     card = out.with_suffix('.md')
-    card.write_text(card_text(out, loaded, evals=evals, command=command, commit=commit))
+    card.write_text(card_text(out, loaded, summaries=summaries, command=command, commit=commit,
+                              source=checkpoint))
     return out, card
 
 
@@ -163,8 +215,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--checkpoint', type=Path, required=True, help='training checkpoint')
     parser.add_argument('--out', type=Path, required=True, help='deployment checkpoint (.pt)')
     parser.add_argument('--evals', type=Path,
-                        help='folder with eval_<split>/summary.csv for the card (default: the '
-                        "run folder above the checkpoint's, when it has them)")
+                        help="where the card's returns come from (default: the evaluations of "
+                        "this checkpoint that `zeus eval` wrote below the checkpoint's folder, "
+                        'eval_<split>/ by default, or in the sweep trial folder above it); a '
+                        'folder with eval_<split>/ folders or one evaluation folder')
     parser.add_argument('--command',
                         help='command that trained it, for checkpoints that did not record one')
     parser.add_argument('--commit',
@@ -182,17 +236,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.resolve() == args.checkpoint.resolve():
         print('zeus export: --out must differ from --checkpoint', file=sys.stderr)
         return 2
-    evals = args.evals
-    if evals is None and (args.checkpoint.parent.parent / 'eval_train').is_dir():
-        evals = args.checkpoint.parent.parent
+    for flag, path in (('--checkpoint', args.checkpoint), ('--evals', args.evals)):
+        if path is not None and not path.exists():
+            print(f'zeus export: {flag} {path}: no such file or folder', file=sys.stderr)
+            return 2
     try:
-        pt, card = export(args.checkpoint, args.out, evals=evals, command=args.command,
-                          commit=args.commit, readout_steps=max(args.readout_steps, 0))
+        summaries = find_evaluations(args.checkpoint, args.evals)
+        pt, card = export(args.checkpoint, args.out, command=args.command, commit=args.commit,
+                          readout_steps=max(args.readout_steps, 0), summaries=summaries)
     except (CheckpointError, ValueError) as error:
         print(f'zeus export: {error}', file=sys.stderr)
         return 2
     before, after = args.checkpoint.stat().st_size, pt.stat().st_size
     print(f'zeus export: {pt} ({after / 1e6:.2f} MB, {before / after:.1f}x smaller) and {card}')
+    scored = ', '.join(f'{split} ({path.parent})' for split, path in summaries.items())
+    print(f'zeus export: the card shows the evaluations of {scored}' if scored else
+          f'zeus export: no evaluation of {args.checkpoint} found below '
+          f'{args.checkpoint.parent} (run `zeus eval --checkpoint {args.checkpoint}` first, '
+          'or give --evals): the card says "Not evaluated yet"')
     return 0
 
 

@@ -21,6 +21,7 @@ __all__ = [
     'MetricsLog',
     'RunningMean',
     'format_table',
+    'metric_series',
     'overlap_style',
     'plot_bars',
     'plot_grouped_lines',
@@ -156,34 +157,71 @@ def _pyplot() -> Any:
     return plt
 
 
-def plot_metric_grid(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], path: str | Path,
-                     *, x: str = 'step', title: str = '') -> Path | None:
-    """One small panel per metric key against `x`; None when no key has data."""
-    series = []
+FEW_POINTS = 30
+"""Curves with fewer points than this get a marker at each: one point alone draws no line."""
+
+
+def metric_series(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], x: str = 'step'
+                  ) -> tuple[list[tuple[str, tuple[float, ...], tuple[float, ...]]], list[str],
+                             list[str]]:
+    """What plot_metric_grid draws: curves, one-value lines, keys without data.
+
+    Curves: (key, xs, ys) of keys with two or more finite values; one-value lines:
+    'key = v  (step s)'; without data: keys logged with no finite value (NaN only).
+    """
+    curves, single, empty = [], [], []
     for key in keys:
         pairs = [(row[x], row[key]) for row in rows if key in row and x in row
-                 and isinstance(row[key], int | float)]
-        if pairs:
-            series.append((key, *zip(*pairs, strict=True)))
-    if not series:
+                 and isinstance(row[key], int | float) and math.isfinite(row[key])]
+        if len(pairs) > 1:
+            curves.append((key, *zip(*pairs, strict=True)))
+        elif pairs:
+            single.append(f'{key} = {pairs[0][1]:.4g}  ({x} {pairs[0][0]:g})')
+        elif any(key in row for row in rows):
+            empty.append(key)
+    return curves, single, empty
+
+
+def plot_metric_grid(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], path: str | Path,
+                     *, x: str = 'step', title: str = '') -> Path | None:
+    """One small panel per metric key with a curve against `x`; None when no key has data.
+
+    Only keys with two or more finite values get a panel (a short run logs each key once: 13
+    empty-looking panels); the rest are listed in one compact text panel, with their single
+    value or as 'no data' (NaN only).
+    """
+    curves, single, empty = metric_series(rows, keys, x)
+    if not (curves or single or empty):
         return None
+    notes = (['one value each so far (a curve needs two logged values):', *single]
+             if single else []) + ([f'no data (NaN only): {", ".join(empty)}'] if empty else [])
+    panels = len(curves) + bool(notes)
     plt = _pyplot()
-    cols = min(3, len(series))
-    nrows = math.ceil(len(series) / cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 2.8 * nrows), squeeze=False)
-    for ax, (key, xs, ys) in zip(axes.flat, series, strict=False):
-        ax.plot(xs, ys, lw=1.2)
-        ax.set_title(key, fontsize=9)
+    cols = min(3, panels)
+    nrows = math.ceil(panels / cols)
+    height = 2.8 * nrows if curves else 0.7 + 0.16 * len(notes)
+    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols if curves else 6.0, height),
+                             squeeze=False)
+    for ax, (key, xs, ys) in zip(axes.flat, curves, strict=False):
+        few = {'marker': 'o', 'ms': 3} if len(xs) < FEW_POINTS else {}
+        ax.plot(xs, ys, lw=1.2, **few)
+        ax.set_title(f'{key} (last {ys[-1]:.3g})', fontsize=9)
         ax.set_xlabel('update' if x == 'step' else x, fontsize=8)
         ax.set_ylabel(key.rsplit('/', 1)[-1], fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(series):]:
+    spare = list(axes.flat)[len(curves):]
+    for ax in spare:
         ax.set_visible(False)
+    if notes:
+        spare[0].set_visible(True)
+        spare[0].axis('off')
+        spare[0].text(0.0, 1.0, '\n'.join(notes), va='top', ha='left', fontsize=7,
+                      family='monospace', transform=spare[0].transAxes, wrap=True)
     if title:
         fig.suptitle(title, fontsize=10)
     # Leave the top strip to the figure title, so it never overlaps a panel title.
-    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.94 if title else 1.0))
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.3 / height if title else 1.0))
     return _save(fig, path)
 
 
@@ -264,23 +302,45 @@ def format_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[str]) -> s
     return '\n'.join(lines)
 
 
+PANELS_PER_ROW = 4
+"""Grids of small panels wrap after this many, so a figure stays readable at any count."""
+
+
 def plot_bars(labels: Sequence[str], series: Mapping[str, Sequence[float]], path: str | Path,
               *, xlabel: str = '', ylabel: str = '', title: str = '') -> Path:
-    """Grouped bars: one group per label, one bar per series (e.g. agent vs random)."""
+    """One panel per label (e.g. context value), a bar per series (agent, frozen, random).
+
+    Panels wrap after PANELS_PER_ROW and share the y axis and one legend: a row of grouped
+    bars grew 0.6 in per bar (3168 px wide for 8 values of 6 policies).
+    """
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.6 * len(labels) * len(series)), 3.8))
-    width = 0.8 / max(len(series), 1)
-    for index, (name, values) in enumerate(series.items()):
-        ax.bar(np.arange(len(labels)) + (index - (len(series) - 1) / 2) * width, values,
-               width, label=name)
-    ax.set_xticks(range(len(labels)), labels, fontsize=8)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3, axis='y')
-    ax.legend(fontsize=8, loc='upper left', bbox_to_anchor=(1.0, 1.0))  # never over a bar
+    cols = max(1, min(PANELS_PER_ROW, len(labels)))
+    nrows = max(1, math.ceil(len(labels) / cols))
+    width = max(6.0, 0.6 + 2.9 * cols)
+    ncol = max(1, min(len(series), int(width // 1.6)))
+    legend_h, title_h = 0.3 * math.ceil(len(series) / ncol) + 0.1, 0.4 if title else 0.0
+    height = 2.4 * nrows + legend_h + title_h
+    fig, axes = plt.subplots(nrows, cols, figsize=(width, height), sharey=True, squeeze=False)
+    colors = [plt.get_cmap('tab10')(i % 10) for i in range(len(series))]
+    for index, ax in enumerate(axes.flat):
+        if index >= len(labels):
+            ax.set_visible(False)
+            continue
+        heights = [values[index] for values in series.values()]
+        ax.bar(range(len(series)), heights, 0.8, color=colors)
+        ax.axhline(0.0, color='black', lw=0.6)
+        ax.set_xticks([])
+        ax.set_title(f'{xlabel} = {labels[index]}' if xlabel else labels[index], fontsize=9)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3, axis='y')
+        if index % cols == 0:
+            ax.set_ylabel(ylabel, fontsize=8)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=color) for color in colors]
+    fig.legend(handles, list(series), loc='lower center', ncol=ncol, fontsize=8, frameon=False)
     if title:
-        ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=10)
+    # The top strip for the title, the bottom one for the legend: never over a panel.
+    fig.tight_layout(rect=(0.0, legend_h / height, 1.0, 1.0 - title_h / height))
     return _save(fig, path)
 
 

@@ -2,18 +2,20 @@
 
     zeus report runs/exp/walker_walk_v0 --out docs/results/walker_walk_v0
 
-Reads <folder>/<method>_s<seed>/eval_<split>/summary.csv (the layout of
-`experiments/run_one.sh` and of `zeus eval` on several checkpoints) of the evaluations that
-<method>_s<seed>/state.json (or an old .done marker) says finished (training/run_state.py),
-writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md into
---out and prints the markdown table (as in docs/results.md).
+Reads every finished evaluation below the folder: any folder with the eval.json that `zeus eval`
+writes last (method, seed and split from it: `zeus eval --checkpoint runs/x/final.pt` writes
+runs/x/eval_<split>/, so `zeus report runs/x` finds it), and the layout of
+`experiments/run_one.sh` and sweeps, <method>_s<seed>/eval_<split>/summary.csv, finished
+where <method>_s<seed>/state.json (or an old .done marker) says so (training/run_state.py).
+Writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md
+into --out (default FOLDER/report) and prints the markdown table (as in docs/results.md).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterator
 import csv
+from dataclasses import dataclass
 from pathlib import Path
 import re
 import sys
@@ -25,11 +27,13 @@ from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
+from zeus_ros.offline.evaluation.records import find_records
 from zeus_ros.offline.training.run_state import RunState, RunStateError, read_state
 
 __all__ = [
     'METRICS',
     'RUN_NAME',
+    'ReportError',
     'diagnostics_table',
     'headroom_rows',
     'headroom_table',
@@ -42,6 +46,11 @@ __all__ = [
     'wall_time_table',
     'write_report',
 ]
+
+
+class ReportError(ValueError):
+    """Nothing to report, or evaluations that do not belong in one table: the message says."""
+
 
 METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman', *DIAGNOSTICS)
 """Columns of an eval summary that are averaged over seeds."""
@@ -73,34 +82,73 @@ def _seconds(value: float | None) -> str:
     return '' if value is None else f'{value:.1f}'.removesuffix('.0')
 
 
-def _finished_summaries(folder: Path) -> Iterator[tuple[re.Match[str], Path, RunState]]:
-    """(run name match, eval_<split>/summary.csv, run state) of every finished evaluation."""
+@dataclass(frozen=True)
+class Finished:
+    """One finished evaluation of one run on one split, and the run's times."""
+
+    method: str
+    seed: int
+    split: str
+    summary: Path
+    state: RunState
+    eval_seconds: float | None
+
+
+def _finished_summaries(folder: Path) -> list[Finished]:
+    """Every finished evaluation below `folder`, one per (method, seed, split): the newest.
+
+    Two layouts: <method>_s<seed>/eval_<split>/ that <method>_s<seed>/state.json (or an old
+    .done marker) says finished (sweeps, run_one.sh, `zeus eval` on many), and any folder
+    with an eval.json, which `zeus eval` writes last (`zeus eval --checkpoint runs/x/final.pt`
+    without --out: runs/x/eval_<split>/). A folder holding several tasks is refused.
+    """
+    found: dict[tuple[str, int, str], tuple[int, Finished]] = {}
+
+    def keep(item: Finished) -> None:
+        key, when = (item.method, item.seed, item.split), item.summary.stat().st_mtime_ns
+        if key not in found or when > found[key][0]:
+            found[key] = (when, item)
+
     states: dict[Path, RunState] = {}
+    legacy = set()
     for summary in sorted(folder.glob('*/eval_*/summary.csv')):
-        run = summary.parent.parent
+        run, split = summary.parent.parent, summary.parent.name.removeprefix('eval_')
         match = RUN_NAME.match(run.name)
         if match is None:
             continue
         state = states.setdefault(run, read_state(run))
-        if summary.parent.name.removeprefix('eval_') in state.evaluated:
-            yield match, summary, state
+        if split in state.evaluated:
+            legacy.add(summary.parent.resolve())
+            keep(Finished(match['method'], int(match['seed']), split, summary, state,
+                          state.evaluated[split]))
+    records = [r for r in find_records(folder) if r.folder.resolve() not in legacy]
+    tasks = sorted({r.task for r in records})
+    if len(tasks) > 1:
+        raise ReportError(f'{folder}: evaluations of {len(tasks)} tasks ({", ".join(tasks)}); '
+                          'report the folder of one task')
+    for record in records:
+        run = Path(record.checkpoint).parent  # the training run's state.json, if it has one
+        state = states.setdefault(run, read_state(run))
+        keep(Finished(record.method, record.seed, record.split, record.summary, state,
+                      record.seconds))
+    return [item for _when, item in found.values()]
 
 
 def per_run(folder: Path) -> list[dict[str, Any]]:
     """One row per finished (run, split): method, seed, split and the agent's metrics."""
     rows = []
-    for match, summary, state in _finished_summaries(folder):
-        with summary.open(newline='') as handle:
+    for done in _finished_summaries(folder):
+        with done.summary.open(newline='') as handle:
             for row in csv.DictReader(handle):
                 if row['policy'] == 'agent':
-                    rows.append({'method': match['method'], 'seed': int(match['seed']),
+                    rows.append({'method': done.method, 'seed': done.seed,
                                  'split': row['split'],
                                  **{metric: row.get(metric, '') for metric in METRICS},
-                                 'train_seconds': _seconds(state.train_seconds),
+                                 'train_seconds': _seconds(done.state.train_seconds),
                                  # a longer run resumed from a shorter one: that one's seconds
-                                 'earlier_train_seconds': _seconds(state.earlier_train_seconds),
-                                 'eval_seconds': _seconds(state.evaluated[
-                                     summary.parent.name.removeprefix('eval_')])})
+                                 'earlier_train_seconds': _seconds(
+                                     done.state.earlier_train_seconds),
+                                 'eval_seconds': _seconds(done.eval_seconds)})
     return sorted(rows, key=lambda r: (method_order_key(r['method']), r['seed'],
                                        _rank(r['split'], SPLIT_ORDER)))
 
@@ -109,18 +157,18 @@ def per_method(folder: Path) -> list[dict[str, Any]]:
     """One row per (method, split): seeds, then mean and s.e. of every metric with data."""
     table: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     random_returns: dict[str, list[float]] = defaultdict(list)
-    for match, summary, _state in _finished_summaries(folder):
-        with summary.open(newline='') as handle:
+    for done in _finished_summaries(folder):
+        with done.summary.open(newline='') as handle:
             for row in csv.DictReader(handle):
                 if row['policy'] == 'random':
                     random_returns[row['split']].append(float(row['mean_return']))
                     continue
-                key = (match['method'], row['split'])
+                key = (done.method, row['split'])
                 for metric in METRICS:
                     value = row.get(metric)
                     if value and value.lower() not in ('nan', 'inf'):
                         table[key][metric].append(float(value))
-                table[key]['seeds'].append(float(match['seed']))
+                table[key]['seeds'].append(float(done.seed))
     rows = []
     for method, split in sorted(table, key=lambda k: (method_order_key(k[0]),
                                                       _rank(k[1], SPLIT_ORDER))):
@@ -281,10 +329,10 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
     """Aggregate `folder`; write summary.csv, runs.csv, table.md, wall_times.md, returns.png."""
     rows = per_method(folder)
     if not rows:
-        raise FileNotFoundError(f'{folder}: no finished evaluations '
-                                '(<method>_s<seed>/eval_<split>/summary.csv, finished in '
-                                '<method>_s<seed>/state.json or by an eval_<split>/.done '
-                                'marker)')
+        raise ReportError(f'{folder}: no finished evaluations in it or any folder below it '
+                          '(an eval.json beside summary.csv, as `zeus eval` writes, or '
+                          '<method>_s<seed>/eval_<split>/ finished in <method>_s<seed>/state.json '
+                          'or by an eval_<split>/.done marker)')
     out.mkdir(parents=True, exist_ok=True)
     fields = ['method', 'split', 'seeds'] + [f for m in METRICS for f in (m, f'{m}_se')]
     with (out / 'summary.csv').open('w', newline='') as handle:
@@ -318,14 +366,21 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus report`; returns the process exit code."""
     parser = ZeusArgumentParser(prog='zeus report', description=__doc__.splitlines()[0])
     flag_or_positional(parser, '--folder', many=False, type=Path,
-                       help='experiment folder of one task (also accepted without --folder, '
-                       'the old spelling)')
-    parser.add_argument('--out', type=Path, required=True, help='folder for CSV, MD and PNG')
+                       help='folder of one task whose evaluations to report, searched at any '
+                       'depth: a run folder (runs/x, where `zeus eval --checkpoint '
+                       'runs/x/final.pt` writes eval_<split>/ by default), a folder of runs, or '
+                       'a sweep / `zeus eval --out` folder (also accepted without --folder, the '
+                       'old spelling)')
+    parser.add_argument('--out', type=Path,
+                        help='folder for CSV, MD and PNG (default: FOLDER/report)')
     parser.add_argument('--title', help="plot title (default: the folder's task name)")
     args = parser.parse_args(argv)
+    out = args.out if args.out is not None else args.folder / 'report'
     try:
-        rows = write_report(args.folder, args.out, args.title)
-    except (FileNotFoundError, RunStateError) as error:
+        if not args.folder.is_dir():
+            raise ReportError(f'--folder {args.folder}: no such folder')
+        rows = write_report(args.folder, out, args.title)
+    except (ReportError, RunStateError) as error:
         print(f'zeus report: {error}', file=sys.stderr)
         return 2
     print(markdown_table(rows))
@@ -334,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
     if headroom:
         print(f'\n{headroom_table(headroom)}')
     print(f'\nwrote summary.csv, runs.csv, table.md, diagnostics.md, headroom.md, '
-          f'wall_times.md and returns.png to {args.out}')
+          f'wall_times.md and returns.png to {out}')
     return 0
 
 

@@ -291,13 +291,16 @@ class AgentPolicy:
         self._prev = obs
         truth = es.observation.context
         true_ctx = np.asarray([truth[n] for n in self.agent.context_names], np.float32)
-        psi = self.agent.context(self.history, true_context=true_ctx)
-        if self.context_transform is not None and psi is not None:
-            psi = np.asarray(self.context_transform(psi), np.float32)
+        frozen = self.frozen_context is not None and self._blind(true_ctx,
+                                                                  es.observation.first)
+        if frozen and self._recent.maxlen == 1:
+            psi = None  # acts on the frozen context: psi(H) would be computed for nothing
+        else:
+            psi = self.agent.context(self.history, true_context=true_ctx)
+            if self.context_transform is not None and psi is not None:
+                psi = np.asarray(self.context_transform(psi), np.float32)
         self._recent.append(psi)
-        psi = self._recent[0]
-        if self.frozen_context is not None and self._blind(true_ctx, es.observation.first):
-            psi = self.frozen_context
+        psi = self.frozen_context if frozen else self._recent[0]
         self._episode_step += 1
         action = self.agent.act(obs, psi, deterministic=not self.stochastic, noise=self.noise,
                                 rng=self.rng)
