@@ -17,7 +17,7 @@ import time
 import numpy as np
 import pytest
 
-from live_fixtures import tiny_checkpoint
+from live_fixtures import TASK, tiny_checkpoint
 from ros_harness import REPO, ros_environment
 
 # This file's own domain ids (the issue-12 range), so parallel runs do not meet.
@@ -214,8 +214,8 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     store_readout(ckpt, readout, novelty=novelty)
     env = ros_environment(DOMAIN_LIVE)
     launch = subprocess.Popen(
-        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--checkpoint', str(ckpt),
-         '--timeout', '60'], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+        [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', TASK, '--checkpoint',
+         str(ckpt), '--timeout', '60'], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
     try:
         inspect = subprocess.run(
