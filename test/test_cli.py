@@ -37,7 +37,7 @@ BAD_VALUES = [
     ('loop', ['--task', 'Cheetah-Run-v0', '--config', 'c.yaml', '--out', 'o', '--method', 'x'],
      '--method', "choose from 'zeus'"),
     ('launch', ['--log-level', 'loud'], '--log-level', "choose from 'debug'"),
-    ('inspect', ['--duration', 'soon'], '--duration', "invalid float value: 'soon'"),
+    ('inspect', ['--duration', 'soon'], '--duration', "'soon' is not a number"),
     ('demo', ['--task', 'Cheetah-Run-v2'], '--task', "did you mean 'Cheetah-Run-v1'"),
     ('report', ['--out', 'o'], '--folder', 'required'),
     ('recover', ['--dry-run'], '--bags', 'required'),
@@ -95,14 +95,14 @@ def test_schedule_is_spelled_one_way_in_every_help(capsys: pytest.CaptureFixture
 
 
 def test_demo_offers_every_task_family(capsys: pytest.CaptureFixture) -> None:
-    """Every registered family is a demo --task choice (Sawyer without a shipped checkpoint)."""
+    """Every registered family is a demo --task choice (Sawyer without a zoo checkpoint)."""
     _run('demo', ['--help'])
     text = ' '.join(capsys.readouterr().out.split())
     for name in TASK_NAMES:
         assert name in text, name
     assert _run('demo', ['--task', 'Sawyer-Peg-v0', '--no-frozen']) == 2
     err = capsys.readouterr().err
-    assert 'no shipped checkpoint for Sawyer-Peg-v0' in err and '--random-policy' in err
+    assert 'Sawyer-Peg-v0 has no zoo checkpoint' in err and '--random-policy' in err
 
 
 def test_train_config_is_found_in_the_package_share_from_any_folder(

@@ -308,8 +308,8 @@ def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,
     from zeus_ros.nodes.agent_loader import load_inference_agent
 
     monkeypatch.chdir(tmp_path)
-    relative = 'checkpoints/cheetah_run_v0_zeus_state.pt'
-    loaded = load_inference_agent('policy', {'checkpoint': relative, 'task': 'Cheetah-Run-v0',
+    relative = 'checkpoints/cheetah_bias_v0/zeus.pt'  # the zoo: what the package installs
+    loaded = load_inference_agent('policy', {'checkpoint': relative, 'task': 'Cheetah-Bias-v0',
                                              'device': 'cpu', 'torch_threads': 1})
     assert loaded.path == share_dir() / relative
     assert loaded.sha256 == hashlib.sha256(loaded.path.read_bytes()).hexdigest()
@@ -332,7 +332,7 @@ def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) 
     from zeus_ros.launch_defaults import share_dir
     from zeus_ros.nodes.agent_loader import load_inference_agent
 
-    shipped = share_dir() / 'checkpoints/cheetah_run_v0_zeus_state.pt'
+    shipped = share_dir() / 'checkpoints/cheetah_bias_v0/zeus.pt'
     copy = tmp_path / 'copy.pt'
     shutil.copyfile(shipped, copy)
     params = {'checkpoint': str(shipped), 'task': '', 'device': 'cpu', 'torch_threads': 1}
@@ -341,7 +341,7 @@ def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) 
     assert policy.agent is estimator.agent and policy.agent.reuse_features
     assert sorted(policy.agent.agent.modules) == ['actor', 'encoder', 'psi']  # no critics
     assert policy.path == copy
-    checked = load_inference_agent('policy', {**params, 'task': 'Cheetah-Run-v0'})
+    checked = load_inference_agent('policy', {**params, 'task': 'Cheetah-Bias-v0'})
     assert checked.agent is not estimator.agent
     shared = weakref.ref(estimator.agent)
     del estimator, policy
