@@ -184,6 +184,10 @@ def test_readme_names_every_command() -> None:
     ('adaptation', ['--checkpoint', 'x.pt', '--episodes', '0'], '--episodes'),
     ('inspect', ['--refresh', '-1'], '--refresh'),
     ('sweep', ['--out', 'o', '--retries', '-1'], '--retries'),
+    ('eval', ['--checkpoint', 'x.pt', '--episodes', '0'], '--episodes'),
+    ('collect', ['--task', 'Cheetah-Bias-v0', '--steps', '-5', '--out', 'o'], '--steps'),
+    ('export', ['--checkpoint', 'x.pt', '--out', 'y.pt', '--readout-steps', '-1'],
+     '--readout-steps'),
 ])
 def test_numeric_flags_out_of_range_are_one_line_exit_2(
         command: str, args: list[str], flag: str, capsys: pytest.CaptureFixture) -> None:

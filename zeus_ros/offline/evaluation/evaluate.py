@@ -552,21 +552,21 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="any values of the task's context parameters instead of a split, "
                         "e.g. '0.5,0.8,1.3' (one parameter) or 'x=0.1:y=0.2,x=0.3:y=0.1'; "
                         "outputs are labelled split 'custom'")
-    parser.add_argument('--episodes', type=int, default=3,
+    parser.add_argument('--episodes', type=at_least(1), default=3,
                         help='episodes per context value (each from other initial states)')
-    parser.add_argument('--switch-every', type=int,
+    parser.add_argument('--switch-every', type=at_least(1),
                         help='steps between unannounced context switches (switching run; '
                         'default 100, or a quarter episode for shorter episodes)')
-    parser.add_argument('--switch-episodes', type=int, default=1,
+    parser.add_argument('--switch-episodes', type=at_least(0), default=1,
                         help='episodes of the switching run')
-    parser.add_argument('--probe-steps', type=int, default=4000,
+    parser.add_argument('--probe-steps', type=at_least(0), default=4000,
                         help='random-policy steps for the identifiability probe (0: skip)')
-    parser.add_argument('--seed', type=int, default=100)
+    parser.add_argument('--seed', type=at_least(0), default=100)
     parser.add_argument('--out', type=Path,
                         help='output folder (default: eval_<split>/ next to the checkpoint); '
                         'zeus export and zeus report find the results in any folder below the '
                         "checkpoint's (eval.json names the checkpoint evaluated)")
-    parser.add_argument('--jobs', type=int, default=1,
+    parser.add_argument('--jobs', type=at_least(1), default=1,
                         help='evaluations in parallel (several checkpoints)')
     parser.add_argument('--force', action='store_true',
                         help='re-run evaluations that already finished (several checkpoints)')

@@ -19,7 +19,7 @@ import sys
 from typing import Any
 
 from sim_bridge.presets import SPLITS
-from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.cli_args import ZeusArgumentParser, at_least
 
 __all__ = ['card_text', 'export', 'find_evaluations', 'main']
 
@@ -223,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='command that trained it, for checkpoints that did not record one')
     parser.add_argument('--commit',
                         help='source commit it was trained on, for checkpoints without one')
-    parser.add_argument('--readout-steps', type=int, default=2000,
+    parser.add_argument('--readout-steps', type=at_least(0), default=2000,
                         help='steps of the policy on the train contexts that calibrate the '
                         'context read-out (psi -> context units, on zeus/context_readout) and '
                         'the novelty monitor (distance from the training contexts, on '

@@ -20,7 +20,7 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
 from zeus_ros.offline.data.bag_writer import SimStep, StepBagWriter
 from zeus_ros.offline.data.schema import StepFeedbackFields, ns_from_sim_time
 
@@ -331,22 +331,23 @@ def _build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument('--task', '--task-file', required=True, type=task_name, help=TASK_HELP)
     parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
-    parser.add_argument('--steps', type=int, required=True, help='control steps to record')
-    parser.add_argument('--seed', type=int, default=0, help='seeds task, schedule and policy')
+    parser.add_argument('--steps', type=at_least(1), required=True, help='control steps to record')
+    parser.add_argument('--seed', type=at_least(0), default=0,
+                        help='seeds task, schedule and policy')
     parser.add_argument('--out', type=Path, required=True, help='directory for the bag(s)')
     parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     parser.add_argument('--pixels', action='store_true', help='also record 84x84 rgb8 frames')
     parser.add_argument('--checkpoint', type=Path, help='act with this agent, not at random')
-    parser.add_argument('--noise', type=float, default=0.0,
+    parser.add_argument('--noise', type=at_least(0.0, float), default=0.0,
                         help='Gaussian exploration noise for --checkpoint, as a fraction of '
                         'half the action range (actions are clipped to the bounds)')
-    parser.add_argument('--context-lag', type=int, default=0,
+    parser.add_argument('--context-lag', type=at_least(0), default=0,
                         help="act on step k with the context of step k - L, as the policy "
                         "node's context_lag parameter does, within its limit (default: 0)")
     parser.add_argument('--append', action='store_true',
                         help='add a new bag next to the bags already in --out')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
-    parser.add_argument('--workers', type=int, default=1,
+    parser.add_argument('--workers', type=at_least(1), default=1,
                         help='simulators at once, each writing its own bag of --steps/N steps '
                         'with a seed derived from --seed (default: 1)')
     parser.add_argument('--ray', action='store_true',
