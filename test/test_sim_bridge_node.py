@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+from pathlib import Path
 
 import pytest
 
@@ -188,3 +189,29 @@ def test_realtime_mode_keeps_stepping_and_marks_stale_actions(
     assert answered.count(1) >= len(answered) // 2, answered
     late = [feedback[k].action_status for k in range(45, 80) if k in feedback]
     assert late and set(late) == {5}, late
+
+
+@pytest.mark.parametrize(('content', 'expected'), [
+    ('garbage: [unclosed\n', 'line 2: not valid YAML'),
+    ('policy:\n  checkpoint: x.pt\n', "node 'policy' needs a ros__parameters: mapping"),
+    (None, 'cannot read it (No such file or directory)'),
+])
+def test_a_bad_params_file_is_one_line_before_rclpy_starts(
+        tmp_path: Path, content: str | None, expected: str) -> None:
+    """A node given a broken params file names the file and the fault, exit 2, no traceback."""
+    import subprocess
+
+    from ros_harness import fresh_domain_id, ros_environment
+
+    path = tmp_path / 'params.yaml'
+    if content is not None:
+        path.write_text(content)
+    for module in ('zeus_ros.nodes.sim_bridge_node', 'zeus_ros.nodes.policy_node'):
+        done = subprocess.run(python_module(module, '--ros-args', '--params-file', str(path)),
+                              env=ros_environment(fresh_domain_id()), capture_output=True,
+                              text=True, timeout=60, check=False)
+        assert done.returncode == 2, done.stderr
+        line = done.stderr.strip()
+        assert line.startswith(f'error: --params-file {path}') and expected in line, line
+        assert len(line.splitlines()) == 1, line
+        assert 'Traceback' not in done.stderr

@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 import faulthandler
 import math
 import os
+from pathlib import Path
 import signal
 import sys
 import time
@@ -497,6 +498,43 @@ def _drain(executor: Executor, nodes: Sequence[Node], quiet: float) -> None:
             seen, quiet_since = received(), time.monotonic()
 
 
+def params_file_errors(args: Sequence[str]) -> list[str]:
+    """What is wrong with each `--params-file` in a node's arguments, one line each.
+
+    rcl reads these files inside rclpy.init and fails with a long RCLError traceback; read here
+    first, a missing file, bad YAML or a file not shaped `<node>: ros__parameters: {...}` is
+    one line naming the file and the fix.
+    """
+    import yaml
+
+    errors = []
+    paths = [args[i + 1] for i, arg in enumerate(args[:-1]) if arg == '--params-file']
+    for path in paths:
+        where = f'--params-file {path}'
+        try:
+            data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+        except OSError as error:
+            errors.append(f'{where}: cannot read it ({error.strerror})')
+            continue
+        except (yaml.YAMLError, UnicodeDecodeError) as error:
+            mark = getattr(error, 'problem_mark', None)
+            line = f' line {mark.line + 1}' if mark is not None else ''
+            errors.append(f'{where}{line}: not valid YAML '
+                          f'({getattr(error, "problem", None) or error})')
+            continue
+        if not isinstance(data, dict) or not data:
+            errors.append(f'{where}: expected a mapping of node names, e.g. '
+                          '"/**/policy: {ros__parameters: {checkpoint: ...}}"')
+            continue
+        for name, section in data.items():
+            if not isinstance(section, dict) or not isinstance(
+                    section.get('ros__parameters'), dict):
+                errors.append(f'{where}: node {name!r} needs a ros__parameters: mapping '
+                              '(the ROS 2 params file layout)')
+                break
+    return errors
+
+
 def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None,
               drain: float = 0.0) -> NoReturn:
     """`run_node` for several nodes in one process on one executor (a component container).
@@ -506,6 +544,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
     finishes (NodeFinished, or its `finished` attribute set), are destroyed and closed in
     order, and the exit code is the first non-zero `exit_code`.
     """
+    bad = params_file_errors(sys.argv[1:] if args is None else args)
+    if bad:
+        print(f'error: {bad[0]}', file=sys.stderr)
+        _exit_now(2)
     signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
         signal.signal(stop_signal, lambda signum, _frame: signals.append(signum))
