@@ -137,3 +137,14 @@ def test_bad_input_is_one_clear_line(args: list[str], message: str, tmp_path: Pa
     assert code == 2
     assert message in err and len(err.splitlines()) == 1
     assert not (tmp_path / 'run' / 'student.pt').exists()
+
+
+def test_the_context_sensitivity_of_a_pixel_agent_is_not_measured_from_states(
+        tiny: Path) -> None:
+    """`zeus adaptation` on a student: the traces hold states, so NaN instead of a crash."""
+    from zeus_ros.offline.evaluation.diagnostics import context_sensitivity
+
+    teacher = InferenceAgent.from_checkpoint(TEACHER)
+    student = InferenceAgent(make_student(load_config(tiny), teacher, TASK))
+    values = [{'motor_bias': -0.3}, {'motor_bias': 0.3}]
+    assert np.isnan(context_sensitivity(student, [], values))

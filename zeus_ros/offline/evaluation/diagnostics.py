@@ -79,10 +79,11 @@ def context_sensitivity(agent: InferenceAgent, traces: Sequence[Trace],
                         values: Sequence[dict[str, float]]) -> float:
     """Mean |delta action| in [-1, 1] units when the context of one extreme replaces the other's.
 
-    NaN without a context or with fewer than two distinct values.
+    NaN without a context or with fewer than two distinct values, and for a pixel agent: a
+    trace keeps the state of each step, not the frames such an agent acts on.
     """
     lo, hi = extreme_indices(values)
-    if lo == hi or agent.context_dim == 0:
+    if lo == hi or agent.context_dim == 0 or agent.obs_kind != 'state':
         return float('nan')
     half_range = (agent.action_high - agent.action_low) / 2
     deltas = []

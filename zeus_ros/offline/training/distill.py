@@ -220,10 +220,9 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
                'collect_s': round(collect_s, 1), 'train_s': round(train_s, 1),
                **{name: value / max(settings.updates, 1) for name, value in sums.items()}}
         rows.append(row)
-        if progress:
-            print(f'round {round_}: ' + ', '.join(
-                f'{key} {value:.4g}' if isinstance(value, float) else f'{key} {value}'
-                for key, value in row.items() if key != 'round'), flush=True)
+        print(f'round {round_}: ' + ', '.join(
+            f'{key} {value:.4g}' if isinstance(value, float) else f'{key} {value}'
+            for key, value in row.items() if key != 'round'), flush=True)
     _write_rows(out / 'rounds.csv', rows)
     extra = {'distill': {'teacher': str(teacher_path), 'teacher_sha256': _sha256(teacher_path),
                          'teacher_method': teacher.method, 'settings': asdict(settings),
