@@ -14,7 +14,7 @@ from rosbags.highlevel import AnyReader
 
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
 from zeus_ros.offline.data.bag_writer import StepBagWriter
-from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
+from zeus_ros.offline.data.ingest import IngestWarning, Issue, ingest_bags
 from zeus_ros.offline.data.schema import (
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
@@ -707,3 +707,40 @@ def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
     assert train_main(['--bags', str(tmp_path / 'nothing'), '--config', str(config), '--out',
                        str(tmp_path / 'run'), '--no-progress']) == 2
     assert 'no bags found: searched' in capsys.readouterr().err
+
+
+def test_a_short_first_state_is_the_one_blamed_not_the_good_ones(tmp_path: Path) -> None:
+    """The length most messages have sets the state size: step 0 is reported, 1.. are kept."""
+    bag = _write_synthetic(tmp_path / 'short0', 30, Faults(short={(TOPIC_STATE, 0)}))
+    with pytest.warns(IngestWarning):
+        ds = ingest_bags(bag)
+    [issue] = [i for i in ds.report.issues if i.kind == 'length']
+    assert (issue.topic, issue.step) == (TOPIC_STATE, 0)
+    assert '1 message(s) of another length than the 2 of most' in issue.detail
+    assert ds.num_transitions > 20 and all(ep.obs.shape[1] == 2 for ep in ds.episodes)
+
+
+def test_a_truncated_bag_points_at_zeus_recover(tmp_path: Path) -> None:
+    """Cut short: the error says what `zeus recover` would do, with the bag's path."""
+    bag = _write_synthetic(tmp_path / 'cut', 60)
+    [data] = list(bag.glob('*.mcap'))
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    with pytest.raises(BagError, match=r'cannot open bag|corrupt or truncated') as info:
+        ingest_bags(bag)
+    assert f'`zeus recover {bag}` restores what was written' in str(info.value)
+
+
+def test_a_type_hash_mismatch_is_named_as_such_when_decoding_fails(tmp_path: Path) -> None:
+    """A message of another definition is not called corrupt: the error names the hashes."""
+    from zeus_ros.offline.data.ingest import IngestReport, read_failure
+
+    bag = tmp_path / 'other_definition'
+    report = IngestReport()
+    report.issues.append(Issue(str(bag), TOPIC_STATE, None, 'schema',
+                               "type hash RIHS01_aa != this checkout's RIHS01_bb for "
+                               'zeus_msgs/msg/StateVector: written with another definition; '
+                               'decoding may fail'))
+    error = read_failure(bag, 12, ValueError('buffer too short'), report)
+    text = str(error)
+    assert 'written with another message definition' in text and 'RIHS01_aa' in text
+    assert 'corrupt' not in text and 'zeus recover' not in text

@@ -11,7 +11,7 @@ ingest it with `namespace=` (`zeus ingest --namespace <ns>`). What metadata.yaml
 was read must agree; a difference is reported like a gap.
 
 Every numeric field is checked: a value that is NaN, infinite or beyond MAX_ABS, or a vector
-whose length differs from what the bag's first message of that topic set, makes its data
+whose length differs from the one most messages of that topic have, makes its data
 unusable. A bad state or context drops its step (both transitions touching it); a bad reward or
 applied action in StepFeedback k+1 drops transition k only. Either way the episode is cut there,
 so no history contains the bad value. Each (topic, field) is reported once with its count and
@@ -300,7 +300,9 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         reader = Reader(path)
         reader.open()
     except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
-        raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}') from exc
+        raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}; if a '
+                             f'crash cut it short, `zeus recover {path}` restores what was '
+                             'written') from exc
     count = 0
     raws: dict[str, list[bytes]] = {t: [] for t in _READ_TOPICS}
     frames: FrameStore | None = None
@@ -331,7 +333,7 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         frames = FrameStore(sum(int(c.msgcount) for c in conns
                                 if schema_topic[c.topic] == TOPIC_IMAGE),
                             sum(f.stat().st_size for f in _bag_files(path)))
-        place = _Place(path, conns, schema_topic)
+        place = _Place(path, conns, schema_topic, report)
         for conn, _, raw in reader.messages(connections=conns):
             keep[conn.id](raw)
             if len(pending) == _IMAGE_BATCH:
@@ -347,12 +349,31 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
         raise
     except Exception as exc:  # truncated chunk, sqlite errors: named after what was read
         count = (frames.read if frames else 0) + sum(map(len, raws.values()))
-        raise BagError(path, f'corrupt or truncated after {count} messages: {exc}') from exc
+        raise read_failure(path, count, exc, report) from exc
     finally:
         reader.close()
     report.messages += count
     _check_counts(path, conns, read, report)
     return {'topics': topics, 'frames': frames}
+
+
+def read_failure(path: Path, count: int | None, exc: Exception, report: IngestReport | None,
+                 topic: str = '') -> BagError:
+    """Why a bag could not be read to its end, named as precisely as the bag allows.
+
+    A message written with another definition (its type hash differs from this checkout's)
+    fails to decode like a torn file does; it is named as such, since `zeus recover` cannot help
+    it. Otherwise the file is corrupt or cut short, and `zeus recover` rebuilds what was written.
+    """
+    where = f'after {count} messages' if count is not None else f'in a {topic} message'
+    schema = [i for i in (report.issues if report else ())
+              if i.kind == 'schema' and i.file == str(path)]
+    if schema:
+        return BagError(path, f'cannot decode {where}: written with another message definition '
+                              f'({schema[0].detail.split(": written")[0]}); read it with the '
+                              f'zeus_ros version that wrote it, or re-record ({exc})')
+    return BagError(path, f'corrupt or truncated {where}: {exc}; if a crash cut it short, '
+                          f'`zeus recover {path}` restores what was written')
 
 
 @dataclass
@@ -366,6 +387,7 @@ class _Place:
     path: Path
     conns: list[Any]
     schema_topic: dict[str, str]
+    report: IngestReport | None = None
 
     def error(self, topic: str, nth: int, exc: Exception) -> BagError:
         """The BagError of the `nth` message of schema `topic` (0-based), which failed."""
@@ -374,9 +396,8 @@ class _Place:
         with suppress(Exception), Reader(self.path) as reader:  # else: no index, same error
             for count, (conn, _, _) in enumerate(reader.messages(connections=self.conns)):
                 if conn.id in ids and (seen := seen + 1) > nth:
-                    return BagError(self.path, f'corrupt or truncated after {count} messages: '
-                                               f'{exc}')
-        return BagError(self.path, f'corrupt or truncated {topic} message: {exc}')
+                    return read_failure(self.path, count, exc, self.report)
+        return read_failure(self.path, None, exc, self.report, topic)
 
 
 def _decode(place: _Place, topic: str, raws: list[bytes], before: int = 0) -> list[Any]:
@@ -550,10 +571,11 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
                   meta: dict[str, Any], namespace: str = '') -> tuple[set[int], set[int]]:
     """Find non-finite, huge and wrong-length fields; return (steps to drop, steps to cut before).
 
-    The first message of each topic sets the vector lengths (for applied_action the first that
-    is not an episode start, which carries none). /zeus/action is the policy's request, not
-    training data: a bad one is reported and read as absent. Lengths must also match earlier
-    bags, else the bag is refused (IngestError): it was recorded on another task or robot.
+    The length most messages of a topic have sets its vector length (applied_action: among
+    those that are not an episode start, which carries none). /zeus/action is the policy's
+    request, not training data: a bad one is reported and read as absent. Lengths must also
+    match earlier bags, else the bag is refused (IngestError): it was recorded on another task
+    or robot.
     """
     drop: set[int] = set()
     cut: set[int] = set()
@@ -564,7 +586,7 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
         steps, messages = in_order[topic]
         if not steps:
             continue
-        length = len(getattr(messages[0], name)) if vector else None
+        length = _majority_length(messages, name) if vector else None
         key = f'{topic} {name}'
         if length is not None and lengths.setdefault(key, length) != length:
             raise IngestError(f'{path}: {bag_topic(topic, namespace)} {name} has {length} '
@@ -580,7 +602,7 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
             else:
                 effect = "each step's transitions are dropped"
                 drop.update(steps)
-            detail = (f"{len(steps)} message(s) of another length than the first's {length}"
+            detail = (f'{len(steps)} message(s) of another length than the {length} of most'
                       if why == 'length' else
                       f'{len(steps)} message(s) with NaN, Inf or |x| > {MAX_ABS:g}')
             first = ', '.join(map(str, steps[:_FIRST_STEPS]))
@@ -588,6 +610,16 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
             report.issues.append(Issue(str(path), bag_topic(topic, namespace), steps[0], why,
                                        f'{name}: {detail} at steps {first}{more}; {effect}'))
     return drop, cut
+
+
+def _majority_length(messages: Sequence[Any], name: str) -> int:
+    """The length most messages of a field have (ties: the earliest): the vector size.
+
+    Not the first message's: one short first message would otherwise mark every good one.
+    """
+    lengths = Counter(len(getattr(m, name)) for m in messages)
+    best = max(lengths.values())
+    return next(n for n in (len(getattr(m, name)) for m in messages) if lengths[n] == best)
 
 
 def _messages(by_step: dict[int, tuple[int, Any]], steps: Iterable[int]) -> Iterator[Any]:
