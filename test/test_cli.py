@@ -23,7 +23,7 @@ BAD_VALUES = [
     ('collect', ['--task', 'cheetah-run-v0', '--steps', '5', '--out', 'x'], '--task',
      "did you mean 'Cheetah-Run-v0'"),
     ('collect', ['--task', 'Cheetah-Run-v0', '--steps', 'many', '--out', 'x'], '--steps',
-     "invalid int value: 'many'"),
+     "'many' is not an integer"),
     ('collect', ['--task', 'Cheetah-Run-v0', '--steps', '5', '--out', 'x', '--storage', 'zip'],
      '--storage', "(choose from 'mcap', 'sqlite3')"),
     ('collect', ['--task', 'Cheetah-Run-v0', '--steps', '5', '--out', 'x', '--schedule',
@@ -196,3 +196,25 @@ def test_numeric_flags_out_of_range_are_one_line_exit_2(
     err = capsys.readouterr().err.strip()
     assert err.startswith(f'zeus {command}: argument {flag}: ') and '\n' not in err
     assert 'must be' in err or 'is not an integer' in err
+
+
+def test_a_config_without_its_size_names_the_missing_keys(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """`method: zeus` alone would train the paper's GPU-sized networks: refused, keys named.
+
+    With `base:` the rest comes from the named config, so the same two lines train.
+    """
+    only = tmp_path / 'only_method.yaml'
+    only.write_text('method: zeus\n')
+    assert _run('train', ['--bags', str(tmp_path), '--config', str(only), '--out',
+                          str(tmp_path / 'o')]) == 2
+    err = capsys.readouterr().err
+    assert 'no k, context_dim, feature_dim, hidden_dim, batch_size, num_updates' in err
+    assert 'base: state_cpu.yaml' in err and len(err.strip().splitlines()) == 1
+    from zeus_ros.offline.training.train import read_config
+
+    based = tmp_path / 'based.yaml'
+    state_cpu = Path(__file__).resolve().parents[1] / 'params' / 'train' / 'state_cpu.yaml'
+    based.write_text(f'base: {state_cpu}\nmethod: no_context\n')
+    config = read_config(based)
+    assert (config.method, config.hidden_dim) == ('no_context', 256)

@@ -118,6 +118,14 @@ def own_flags(args: argparse.Namespace) -> list[tuple[str, str, Any]]:
         ('seed', '--seed', 'seed'), ('device', '--device', 'device'))]
 
 
+SIZE_KEYS = ('method', 'k', 'context_dim', 'feature_dim', 'hidden_dim', 'batch_size',
+             'num_updates')
+"""What a training config must set itself (or take from `base:`): the networks and the budget.
+
+Left out, the dataclass defaults are the paper's (1024-wide networks, a million updates): a
+silent multi-day run on a CPU."""
+
+
 def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
     """load_config, but a binary or empty file is a ConfigError naming the flag, not a default.
 
@@ -142,6 +150,11 @@ def read_config(path: Path, flag: str = '--config') -> ZeusConfig:
     if not isinstance(data, dict):
         raise ConfigError(f'{flag} {path}: expected a mapping of config keys, got a '
                           f'{type(data).__name__}')
+    missing = [key for key in SIZE_KEYS if key not in data]
+    if missing and 'base' not in data:
+        raise ConfigError(f'{flag} {path}: no {", ".join(missing)}: a config sets the size of '
+                          'its run or names a base to take it from (base: state_cpu.yaml, '
+                          "relative to the file); refusing the paper's GPU-sized defaults")
     return load_config(path)
 
 
