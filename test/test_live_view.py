@@ -228,7 +228,8 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     assert inspect.returncode == 0, inspect.stdout + inspect.stderr
     views = [line for line in inspect.stdout.splitlines() if line.startswith('[inspect] step')]
     assert views, inspect.stdout
-    assert all('torso_length: estimated' in line and ', true ' in line for line in views), views
+    assert all('torso_length: estimated' in line and ', true ' in line and '[m]' in line
+               for line in views), views  # the unit from params/tasks/Cheetah-Run-v0.yaml
     assert not any('episode -1' in line or 'segment -1' in line for line in views)
     assert any('NOT A TRAINING CONTEXT' in line for line in views), views
     assert 'context novelty: novel_steps=' in inspect.stdout  # the /diagnostics WARN

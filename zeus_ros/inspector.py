@@ -81,6 +81,8 @@ class Inspector:
         self.namespace = namespace
         self.started = time.monotonic()
         self.first_step_at: float | None = None
+        self.task = ''
+        """The task the steps name (StepFeedback.task): the read-out's units come from it."""
         # In the system's namespace, the relative zeus topics resolve to that system's.
         self.node = rclpy.create_node(name, namespace=namespace)
         # One executor for the whole run: rclpy.spin_once() would build a new one per call.
@@ -134,6 +136,8 @@ class Inspector:
     def _on_step(self, msg: object, info: Any) -> None:
         if self.first_step_at is None:
             self.first_step_at = time.monotonic()
+        if not self.task and msg.task:
+            self.task = msg.task
         record = self.log.record(msg.step)
         record.episode, record.first, record.reward = msg.episode, msg.first, msg.reward
         record.t_observation = received_s(info)
@@ -245,12 +249,22 @@ class Inspector:
             return None
         return (len(times) - 1) / (times[-1] - times[0])
 
+    def unit(self, parameter: str) -> str:
+        """' [unit]' of a context parameter from the task's family file ('' when unknown)."""
+        from sim_bridge.families import family
+
+        try:
+            unit = family(self.task).unit(parameter) if self.task else ''
+        except ValueError:  # a robot or a task file this process does not know
+            unit = ''
+        return f' [{unit}]' if unit else ''
+
     def estimate_text(self, record: SeenStep) -> str:
         """'torso_length: estimated 1.21, true 1.25' with a read-out, else psi's first values."""
         names = self.log.context_names
         truth = record.truth or ()
         if record.readout:
-            return '; '.join(f'{n}: estimated {e:.3g}, true {t:.3g}' for n, e, t in
+            return '; '.join(f'{n}: estimated {e:.3g}, true {t:.3g}{self.unit(n)}' for n, e, t in
                              zip(names, record.readout, truth, strict=False))
         true = ', '.join(f'{n}={v:.3g}' for n, v in zip(names, truth, strict=False))
         if record.estimate is None:
