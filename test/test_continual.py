@@ -1,0 +1,99 @@
+"""Continual deployment, the library (zeus_ros/offline/training/continual.py), on real data.
+
+Closed splits only; a bounded replay mix; a candidate continued from a deployment export
+(fresh critics warmed up) and from a full checkpoint; the paired gate refuses a candidate
+trained on corrupted rewards and deploys a genuinely better one; every decision is a history
+line. Tiny budgets: the whole file takes about a minute on two shared cores.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import shutil
+
+from continual_fixtures import WEAK_TASK, record, weak_checkpoint
+import pytest
+import torch
+
+from zeus_ros.launch_defaults import zoo_checkpoint
+from zeus_ros.offline.training import continual as c
+
+BIAS = 'Cheetah-Bias-v0'
+
+
+@pytest.fixture(autouse=True)
+def one_thread() -> None:
+    torch.set_num_threads(1)  # as the live trainer runs
+
+
+@pytest.fixture(scope='module')
+def bias_recording(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    folder = tmp_path_factory.mktemp('rec') / 'run1'
+    return record(folder, BIAS, [-0.5, 0.5, -0.45, 0.45], zoo_checkpoint(BIAS), splits=3,
+                  steps=240, every=40)
+
+
+def test_closed_splits_skip_the_bag_being_written(bias_recording: list[Path],
+                                                  tmp_path: Path) -> None:
+    folder = tmp_path / 'run1'
+    for bag in bias_recording:
+        shutil.copytree(bag, folder / bag.name)
+    writing = folder / 'run1_003'  # the recorder's open split: provisional metadata
+    shutil.copytree(bias_recording[0], writing)
+    meta = writing / 'metadata.yaml'
+    meta.write_text(meta.read_text().replace('custom_data: null',
+                                             'custom_data: {zeus_bag_state: provisional}'))
+    unfinished = folder / 'run1_004'  # killed before its first metadata
+    unfinished.mkdir()
+    shutil.copy(next(bias_recording[0].glob('*.mcap')), unfinished / 'run1_004.mcap')
+    splits = c.closed_splits(folder)
+    assert [b.name for b in splits] == ['run1_000', 'run1_001', 'run1_002']
+    assert [c.split_steps(b) for b in splits] == [240, 240, 240]
+    assert c.closed_splits(tmp_path / 'nothing_yet') == []
+
+
+def test_replay_mix_is_bounded(bias_recording: list[Path]) -> None:
+    new = bias_recording[2:]
+    (old,) = c.replay_mix(bias_recording, new, c.ContinualSettings())  # 240 old for 240 new
+    assert old in bias_recording[:2]
+    half = c.ContinualSettings(old_ratio=0.5)  # 120 old steps allowed: no whole split fits
+    assert c.replay_mix(bias_recording, new, half) == []
+    capped = c.ContinualSettings(old_ratio=10, max_old_steps=300)
+    assert len(c.replay_mix(bias_recording, bias_recording[2:], capped)) == 1
+
+
+def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
+        bias_recording: list[Path], tmp_path: Path) -> None:
+    zoo = zoo_checkpoint(BIAS)
+    settings = c.ContinualSettings(warmup_updates=50, updates=100, episodes=1,
+                                   max_seen_values=4)
+    history = tmp_path / 'history.jsonl'
+    result = c.continual_round(zoo, bias_recording[1:], bias_recording, tmp_path / 'bad',
+                               history, settings, corrupt_rewards=True)
+    assert result.candidate.warmup_updates == 50  # an export: fresh critics warmed up first
+    assert sorted(v['motor_bias'] for v in result.candidate.seen) == [-0.5, -0.45, 0.45, 0.5]
+    assert not result.gate.deploy, result.gate.summary()
+    assert result.gate.gain < 0
+    assert {v['where'] for v in result.gate.values} == {'seen', 'train'}
+    assert len(result.gate.values) == 4 + 8  # seen + every train value of the family
+    (line,) = c.read_history(history)
+    assert line['decision'] == 'refuse' and line['corrupt_rewards'] is True
+    assert line['sha256'] == result.candidate.sha256 and line['reason']
+    card = (tmp_path / 'bad' / 'card.json').read_text()
+    assert '"corrupt_rewards": true' in card
+
+
+def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path) -> None:
+    weak = weak_checkpoint(tmp_path / 'weak.pt')
+    bags = record(tmp_path / 'run2', WEAK_TASK, [0.75, 1.25], weak, splits=2, steps=400)
+    settings = c.ContinualSettings(updates=500, episodes=1, max_seen_values=2,
+                                   max_train_values=2)
+    same = c.gate(weak, weak, [{'torso_length': 1.25}], settings)
+    assert same.gain == 0 and not same.deploy  # paired: same initial states, same returns
+    history = tmp_path / 'history.jsonl'
+    result = c.continual_round(weak, bags[1:], bags, tmp_path / 'good', history, settings)
+    assert result.candidate.warmup_updates == 0  # a full checkpoint brings its critics
+    assert result.candidate.old_bags == [str(bags[0])]
+    assert result.gate.deploy, result.gate.summary()
+    assert result.gate.gain >= max(settings.margin, 2 * result.gate.se)
+    assert c.read_history(history)[-1]['decision'] == 'deploy'

@@ -1,0 +1,415 @@
+"""Continual deployment, the ROS-free half: closed splits -> candidate -> gate -> history.
+
+The live trainer (zeus_ros/nodes/continual_node.py) runs one `continual_round` whenever enough
+new steps are recorded; everything it decides is computed here, so it is tested without ROS.
+
+- **Data.** Only closed splits of the growing recording are read (`closed_splits`: metadata
+  says `closed` or `recovered`, or was written at close), never the bag being written.
+- **Replay mix.** Every split new since the last swap, plus older splits drawn at random up to
+  `old_ratio` x the new steps (default 1: half old, half new) and at most `max_old_steps`. The
+  old half keeps the contexts already handled in the batches, so fitting the new ones does not
+  overwrite them (forgetting is what the gate's train values check); the cap bounds memory and
+  update cost however long the robot runs, and a uniform draw over the older splits keeps the
+  whole past represented rather than only the most recent hours.
+- **Continuing from the deployed checkpoint.** A deployment export (the zoo) has encoder, psi
+  and actor but no critics: a fresh critic is built and first trained alone for
+  `warmup_updates` (actor frozen: its update period is set beyond the warm-up), so the actor's
+  first gradient comes from a critic that already values its own behaviour. A full checkpoint
+  (an earlier candidate) brings its critics and optimizers and skips the warm-up. phi and psi
+  stay frozen throughout (`representation_frozen_from: 1`): with a few hundred updates on a few
+  thousand steps, retraining the context space from fresh dynamics models would move every
+  context the deployed actor relies on; the candidate learns to act on the deployed context
+  space instead, and the estimator and policy of a swap still share one file.
+- **Gate.** Candidate and deployed checkpoint are evaluated in-process on the same seeds (the
+  same initial states per value): on the contexts seen in the new splits (the recording's
+  context truth) and on the family's train values (no forgetting). Deploy only when the mean
+  gain over the seen contexts is at least max(`margin`, 2 s.e. of the paired differences) and
+  no value is worse than max(`tolerance_floor`, `tolerance` x |deployed return there|).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+import datetime
+import json
+import os
+from pathlib import Path
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ['Candidate', 'ContinualSettings', 'GateResult', 'RoundResult', 'append_history',
+           'closed_splits', 'continual_round', 'gate', 'read_history', 'replay_mix',
+           'seen_contexts', 'split_steps', 'train_candidate']
+
+CLOSED_STATES = ('closed', 'recovered', None)
+"""A split in one of these states is complete. None: metadata without a zeus state, written by
+a writer that writes it only at close (`zeus collect`, `ros2 bag record`); 'provisional' (the
+recorder's bag being written) and 'unfinished' (no metadata) may still grow."""
+STEP_TOPIC = '/zeus/step'
+WARMUP_ACTOR_PERIOD = 10**9
+"""actor_update_freq during the critic warm-up: no warm-up update index is a multiple of it."""
+
+
+@dataclass(frozen=True)
+class ContinualSettings:
+    """What one round does; defaults sized for a 2-core robot computer (tests shrink them)."""
+
+    new_steps: int = 2000
+    """Closed new steps that start a round (a novelty alarm may start one earlier)."""
+    warmup_updates: int = 200
+    """Critic-only updates before the actor moves (deployment exports only)."""
+    updates: int = 1000
+    """Actor + critic updates of a round."""
+    actor_lr_scale: float = 0.3
+    """The actor's learning rate in a round, as a fraction of its training one: small steps
+    from a policy that works, against a critic that has seen little data."""
+    old_ratio: float = 1.0
+    """Old steps kept per new step in the replay mix."""
+    max_old_steps: int = 20000
+    """Cap on old steps in the mix: memory and update cost stay bounded."""
+    episodes: int = 2
+    """Gate episodes per context value (paired: same initial states for both checkpoints)."""
+    eval_seed: int = 300
+    """Gate evaluation seed: initial states no training run chose."""
+    max_seen_values: int = 6
+    """Seen contexts evaluated by the gate (evenly spread over those recorded)."""
+    max_train_values: int = 0
+    """Train values evaluated by the gate, evenly spread (0: every one of the family's)."""
+    margin: float = 1.0
+    """Required mean gain of return per episode on the seen contexts (and >= 2 s.e.)."""
+    tolerance: float = 0.10
+    """Allowed loss at any value, as a fraction of |deployed return| there..."""
+    tolerance_floor: float = 2.0
+    """...and at least this much return per episode (noise of short episodes)."""
+    seed: int = 0
+
+
+@dataclass
+class Candidate:
+    """A trained candidate checkpoint and what it was trained on."""
+
+    path: Path
+    sha256: str
+    new_bags: list[str]
+    old_bags: list[str]
+    transitions: int
+    updates: int
+    warmup_updates: int
+    seconds: float
+    seen: list[dict[str, float]] = field(default_factory=list)
+
+
+@dataclass
+class GateResult:
+    """Paired candidate-vs-deployed figures and the decision."""
+
+    deploy: bool
+    reason: str
+    gain: float
+    se: float
+    required: float
+    deployed_seen: float
+    candidate_seen: float
+    values: list[dict[str, Any]] = field(default_factory=list)
+    """Per value: context, where (seen/train), deployed, candidate, diff, allowed."""
+    seconds: float = 0.0
+
+    def summary(self) -> str:
+        """One line for logs and /diagnostics."""
+        worst = min(self.values, key=lambda v: v['diff'] - (-v['allowed']), default=None)
+        where = '' if worst is None else (
+            f'; tightest {worst["where"]} value {_fmt_context(worst["context"])}: '
+            f'{worst["diff"]:+.1f} (allowed -{worst["allowed"]:.1f})')
+        return (f'gain on seen contexts {self.gain:+.2f} ± {self.se:.2f} (required '
+                f'{self.required:.2f}; deployed {self.deployed_seen:.1f}, candidate '
+                f'{self.candidate_seen:.1f}){where}')
+
+
+@dataclass
+class RoundResult:
+    """One round: the candidate, the gate, and the history record written."""
+
+    candidate: Candidate
+    gate: GateResult
+    record: dict[str, Any]
+
+
+# ---------------------------------------------------------------------- data
+def _metadata(bag: Path) -> dict[str, Any]:
+    import yaml
+
+    text = (bag / 'metadata.yaml').read_text('utf8')
+    return (yaml.safe_load(text) or {}).get('rosbag2_bagfile_information') or {}
+
+
+def closed_splits(recording: Path | str) -> list[Path]:
+    """The complete bags under `recording`, oldest first; never the one being written."""
+    from zeus_ros.offline.data.bag_errors import BagError
+    from zeus_ros.offline.data.ingest import find_bags
+    from zeus_ros.offline.data.recover import bag_state
+
+    recording = Path(recording)
+    if not recording.exists():
+        return []
+    try:
+        bags = find_bags(recording)
+    except BagError:  # nothing recorded yet
+        return []
+    return [bag for bag in bags if bag.is_dir() and bag_state(bag) in CLOSED_STATES]
+
+
+def split_steps(bag: Path) -> int:
+    """Steps in a closed split, from its metadata (no message is read)."""
+    try:
+        topics = _metadata(bag).get('topics_with_message_count') or []
+    except (OSError, ValueError):
+        return 0
+    return sum(int(t.get('message_count', 0)) for t in topics
+               if (t.get('topic_metadata') or {}).get('name') == STEP_TOPIC)
+
+
+def replay_mix(splits: Sequence[Path], new: Sequence[Path], settings: ContinualSettings
+               ) -> list[Path]:
+    """The old splits of a round: a seeded uniform draw over the splits before `new`."""
+    fresh = {Path(b).resolve() for b in new}
+    old = [b for b in splits if Path(b).resolve() not in fresh]
+    budget = min(settings.old_ratio * sum(split_steps(b) for b in new), settings.max_old_steps)
+    rng = np.random.default_rng(settings.seed + len(splits))
+    chosen: list[Path] = []
+    used = 0
+    for index in rng.permutation(len(old)):
+        steps = split_steps(old[index])
+        if used + steps > budget:
+            continue
+        chosen.append(old[index])
+        used += steps
+    return sorted(chosen)
+
+
+def seen_contexts(dataset: Any, max_values: int) -> list[dict[str, float]]:
+    """Distinct true contexts in `dataset` (rounded to 1e-3), at most `max_values`, spread."""
+    if not dataset.episodes or not dataset.context_names:
+        return []
+    rows = np.concatenate([ep.context for ep in dataset.episodes])
+    rows = rows[np.isfinite(rows).all(axis=1)]
+    if not len(rows):
+        return []
+    unique = np.unique(np.round(rows, 3), axis=0)
+    if len(unique) > max_values:
+        unique = unique[np.round(np.linspace(0, len(unique) - 1, max_values)).astype(int)]
+    return [{name: float(v) for name, v in zip(dataset.context_names, row, strict=True)}
+            for row in unique]
+
+
+# ---------------------------------------------------------------------- candidate
+def _agent_from(deployed: Path) -> tuple[Any, bool]:
+    """An agent that can train, from `deployed`; True when its critics are fresh."""
+    from zeus_ros.learning.agent import ZeusAgent
+    from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
+
+    loaded = load_checkpoint(deployed, load_optimizers=False)
+    config = loaded.config.replace(device='cpu')
+    if not loaded.deploy:
+        full = load_checkpoint(deployed, map_location='cpu').agent
+        full.config = config
+        return full, False
+    agent = ZeusAgent(config, loaded.spec, device='cpu')
+    acting = {name: loaded.agent.modules[name].state_dict()
+              for name in DEPLOY_MODULES if name in agent.modules}
+    for name, state in acting.items():
+        agent.modules[name].load_state_dict(state)
+    for source, target in (('encoder', 'encoder_target'), ('psi', 'psi_target')):
+        if target in agent.modules:
+            agent.modules[target].load_state_dict(acting[source])
+    agent.log_alpha.data.copy_(loaded.agent.log_alpha.detach())
+    return agent, True
+
+
+def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Sequence[Path],
+                    out: Path | str, settings: ContinualSettings, *,
+                    corrupt_rewards: bool = False,
+                    log: Callable[[str], None] = print) -> Candidate:
+    """Continue `deployed` on new + old bags; write `out`/candidate.pt and its card.
+
+    `corrupt_rewards` negates every reward: the deliberately bad candidate the gate must
+    refuse. Raises TrainError (bad data, another task, non-finite training).
+    """
+    from zeus_ros.learning.checkpoint import save_checkpoint
+    from zeus_ros.learning.errors import CheckpointError
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.data.replay import ReplayBuffer
+    from zeus_ros.offline.evaluation.records import checkpoint_sha256
+    from zeus_ros.offline.training.train import TrainError
+
+    begin = time.perf_counter()
+    out = Path(out)
+    agent, fresh_critic = _agent_from(Path(deployed))
+    dataset = ingest_bags([*new_bags, *old_bags])
+    if dataset.task != agent.spec.task:
+        raise TrainError(f'the recording holds {dataset.task}, the deployed checkpoint '
+                         f'{deployed} runs {agent.spec.task}')
+    seen = seen_contexts(ingest_bags(list(new_bags)) if old_bags else dataset,
+                         settings.max_seen_values)
+    if corrupt_rewards:
+        dataset.episodes = [replace(ep, reward=-ep.reward) for ep in dataset.episodes]
+    config = agent.config
+    for group in agent.optimizers['actor'].param_groups:
+        group['lr'] = config.actor_lr * settings.actor_lr_scale
+    replay = ReplayBuffer(dataset, history=config.k, pixels=config.obs_kind == 'pixels',
+                          seed=settings.seed, model_horizon=config.model_horizon)
+    if len(replay) < config.batch_size:
+        raise TrainError(f'{len(replay)} transitions, fewer than one batch '
+                         f'({config.batch_size}); wait for more steps')
+    frozen = config.replace(representation_frozen_from=1)
+    warmup = settings.warmup_updates if fresh_critic else 0
+    needs_pair = config.method == 'zeus' and float(config.alpha_psi) > 0
+    start = step = max(agent_step(Path(deployed)), 1)
+    phases = ((frozen.replace(actor_update_freq=WARMUP_ACTOR_PERIOD), warmup),
+              (frozen, settings.updates))
+    for phase_config, count in phases:
+        agent.config = phase_config
+        for _ in range(count):
+            pair = replay.sample(config.batch_size) if needs_pair else None
+            agent.update(replay.sample(config.batch_size), pair, step)
+            step += 1
+    agent.config = frozen.replace(num_updates=step)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / 'candidate.pt'
+    extra = {'continual_from': str(deployed), 'bags': [str(b) for b in (*new_bags, *old_bags)],
+             'transitions': len(replay), 'corrupt_rewards': corrupt_rewards}
+    try:
+        save_checkpoint(path, agent, step=step, extra=extra)
+    except CheckpointError as error:
+        raise TrainError(f'candidate diverged: {error}') from None
+    candidate = Candidate(path, checkpoint_sha256(path), [str(b) for b in new_bags],
+                          [str(b) for b in old_bags], len(replay), step - start - warmup,
+                          warmup, time.perf_counter() - begin, seen)
+    card = {**{k: v for k, v in asdict(candidate).items() if k != 'path'}, 'path': str(path),
+            'from': str(deployed), 'corrupt_rewards': corrupt_rewards,
+            'representation': 'phi and psi frozen (the deployed context space)'}
+    from zeus_ros.atomic_file import replace_text
+
+    replace_text(out / 'card.json', json.dumps(card, indent=1) + '\n')
+    log(f'continual: candidate {path} ({candidate.sha256[:12]}): {warmup} critic warm-up + '
+        f'{candidate.updates} updates on {len(replay)} transitions ({len(new_bags)} new, '
+        f'{len(old_bags)} old split(s)) in {candidate.seconds:.1f} s')
+    return candidate
+
+
+def agent_step(path: Path) -> int:
+    """The update count stored in a checkpoint (0 when it has none)."""
+    from zeus_ros.offline.training.train import checkpoint_step
+
+    return checkpoint_step(path)
+
+
+# ---------------------------------------------------------------------- gate
+def _per_value(agent: Any, values: Sequence[dict[str, float]], settings: ContinualSettings
+               ) -> np.ndarray:
+    from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
+
+    rows = evaluate_contexts(agent, values, episodes=settings.episodes,
+                             seed=settings.eval_seed, progress=False)
+    return np.array([r['return'] for r in rows], float).reshape(-1, settings.episodes).mean(1)
+
+
+def gate(deployed: Path | str, candidate: Path | str, seen: Sequence[dict[str, float]],
+         settings: ContinualSettings) -> GateResult:
+    """Paired evaluation of both checkpoints on the seen contexts and the train values."""
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.offline.evaluation.evaluate import split_values
+
+    begin = time.perf_counter()
+    old = InferenceAgent.from_checkpoint(deployed)
+    new = InferenceAgent.from_checkpoint(candidate, expect_task=old.task)
+    train = split_values(old.task, 'train')
+    if 0 < settings.max_train_values < len(train):
+        picks = np.round(np.linspace(0, len(train) - 1, settings.max_train_values))
+        train = [train[int(i)] for i in picks]
+    values = [*seen, *train]
+    where = ['seen'] * len(seen) + ['train'] * len(train)
+    before, after = _per_value(old, values, settings), _per_value(new, values, settings)
+    diff = after - before
+    allowed = np.maximum(settings.tolerance_floor, settings.tolerance * np.abs(before))
+    rows = [{'context': v, 'where': w, 'deployed': float(b), 'candidate': float(a),
+             'diff': float(d), 'allowed': float(t)}
+            for v, w, b, a, d, t in zip(values, where, before, after, diff, allowed, strict=True)]
+    n = len(seen) or len(values)  # no truth recorded: the train values stand in
+    seen_diff = diff[:n]
+    gain = float(seen_diff.mean())
+    se = float(seen_diff.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    required = max(settings.margin, 2 * se)
+    worse = [r for r in rows if r['diff'] < -r['allowed']]
+    if gain < required:
+        reason = f'gain {gain:+.2f} below the required {required:.2f}'
+    elif worse:
+        r = min(worse, key=lambda r: r['diff'] + r['allowed'])
+        reason = (f'{len(worse)} value(s) worse than allowed, e.g. {r["where"]} '
+                  f'{_fmt_context(r["context"])}: {r["diff"]:+.1f} (allowed -{r["allowed"]:.1f})')
+    else:
+        reason = f'gain {gain:+.2f} >= {required:.2f} and no value worse than allowed'
+    return GateResult(gain >= required and not worse, reason, gain, se, required,
+                      float(before[:n].mean()), float(after[:n].mean()), rows,
+                      time.perf_counter() - begin)
+
+
+def _fmt_context(context: dict[str, float]) -> str:
+    return ','.join(f'{k}={v:g}' for k, v in context.items())
+
+
+# ---------------------------------------------------------------------- history
+def append_history(path: Path | str, record: dict[str, Any]) -> dict[str, Any]:
+    """Append one JSON line (with a UTC time) and fsync it: a crash keeps every decision."""
+    record = {'time': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
+              **record}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open('a', encoding='utf8') as handle:
+        handle.write(json.dumps(record) + '\n')
+        handle.flush()
+        os.fsync(handle.fileno())
+    return record
+
+
+def read_history(path: Path | str) -> list[dict[str, Any]]:
+    """Every record of a history file (a torn last line from a crash is skipped)."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    records = []
+    for line in path.read_text('utf8').splitlines():
+        try:
+            records.append(json.loads(line))
+        except ValueError:
+            continue
+    return records
+
+
+def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequence[Path],
+                    out: Path | str, history: Path | str, settings: ContinualSettings, *,
+                    corrupt_rewards: bool = False, log: Callable[[str], None] = print
+                    ) -> RoundResult:
+    """Train a candidate on the replay mix, gate it, and record the decision (no swap here)."""
+    old = replay_mix(splits, new_bags, settings)
+    candidate = train_candidate(deployed, new_bags, old, out, settings,
+                                corrupt_rewards=corrupt_rewards, log=log)
+    result = gate(deployed, candidate.path, candidate.seen, settings)
+    from zeus_ros.offline.evaluation.records import checkpoint_sha256
+
+    record = append_history(history, {
+        'event': 'gate', 'candidate': str(candidate.path), 'sha256': candidate.sha256,
+        'deployed': str(deployed), 'deployed_sha256': checkpoint_sha256(deployed),
+        'new_bags': candidate.new_bags, 'old_bags': candidate.old_bags,
+        'transitions': candidate.transitions, 'updates': candidate.updates,
+        'warmup_updates': candidate.warmup_updates, 'train_s': round(candidate.seconds, 2),
+        'corrupt_rewards': corrupt_rewards, 'gain': result.gain, 'se': result.se,
+        'required': result.required, 'deployed_seen': result.deployed_seen,
+        'candidate_seen': result.candidate_seen, 'gate_s': round(result.seconds, 2),
+        'values': result.values, 'decision': 'deploy' if result.deploy else 'refuse',
+        'reason': result.reason})
+    log(f'continual: {"DEPLOY" if result.deploy else "REFUSE"} {candidate.path.name} '
+        f'({candidate.sha256[:12]}): {result.summary()}; {result.reason}')
+    return RoundResult(candidate, result, record)
