@@ -12,6 +12,9 @@ source "$_zeus_root/install/setup.bash"
 unset _zeus_nounset
 export PATH="$_zeus_root/install/zeus_ros/lib/zeus_ros:$PATH"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+# RTPS on loopback only (shared memory + UDP on 127.0.0.1); an own profile, or an empty value
+# for Fast DDS's defaults, is kept (several machines: docs/security.md).
+export FASTRTPS_DEFAULT_PROFILES_FILE=${FASTRTPS_DEFAULT_PROFILES_FILE-$_zeus_root/params/dds/fastdds_loopback.xml}
 export MUJOCO_GL=${MUJOCO_GL:-egl}
 export PYOPENGL_PLATFORM=${PYOPENGL_PLATFORM:-$MUJOCO_GL}
 unset _zeus_root

@@ -50,10 +50,27 @@ def group_domain_id(wanted: int | None = None) -> int:
     return int(os.environ.get('ROS_DOMAIN_ID') or fresh_domain_id())
 
 
+def loopback_dds_profile() -> Path | None:
+    """params/dds/fastdds_loopback.xml (checkout or installed share): RTPS on loopback only.
+
+    A user's own FASTRTPS_DEFAULT_PROFILES_FILE (several machines) is left as it is by callers.
+    """
+    from zeus_ros.launch_defaults import share_dir
+
+    for base in (Path(__file__).resolve().parents[1], share_dir()):
+        candidate = base / 'params' / 'dds' / 'fastdds_loopback.xml'
+        if candidate.is_file():
+            return candidate
+    return None
+
+
 def ros_env(domain_id: int | None = None) -> dict[str, str]:
     """The children's environment: loopback-only discovery and one domain id for the group."""
     env = dict(os.environ)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    profile = loopback_dds_profile()
+    if profile is not None:
+        env.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(profile))
     env['ROS_DOMAIN_ID'] = str(group_domain_id(domain_id))
     env['PYTHONUNBUFFERED'] = '1'
     env.setdefault('MUJOCO_GL', 'egl')
@@ -71,6 +88,9 @@ def ros_context(domain_id: int) -> Iterator[Any]:
     from rclpy.context import Context
 
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    profile = loopback_dds_profile()
+    if profile is not None:  # read by Fast DDS when this process makes its first participant
+        os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(profile))
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
     try:
