@@ -16,13 +16,7 @@ from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID bef
 """
 
 from launch import LaunchContext, LaunchDescription
-from launch.actions import (
-    DeclareLaunchArgument,
-    EmitEvent,
-    ExecuteProcess,
-    OpaqueFunction,
-    RegisterEventHandler,
-)
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
@@ -62,9 +56,11 @@ def launch_nodes(context: LaunchContext) -> list:
 
 
 def _trainer_process(plan: launch_defaults.LaunchPlan, spec: launch_defaults.NodePlan,
-                     env: dict[str, str]) -> ExecuteProcess:
+                     env: dict[str, str]) -> object:
     """The continual trainer, as `zeus launch` starts it; its exit does not stop the loop."""
     import sys
+
+    from launch.actions import ExecuteProcess
 
     return ExecuteProcess(cmd=[sys.executable, '-m', spec.module, '--ros-args',
                                *plan.ros_args(spec)], name=spec.name, output='screen',

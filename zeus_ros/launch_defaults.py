@@ -19,8 +19,9 @@ import yaml
 
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
-__all__ = ['AGENT_NODES', 'ARGUMENTS', 'CONTAINER', 'CONTAINER_EXECUTABLE', 'CONTAINER_MODULE',
-           'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'LaunchArgument',
+__all__ = ['AGENT_NODES', 'ARGUMENTS', 'BACKGROUND', 'CONTAINER', 'CONTAINER_EXECUTABLE',
+           'CONTAINER_MODULE', 'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'TRAINER',
+           'LaunchArgument',
            'LaunchPlan', 'NodePlan', 'default_params_file', 'param_args', 'parse_bool', 'plan',
            'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir', 'start_args',
            'start_parameters', 'task_overrides', 'zoo_checkpoint']
@@ -32,8 +33,10 @@ NODES: dict[str, str] = {
     'policy': 'zeus_ros.nodes.policy_node',
     'recorder': 'zeus_ros.nodes.recorder_node',
     'robot_bridge': 'zeus_ros.nodes.robot_bridge_node',
+    'continual_trainer': 'zeus_ros.nodes.continual_node',
 }
-"""Node name -> module; the installed executable is `<name>_node`."""
+"""Node name -> module; the installed executable is `<name>_node` (the continual trainer
+runs as `python -m` of its module: it is started only by the launchers)."""
 DEFAULT_NODES = ('sim_bridge', 'context_estimator', 'policy')
 STEP_SOURCES = frozenset({'sim_bridge', 'robot_bridge'})
 """Nodes that publish the steps (a launch runs one): they wait for every other node."""
@@ -52,6 +55,13 @@ AGENT_NODES = ('context_estimator', 'policy')
 """Nodes that load a checkpoint (the `checkpoint` launch argument sets both: a matched pair)."""
 RECORDS_OTHERS = frozenset({'recorder'})
 """Nodes that stop last and whose exit does not end the launch."""
+TRAINER = 'continual_trainer'
+"""continual: retrains, gates and swaps in the background; its exit does not end the launch."""
+BACKGROUND = RECORDS_OTHERS | {TRAINER}
+"""Nodes outside the control loop: never in the container, never waited for at step 0."""
+CONTINUAL_SPLIT_S = 60.0
+"""continual: the recorder's split period unless the params file sets one (a round reads only
+closed splits, so this is the delay before new steps can be trained on)."""
 CONTAINER = 'container'
 CONTAINER_MODULE = 'zeus_ros.nodes.container'
 CONTAINER_EXECUTABLE = 'loop_container'
@@ -87,6 +97,10 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
     LaunchArgument('checkpoint', '', 'checkpoint for context_estimator AND policy (empty: '
                    "the one in the params file, or the task's zoo checkpoint)"),
     LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
+    LaunchArgument('continual', 'false', 'record, and retrain from the closed splits in the '
+                   'background (continual_trainer, niced, 1 torch thread): gate each candidate '
+                   'against the deployed checkpoint, swap it in live, roll back a live '
+                   'regression'),
     LaunchArgument('log_level', 'info', 'log level of every node: ' + ', '.join(LOG_LEVELS)),
     LaunchArgument('robot', 'false', "robot_bridge in sim_bridge's place (params_file: the "
                    "robot's, e.g. params/robot_bridge.yaml)"),
@@ -119,6 +133,11 @@ class NodePlan:
         """Stops last; its exit does not stop the others."""
         return self.name in RECORDS_OTHERS
 
+    @property
+    def background(self) -> bool:
+        """Outside the control loop: its exit does not stop the others."""
+        return self.name in BACKGROUND
+
 
 @dataclass(frozen=True)
 class LaunchPlan:
@@ -136,7 +155,7 @@ class LaunchPlan:
         """The nodes that share the container process (none unless single_process)."""
         if not self.single_process:
             return ()
-        return tuple(node for node in self.nodes if not node.records_others)
+        return tuple(node for node in self.nodes if not node.background)
 
     @property
     def separate(self) -> tuple[NodePlan, ...]:
@@ -365,6 +384,7 @@ def plan(
     robot: bool = False,
     single_process: bool = False,
     intra_process: bool = True,
+    continual: bool = False,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -377,7 +397,8 @@ def plan(
     see LaunchPlan.container_args), never their parameters; `intra_process` (single_process
     only) whether the container's nodes hand each other messages in process. `task` runs
     another family than the params file's: its demo schedule on sim_bridge, its zoo checkpoint
-    on the agent nodes (unless `checkpoint` is given).
+    on the agent nodes (unless `checkpoint` is given). `continual` records and adds the
+    continual trainer, pointed at the recorder's output and the agents' checkpoint.
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -385,8 +406,10 @@ def plan(
     names = list(dict.fromkeys(nodes))
     if robot:  # a robot steps the loop: robot_bridge takes sim_bridge's place
         names = [('robot_bridge' if name == 'sim_bridge' else name) for name in names]
-    if record and 'recorder' not in names:
+    if (record or continual) and 'recorder' not in names:
         names.append('recorder')
+    if continual and TRAINER not in names:
+        names.append(TRAINER)
     unknown = [name for name in names if name not in NODES]
     if unknown:
         raise ValueError(f'unknown node(s) {unknown}; choose from {list(NODES)}')
@@ -405,9 +428,10 @@ def plan(
         checkpoint = str(family_overrides.pop('checkpoint'))
     ns = namespace.strip().strip('/')
     planned = []
+    loop = [name for name in names if name != TRAINER]
     for name in names:
         overrides: dict[str, Any] = {}
-        overrides.update(start_parameters(name, names))
+        overrides.update(start_parameters(name, loop))
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:
                 overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))
@@ -422,9 +446,44 @@ def plan(
         if use_sim_time:
             overrides['use_sim_time'] = True
         planned.append(NodePlan(name, overrides))
+    if TRAINER in names:
+        planned = _continual_plan(planned, params, task)
     return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
                       log_level=log_level.lower(), nodes=tuple(planned),
                       single_process=single_process, intra_process=intra_process)
+
+
+def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: str
+                    ) -> list[NodePlan]:
+    """Point the recorder at a known folder with splits and the trainer at it and the agents.
+
+    The recorder's `output` and `split_duration_s` from the params file win; otherwise a new
+    bags/continual_<date> folder split every CONTINUAL_SPLIT_S seconds.
+    """
+    import time
+
+    agents = {node.name: node for node in planned if node.name in AGENT_NODES}
+    checkpoint = agents.get('policy', NodePlan('policy')).parameters.get('checkpoint')
+    if len(agents) < 2 or not checkpoint:
+        raise ValueError('continual needs context_estimator and policy with a checkpoint (the '
+                         'trainer continues from it): pass --checkpoint / checkpoint:=, --task, '
+                         'or set one in the params file')
+    recorder = _node_sections(params, 'recorder')
+    output = next((s['output'] for s in reversed(recorder) if s.get('output')), '') or \
+        f'bags/continual_{time.strftime("%Y%m%d_%H%M%S")}'
+    split = next((s['split_duration_s'] for s in reversed(recorder)
+                  if s.get('split_duration_s')), CONTINUAL_SPLIT_S)
+    output = os.path.abspath(os.path.expanduser(str(output)))
+    result = []
+    for node in planned:
+        extra: dict[str, Any] = {}
+        if node.name == 'recorder':
+            extra = {'output': output, 'split_duration_s': float(split)}
+        elif node.name == TRAINER:
+            extra = {'recording': output, 'checkpoint': checkpoint,
+                     **({'task': task} if task else {})}
+        result.append(NodePlan(node.name, {**node.parameters, **extra}))
+    return result
 
 
 def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
@@ -440,4 +499,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                 record=parse_bool('record', get['record']), log_level=get['log_level'],
                 robot=parse_bool('robot', get['robot']),
                 single_process=parse_bool('single_process', get['single_process']),
-                intra_process=parse_bool('intra_process', get['intra_process']))
+                intra_process=parse_bool('intra_process', get['intra_process']),
+                continual=parse_bool('continual', get['continual']))

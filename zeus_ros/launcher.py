@@ -32,6 +32,7 @@ from zeus_ros.launch_defaults import (
     CONTAINER_MODULE,
     NODES,
     RECORDS_OTHERS,
+    TRAINER,
     LaunchPlan,
 )
 from zeus_ros.processes import ros_env, start_node, stop_nodes
@@ -124,6 +125,12 @@ class Supervisor:
                 assert node.process is not None
                 code = node.process.poll()
                 if code is None:
+                    continue
+                if node.name == TRAINER:  # retraining stops; the deployed checkpoint runs on
+                    print(f'[zeus launch] {node.name} exited with code {code}; the control loop '
+                          'keeps running on the checkpoint deployed last', file=sys.stderr,
+                          flush=True)
+                    self.nodes.remove(node)
                     continue
                 others = [n for n in self.nodes if n is not node and n.name not in
                           RECORDS_OTHERS and n.process is not None and n.process.poll() is None]
@@ -259,6 +266,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--nodes', default=','.join(launch_defaults.DEFAULT_NODES),
                         help=f'comma-separated subset of {",".join(NODES)}')
     parser.add_argument('--record', action='store_true', help='also start the recorder')
+    parser.add_argument('--continual', action='store_true',
+                        help='record, and retrain from the closed splits in the background: '
+                        'each candidate is gated against the deployed checkpoint, swapped in '
+                        'live on estimator and policy, rolled back on a live regression '
+                        '(docs/usage.md, Continual deployment)')
     parser.add_argument('--robot', action='store_true',
                         help="robot_bridge in sim_bridge's place (--params: the robot's, e.g. "
                         'params/robot_bridge.yaml)')
@@ -296,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
             checkpoint=args.checkpoint, task=args.task, record=args.record,
             log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
-            intra_process=not args.no_intra_process)
+            intra_process=not args.no_intra_process, continual=args.continual)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2

@@ -40,7 +40,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['Candidate', 'ContinualSettings', 'GateResult', 'RoundResult', 'append_history',
+__all__ = ['Candidate', 'ContinualSettings', 'GateResult', 'RoundResult', 'RoundStopped',
+           'append_history',
            'closed_splits', 'continual_round', 'gate', 'read_history', 'replay_mix',
            'seen_contexts', 'split_steps', 'train_candidate']
 
@@ -85,6 +86,10 @@ class ContinualSettings:
     tolerance_floor: float = 2.0
     """...and at least this much return per episode (noise of short episodes)."""
     seed: int = 0
+
+
+class RoundStopped(Exception):  # noqa: N818 - a request, not an error
+    """A shutdown asked a round to stop: nothing was written."""
 
 
 @dataclass
@@ -146,7 +151,10 @@ def _metadata(bag: Path) -> dict[str, Any]:
 
 
 def closed_splits(recording: Path | str) -> list[Path]:
-    """The complete bags under `recording`, oldest first; never the one being written."""
+    """The complete bags under `recording` that hold steps, oldest first.
+
+    Never the one being written; a split opened before step 0 may hold no step (skipped).
+    """
     from zeus_ros.offline.data.bag_errors import BagError
     from zeus_ros.offline.data.ingest import find_bags
     from zeus_ros.offline.data.recover import bag_state
@@ -158,7 +166,8 @@ def closed_splits(recording: Path | str) -> list[Path]:
         bags = find_bags(recording)
     except BagError:  # nothing recorded yet
         return []
-    return [bag for bag in bags if bag.is_dir() and bag_state(bag) in CLOSED_STATES]
+    return [bag for bag in bags if bag.is_dir() and bag_state(bag) in CLOSED_STATES
+            and split_steps(bag) > 0]
 
 
 def split_steps(bag: Path) -> int:
@@ -230,12 +239,13 @@ def _agent_from(deployed: Path) -> tuple[Any, bool]:
 
 def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Sequence[Path],
                     out: Path | str, settings: ContinualSettings, *,
-                    corrupt_rewards: bool = False,
-                    log: Callable[[str], None] = print) -> Candidate:
+                    corrupt_rewards: bool = False, log: Callable[[str], None] = print,
+                    stop: Callable[[], bool] = lambda: False) -> Candidate:
     """Continue `deployed` on new + old bags; write `out`/candidate.pt and its card.
 
     `corrupt_rewards` negates every reward: the deliberately bad candidate the gate must
-    refuse. Raises TrainError (bad data, another task, non-finite training).
+    refuse. `stop` is asked every 50 updates (a shutdown: RoundStopped). Raises TrainError (bad
+    data, another task, non-finite training).
     """
     from zeus_ros.learning.checkpoint import save_checkpoint
     from zeus_ros.learning.errors import CheckpointError
@@ -271,7 +281,9 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
               (frozen, settings.updates))
     for phase_config, count in phases:
         agent.config = phase_config
-        for _ in range(count):
+        for index in range(count):
+            if index % 50 == 0 and stop():
+                raise RoundStopped(f'stopped at update {step}')
             pair = replay.sample(config.batch_size) if needs_pair else None
             agent.update(replay.sample(config.batch_size), pair, step)
             step += 1
@@ -390,12 +402,12 @@ def read_history(path: Path | str) -> list[dict[str, Any]]:
 
 def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequence[Path],
                     out: Path | str, history: Path | str, settings: ContinualSettings, *,
-                    corrupt_rewards: bool = False, log: Callable[[str], None] = print
-                    ) -> RoundResult:
+                    corrupt_rewards: bool = False, log: Callable[[str], None] = print,
+                    stop: Callable[[], bool] = lambda: False) -> RoundResult:
     """Train a candidate on the replay mix, gate it, and record the decision (no swap here)."""
     old = replay_mix(splits, new_bags, settings)
     candidate = train_candidate(deployed, new_bags, old, out, settings,
-                                corrupt_rewards=corrupt_rewards, log=log)
+                                corrupt_rewards=corrupt_rewards, log=log, stop=stop)
     result = gate(deployed, candidate.path, candidate.seen, settings)
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 

@@ -1,0 +1,110 @@
+"""`zeus launch --continual` with real processes: one gated swap and one refusal (issue 37).
+
+The system deploys a weak Cheetah-Run-v0 policy (continual_fixtures.weak_checkpoint); the
+trainer's first round earns clearly more and is swapped in live on estimator and policy (both
+log the new sha256) and kept by the live check; its second round is a drill trained on negated
+rewards, which the gate refuses. sim_bridge runs in realtime at 60 steps/s so the niced trainer
+gets CPU on two shared cores. About 80 s.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from continual_fixtures import FULL_RUN_V0, WEAK_TASK, weak_checkpoint
+import yaml
+
+from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
+
+TRAINER = {'new_steps': 300, 'updates': 200, 'episodes': 1, 'max_seen_values': 2,
+           'max_train_values': 1, 'corrupt_rounds': [2], 'check_segments': 2, 'poll_s': 0.5}
+
+
+def _params(folder: Path) -> Path:
+    """The installed params with a realtime loop, splits every 2 s and a tiny trainer budget."""
+    params = yaml.safe_load((REPO / 'params' / 'zeus.yaml').read_text())
+    params['/**/sim_bridge']['ros__parameters'].update({'mode': 'realtime',
+                                                        'control_rate': 60.0})
+    params['/**/policy']['ros__parameters']['noise'] = 0.2  # exploration for the critic
+    params['/**/recorder']['ros__parameters'].update({'split_duration_s': 2.0,
+                                                      'output': str(folder / 'rec')})
+    params['/**/continual_trainer'] = {'ros__parameters': TRAINER}
+    path = folder / 'params.yaml'
+    path.write_text(yaml.safe_dump(params))
+    return path
+
+
+def _history(path: Path) -> list[dict]:
+    if not path.is_file():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
+        tmp_path: Path) -> None:
+    require_ros()
+    weak = weak_checkpoint(tmp_path / 'weak.pt')
+    history = tmp_path / 'rec_continual' / 'history.jsonl'
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', WEAK_TASK,
+            '--checkpoint', str(weak), '--continual', '--params', str(_params(tmp_path)),
+            '--no-progress', '--timeout', '150']
+    env = ros_environment(fresh_domain_id())
+    log = tmp_path / 'launch.log'
+    with log.open('w') as out:
+        launch = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
+                                  cwd=tmp_path, start_new_session=True)
+        try:
+            deadline = time.monotonic() + 140
+            while time.monotonic() < deadline and launch.poll() is None:
+                events = _history(history)
+                if any(e.get('decision') == 'refuse' for e in events) and any(
+                        e['event'] == 'live_check' for e in events):
+                    break
+                time.sleep(1)
+        finally:
+            if launch.poll() is None:
+                launch.send_signal(signal.SIGINT)
+            launch.wait(timeout=60)
+    text = log.read_text()
+    events = _history(history)
+    gates = [e for e in events if e['event'] == 'gate']
+    assert [g['decision'] for g in gates[:2]] == ['deploy', 'refuse'], text[-3000:]
+    assert gates[1]['corrupt_rewards'] and gates[1]['deployed_sha256'] == gates[0]['sha256']
+    (swap,) = [e for e in events if e['event'] == 'swap']
+    assert swap['sha256'] == gates[0]['sha256'] and not swap['forced']
+    assert Path(swap['checkpoint']).is_file() and Path(swap['previous']) == weak  # kept
+    for node in ('context_estimator', 'policy'):  # the pair, by sha256
+        assert f'[{node}]' in text and f'(sha256 {swap["sha256"]})' in text
+    check = next(e for e in events if e['event'] == 'live_check')
+    assert check['decision'] == 'keep', check
+    assert 'continual: SWAPPED in' in text and 'continual: REFUSE' in text
+    assert 'sim_bridge 0, context_estimator 0, policy 0' in text  # the loop never stopped
+
+
+def test_continual_plan_points_the_trainer_at_the_recording_and_the_checkpoint(
+        tmp_path: Path) -> None:
+    """Both launchers get the trainer from launch_defaults; step 0 never waits for it."""
+    from zeus_ros import launch_defaults as d
+
+    full = str(FULL_RUN_V0)
+    plan = d.plan_from_arguments({'continual': 'true', 'task': WEAK_TASK, 'checkpoint': full,
+                                  'params_file': str(_params(tmp_path))})
+    nodes = {node.name: node.parameters for node in plan.nodes}
+    assert list(nodes) == ['sim_bridge', 'context_estimator', 'policy', 'recorder', d.TRAINER]
+    assert nodes[d.TRAINER]['recording'] == nodes['recorder']['output'] == str(tmp_path / 'rec')
+    assert nodes[d.TRAINER]['checkpoint'] == nodes['policy']['checkpoint']
+    assert nodes['recorder']['split_duration_s'] == 2.0
+    assert d.TRAINER not in nodes['sim_bridge']['observers']
+    assert d.TRAINER not in [node.name for node in d.plan(
+        continual=True, task=WEAK_TASK, checkpoint=full, single_process=True).contained]
+    try:
+        d.plan(continual=True, nodes=['sim_bridge'], task=WEAK_TASK, checkpoint=full)
+    except ValueError as error:
+        assert 'continual needs context_estimator and policy' in str(error)
+    else:
+        raise AssertionError('a continual plan without the agent nodes was accepted')

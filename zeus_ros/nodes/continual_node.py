@@ -1,0 +1,360 @@
+"""continual_trainer: retrain from the growing recording, gate, swap live, roll back (issue 37).
+
+Its own process, started by `zeus launch --continual` (`continual:=true`): it lowers its own
+priority (`nice`) and runs torch on `threads` threads, so the control loop's processes keep
+their CPU. The main thread waits for `new_steps` closed new steps, trains a candidate and gates
+it (zeus_ros/offline/training/continual.py); a background thread spins the node (step and
+context-truth subscriptions, parameter clients, /diagnostics). A candidate that passes is
+copied to OUT/deployed/ and set as `checkpoint` on context_estimator and then policy (they pair
+by sha256: no mismatched pair ever acts); the previous checkpoint stays on disk and is what a
+failed live check restores. Every decision is one log line, one /diagnostics status and one line
+of OUT/history.jsonl.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import shutil
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from zeus_ros.offline.training import continual as c
+from zeus_ros.offline.training.continual_watch import (
+    LiveCheck,
+    SegmentReturns,
+    prune_recording,
+)
+
+TARGETS = ('context_estimator', 'policy')
+"""Set in this order: the policy refuses the estimator's new estimates until it follows."""
+DEFAULTS: dict[str, Any] = {
+    'recording': '', 'checkpoint': '', 'out': '', 'task': '', 'new_steps': 2000,
+    'warmup_updates': 200, 'updates': 1000, 'episodes': 2, 'max_seen_values': 6,
+    'max_train_values': 0, 'margin': 1.0, 'tolerance': 0.10, 'tolerance_floor': 2.0,
+    'old_ratio': 1.0, 'max_old_steps': 20000, 'threads': 1, 'nice': 10,
+    'check_segments': 2, 'keep_recording_mb': 2048, 'keep_candidates': 5,
+    'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
+}
+"""Parameters; `corrupt_rounds` / `force_rounds` (round numbers from 1; 0: none) are drills:
+that round trains on negated rewards / is swapped in whatever the gate says."""
+
+
+class ContinualTrainer(Node):
+    """The ROS side: parameters, subscriptions, the swap and /diagnostics."""
+
+    def __init__(self) -> None:
+        super().__init__('continual_trainer')
+        for name, default in DEFAULTS.items():
+            self.declare_parameter(name, default)
+        p = {name: self.get_parameter(name).value for name in DEFAULTS}
+        if not p['recording'] or not p['checkpoint']:
+            raise ValueError('continual_trainer: parameters recording and checkpoint are '
+                             'required (zeus launch --continual sets both)')
+        self.p = p
+        self.recording = Path(p['recording']).resolve()
+        self.out = Path(p['out'] or f'{self.recording}_continual').resolve()
+        self.history = self.out / 'history.jsonl'
+        self.deployed = Path(p['checkpoint']).resolve()
+        self.previous: Path | None = None
+        self.last_gate: c.GateResult | None = None
+        self.settings = c.ContinualSettings(**{k: p[k] for k in (
+            'new_steps', 'warmup_updates', 'updates', 'episodes', 'max_seen_values',
+            'max_train_values', 'margin', 'tolerance', 'tolerance_floor', 'old_ratio',
+            'max_old_steps')})
+        self.returns = SegmentReturns()
+        self.lock = threading.Lock()
+        self.state = 'waiting'
+        self.counts = {'rounds': 0, 'swaps': 0, 'refusals': 0, 'rollbacks': 0, 'failures': 0}
+        from diagnostic_msgs.msg import DiagnosticArray
+        from zeus_msgs.msg import ContextTruth, StepFeedback
+
+        from zeus_ros.nodes.common import TOPICS, step_qos
+
+        self.diagnostics = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, step_qos(100))
+        self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth,
+                                 step_qos(100))
+        from rclpy.parameter_client import AsyncParameterClient
+
+        self.clients_ = {name: AsyncParameterClient(self, name) for name in TARGETS}
+        self.create_timer(5.0, lambda: self.report('status'))
+
+    def _on_step(self, msg: Any) -> None:
+        with self.lock:
+            self.returns.on_step(msg.reward, msg.first)
+
+    def _on_truth(self, msg: Any) -> None:
+        with self.lock:
+            self.returns.on_truth(msg.segment)
+
+    def report(self, event: str, message: str = '', problem: bool = False) -> None:
+        """One /diagnostics status: the state, the counts, the deployed checkpoint."""
+        from zeus_ros.nodes.common import diagnostics_message
+
+        values = {'event': event, 'state': self.state, 'deployed': str(self.deployed),
+                  'previous': str(self.previous or ''), 'history': str(self.history),
+                  **self.counts}
+        if message:
+            values['decision'] = message
+        self.diagnostics.publish(diagnostics_message(self, 'continual', values,
+                                                     [message] if problem else []))
+
+    def set_checkpoint(self, path: Path, timeout: float = 30.0) -> str | None:
+        """Both nodes on `path` (estimator first); None, or why it failed (both restored)."""
+        done: list[str] = []
+        for name in TARGETS:
+            client = self.clients_[name]
+            if not client.wait_for_services(timeout_sec=timeout):
+                why = f'{name} offers no parameter services'
+            else:
+                future = client.set_parameters([Parameter('checkpoint', value=str(path))])
+                end = time.monotonic() + timeout
+                while not future.done() and time.monotonic() < end:
+                    time.sleep(0.01)
+                result = future.result() if future.done() else None
+                ok = result is not None and all(r.successful for r in result.results)
+                why = '' if ok else (f'{name} refused it: '
+                                     + (result.results[0].reason if result else 'no answer'))
+            if why:
+                for other in done:  # the pair stays matched
+                    self.clients_[other].set_parameters(
+                        [Parameter('checkpoint', value=str(self.deployed))])
+                return why
+            done.append(name)
+        return None
+
+
+class Trainer:
+    """The main-thread loop: wait, train, gate, swap, watch, prune."""
+
+    def __init__(self, node: ContinualTrainer, stop: threading.Event) -> None:
+        self.node = node
+        self.stop = stop
+        self.log = node.get_logger()
+        self.since_swap: list[Path] = []
+        self.used: set[Path] = set()
+        """Splits of the rounds before the last swap: old data from then on."""
+        self.steps_at_round = 0
+        self.watch: LiveCheck | None = None
+        self.episode_length = 0
+
+    def run(self) -> None:
+        """Until stopped: one poll every poll_s seconds."""
+        n = self.node
+        n.out.mkdir(parents=True, exist_ok=True)
+        self.log.info(f'continual: deployed {n.deployed}; recording {n.recording}; history '
+                      f'{n.history}; a round every {n.settings.new_steps} new closed steps')
+        c.append_history(n.history, {'event': 'start', 'deployed': str(n.deployed),
+                                     'recording': str(n.recording)})
+        while not self.stop.wait(float(n.p['poll_s'])):
+            self.poll()
+
+    def poll(self) -> None:
+        """Check a swap under watch, then start a round when enough new steps are closed."""
+        n = self.node
+        self.check_live()
+        splits = c.closed_splits(n.recording)
+        known = {p.resolve() for p in self.since_swap}
+        self.since_swap += [b for b in splits if b.resolve() not in known
+                            and b.resolve() not in self.used]
+        total = sum(c.split_steps(b) for b in self.since_swap)
+        if self.watch is not None or total - self.steps_at_round < n.settings.new_steps:
+            return
+        self.steps_at_round = total
+        self.round(splits)
+        removed = prune_recording(c.closed_splits(n.recording),
+                                  int(n.p['keep_recording_mb'] * 1e6), self.since_swap)
+        if removed:
+            self.log.info(f'continual: retention: deleted {len(removed)} oldest split(s) '
+                          f'({", ".join(b.name for b in removed)}) to stay under '
+                          f'{n.p["keep_recording_mb"]} MB')
+
+    def round(self, splits: list[Path]) -> None:
+        """Train and gate a candidate; swap it in when it passes (or is forced)."""
+        n = self.node
+        n.counts['rounds'] += 1
+        number = n.counts['rounds']
+        new = self._newest(self.since_swap, 4 * n.settings.new_steps)
+        corrupt = number in n.p['corrupt_rounds']
+        n.state = 'training'
+        n.report('round', f'round {number}: training on {len(new)} new split(s)')
+        folder = n.out / f'round_{number:03d}'
+        try:
+            result = c.continual_round(n.deployed, new, splits, folder, n.history, n.settings,
+                                       corrupt_rewards=corrupt, log=self.log.info,
+                                       stop=self.stop.is_set)
+        except c.RoundStopped:
+            self.log.info(f'continual: round {number} stopped: shutting down')
+            return
+        except Exception as error:  # a bad split, a diverged candidate: the robot runs on
+            n.counts['failures'] += 1
+            n.state = 'waiting'
+            line = f'continual: round {number} failed: {type(error).__name__}: {error}'
+            self.log.error(line)
+            c.append_history(n.history, {'event': 'failure', 'round': number,
+                                         'reason': str(error)})
+            n.report('failure', line, problem=True)
+            return
+        n.state = 'waiting'
+        forced = number in n.p['force_rounds']
+        if not result.gate.deploy and not forced:
+            n.counts['refusals'] += 1
+            n.report('refuse', f'round {number}: refused {result.candidate.sha256[:12]}: '
+                     f'{result.gate.reason}')
+        else:
+            self.swap(result, number, forced and not result.gate.deploy)
+        self._prune_candidates()
+
+    def swap(self, result: c.RoundResult, number: int, forced: bool) -> None:
+        """Copy the candidate to OUT/deployed, set it on both nodes, start the live watch."""
+        n = self.node
+        target = n.out / 'deployed' / f'round_{number:03d}_{result.candidate.sha256[:12]}.pt'
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(result.candidate.path, target)
+        why = n.set_checkpoint(target)
+        if why is not None:
+            n.counts['failures'] += 1
+            line = f'continual: swap of round {number} failed ({why}); {n.deployed} runs on'
+            self.log.error(line)
+            c.append_history(n.history, {'event': 'swap_failed', 'round': number,
+                                         'reason': why})
+            n.report('swap_failed', line, problem=True)
+            return
+        n.previous, n.deployed = n.deployed, target
+        n.counts['swaps'] += 1
+        gate = result.gate
+        allowed = max(n.settings.tolerance_floor, n.settings.tolerance * abs(gate.deployed_seen))
+        with n.lock:
+            segment = n.returns.current
+        self.watch = LiveCheck(segment, gate.candidate_seen, gate.deployed_seen - allowed,
+                               self._episode_length(), int(n.p['check_segments']))
+        self.used |= {p.resolve() for p in self.since_swap}
+        self.since_swap, self.steps_at_round = [], 0
+        line = (f'continual: SWAPPED in {target.name} ({result.candidate.sha256[:12]})'
+                f'{" FORCED past the gate" if forced else ""}; previous {n.previous.name} kept; '
+                f'live check over {self.watch.segments} segments: expected '
+                f'{self.watch.expected:.1f}, rollback below {self.watch.floor:.1f}')
+        self.log.info(line)
+        c.append_history(n.history, {'event': 'swap', 'round': number, 'checkpoint': str(target),
+                                     'sha256': result.candidate.sha256, 'forced': forced,
+                                     'previous': str(n.previous),
+                                     'expected': self.watch.expected,
+                                     'floor': self.watch.floor})
+        n.report('swap', line)
+
+    def check_live(self) -> None:
+        """Roll back a swap whose live return per segment falls below the gate's floor."""
+        n = self.node
+        if self.watch is None:
+            return
+        with n.lock:
+            verdict = self.watch.verdict(n.returns)
+        if verdict is None:
+            return
+        decision, live = verdict
+        watch, self.watch = self.watch, None
+        record = {'event': 'live_check', 'checkpoint': str(n.deployed), 'live': live,
+                  'expected': watch.expected, 'floor': watch.floor, 'decision': decision}
+        if decision == 'keep':
+            line = (f'continual: live check kept {n.deployed.name}: {live:.1f} per episode '
+                    f'(expected {watch.expected:.1f}, floor {watch.floor:.1f})')
+            self.log.info(line)
+            c.append_history(n.history, record)
+            n.report('keep', line)
+            return
+        assert n.previous is not None
+        why = n.set_checkpoint(n.previous)
+        if why is None:
+            n.counts['rollbacks'] += 1
+            bad, n.deployed, n.previous = n.deployed, n.previous, None
+            line = (f'continual: ROLLED BACK {bad.name} -> {n.deployed.name}: live {live:.1f} '
+                    f'per episode below the floor {watch.floor:.1f} (expected '
+                    f'{watch.expected:.1f})')
+        else:
+            line = f'continual: rollback of {n.deployed.name} failed: {why}'
+        self.log.warning(line)
+        c.append_history(n.history, {**record, 'rolled_back_to': str(n.deployed),
+                                     'error': why})
+        n.report('rollback', line, problem=True)
+
+    def _episode_length(self) -> int:
+        if not self.episode_length:
+            from sim_bridge.registry import task_class
+            from zeus_ros.learning.inference import InferenceAgent
+
+            task = InferenceAgent.from_checkpoint(self.node.deployed).task
+            self.episode_length = int(task_class(task).episode_length)
+        return self.episode_length
+
+    @staticmethod
+    def _newest(splits: list[Path], steps: int) -> list[Path]:
+        """The newest splits holding at most `steps` steps (at least one)."""
+        chosen: list[Path] = []
+        total = 0
+        for bag in reversed(splits):
+            total += c.split_steps(bag)
+            if chosen and total > steps:
+                break
+            chosen.append(bag)
+        return sorted(chosen)
+
+    def _prune_candidates(self) -> None:
+        """Keep the newest `keep_candidates` round folders (deployed copies are all kept)."""
+        rounds = sorted(self.node.out.glob('round_*'))
+        for folder in rounds[:-int(self.node.p['keep_candidates'])]:
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: `python -m zeus_ros.nodes.continual_node --ros-args -p recording:=...`."""
+    import signal
+    import sys
+
+    from rclpy.signals import SignalHandlerOptions
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = ContinualTrainer()
+    except ValueError as error:
+        print(f'error: {error}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    import torch
+
+    os.nice(int(node.p['nice']))
+    torch.set_num_threads(max(1, int(node.p['threads'])))
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=lambda: _spin(executor, stop), daemon=True)
+    spinner.start()
+    try:
+        Trainer(node, stop).run()
+    finally:
+        stop.set()
+        spinner.join(timeout=2)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+    while not stop.is_set():
+        try:
+            executor.spin_once(timeout_sec=0.1)
+        except Exception:  # shutting down
+            break
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
