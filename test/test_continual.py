@@ -97,3 +97,40 @@ def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path
     assert result.gate.deploy, result.gate.summary()
     assert result.gate.gain >= max(settings.margin, 2 * result.gate.se)
     assert c.read_history(history)[-1]['decision'] == 'deploy'
+
+
+def test_live_check_pairs_segments_by_context_and_rolls_back_a_loss() -> None:
+    from zeus_ros.offline.training.continual_watch import LiveCheck, SegmentReturns
+
+    returns = SegmentReturns()
+    # before the swap (in segment 2): context 1.0 earns -1, context 2.0 earns -2 per step;
+    # after it, context 2.0 earns -2.5, context 1.0 -1.5, then 3.0 (never met before)
+    plan = [(1.0, -1.0), (2.0, -2.0), (1.0, -1.0), (2.0, -2.5), (3.0, -9.0), (1.0, -1.5),
+            (2.0, 0.0)]
+    for segment, (context, reward) in enumerate(plan):
+        returns.on_truth(segment, [context])
+        returns.on_step(0.0, first=True)  # a reset earns nothing
+        for _ in range(10):
+            returns.on_step(reward, first=False)
+    check = LiveCheck(2, 0, gain=5.0, tolerance=0.1, tolerance_floor=2.0, episode_length=40)
+    decision, change, allowed = check.verdict(returns)  # segments 3 and 5: paired; 4 skipped
+    assert decision == 'rollback' and change == -20.0 and allowed == 6.0  # -0.5 per step
+    lenient = LiveCheck(2, 0, gain=5.0, tolerance=0.5, tolerance_floor=2.0, episode_length=40)
+    assert lenient.verdict(returns)[0] == 'keep'  # 50 % of |-60| allowed
+    assert LiveCheck(2, 0, 0, 0.1, 2.0, 40, segments=3).verdict(returns) is None  # 6 running
+
+
+def test_retention_deletes_the_oldest_splits_but_never_the_protected(
+        bias_recording: list[Path], tmp_path: Path) -> None:
+    from zeus_ros.offline.training.continual_watch import folder_bytes, prune_recording
+
+    copies = []
+    for bag in bias_recording:
+        copies.append(tmp_path / bag.name)
+        shutil.copytree(bag, copies[-1])
+    total = sum(folder_bytes(b) for b in copies)
+    keep = total - folder_bytes(copies[1])  # one split too many
+    removed = prune_recording(copies, keep_bytes=keep, protect=copies[:1])
+    assert removed == [copies[1]]  # the oldest that is not protected
+    assert [b.exists() for b in copies] == [True, False, True]
+    assert prune_recording(copies, keep_bytes=0) == []  # 0: keep everything

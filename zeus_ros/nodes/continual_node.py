@@ -38,7 +38,7 @@ DEFAULTS: dict[str, Any] = {
     'recording': '', 'checkpoint': '', 'out': '', 'task': '', 'new_steps': 2000,
     'warmup_updates': 200, 'updates': 1000, 'episodes': 2, 'max_seen_values': 6,
     'max_train_values': 0, 'margin': 1.0, 'tolerance': 0.10, 'tolerance_floor': 2.0,
-    'old_ratio': 1.0, 'max_old_steps': 20000, 'threads': 1, 'nice': 10,
+    'actor_lr_scale': 0.3, 'old_ratio': 1.0, 'max_old_steps': 20000, 'threads': 1, 'nice': 10,
     'check_segments': 2, 'keep_recording_mb': 2048, 'keep_candidates': 5,
     'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
 }
@@ -66,8 +66,8 @@ class ContinualTrainer(Node):
         self.last_gate: c.GateResult | None = None
         self.settings = c.ContinualSettings(**{k: p[k] for k in (
             'new_steps', 'warmup_updates', 'updates', 'episodes', 'max_seen_values',
-            'max_train_values', 'margin', 'tolerance', 'tolerance_floor', 'old_ratio',
-            'max_old_steps')})
+            'max_train_values', 'margin', 'tolerance', 'tolerance_floor', 'actor_lr_scale',
+            'old_ratio', 'max_old_steps')})
         self.returns = SegmentReturns()
         self.lock = threading.Lock()
         self.state = 'waiting'
@@ -92,7 +92,7 @@ class ContinualTrainer(Node):
 
     def _on_truth(self, msg: Any) -> None:
         with self.lock:
-            self.returns.on_truth(msg.segment)
+            self.returns.on_truth(msg.segment, msg.values)
 
     def report(self, event: str, message: str = '', problem: bool = False) -> None:
         """One /diagnostics status: the state, the counts, the deployed checkpoint."""
@@ -143,6 +143,8 @@ class Trainer:
         """Splits of the rounds before the last swap: old data from then on."""
         self.steps_at_round = 0
         self.watch: LiveCheck | None = None
+        self.since_segment = 0
+        """First segment of the deployed checkpoint: its live baseline starts there."""
         self.episode_length = 0
 
     def run(self) -> None:
@@ -230,27 +232,26 @@ class Trainer:
         n.previous, n.deployed = n.deployed, target
         n.counts['swaps'] += 1
         gate = result.gate
-        allowed = max(n.settings.tolerance_floor, n.settings.tolerance * abs(gate.deployed_seen))
         with n.lock:
             segment = n.returns.current
-        self.watch = LiveCheck(segment, gate.candidate_seen, gate.deployed_seen - allowed,
-                               self._episode_length(), int(n.p['check_segments']))
+        self.watch = LiveCheck(segment, self.since_segment, gate.gain, n.settings.tolerance,
+                               n.settings.tolerance_floor, self._episode_length(),
+                               int(n.p['check_segments']))
+        self.since_segment = segment + 1
         self.used |= {p.resolve() for p in self.since_swap}
         self.since_swap, self.steps_at_round = [], 0
         line = (f'continual: SWAPPED in {target.name} ({result.candidate.sha256[:12]})'
                 f'{" FORCED past the gate" if forced else ""}; previous {n.previous.name} kept; '
-                f'live check over {self.watch.segments} segments: expected '
-                f'{self.watch.expected:.1f}, rollback below {self.watch.floor:.1f}')
+                f'live check over {self.watch.segments} segments paired by context with the '
+                f"previous checkpoint's (gate gain {gate.gain:+.1f} per episode)")
         self.log.info(line)
         c.append_history(n.history, {'event': 'swap', 'round': number, 'checkpoint': str(target),
                                      'sha256': result.candidate.sha256, 'forced': forced,
-                                     'previous': str(n.previous),
-                                     'expected': self.watch.expected,
-                                     'floor': self.watch.floor})
+                                     'previous': str(n.previous), 'gate_gain': gate.gain})
         n.report('swap', line)
 
     def check_live(self) -> None:
-        """Roll back a swap whose live return per segment falls below the gate's floor."""
+        """Roll back a swap that earns less live than its predecessor on the same contexts."""
         n = self.node
         if self.watch is None:
             return
@@ -258,13 +259,14 @@ class Trainer:
             verdict = self.watch.verdict(n.returns)
         if verdict is None:
             return
-        decision, live = verdict
+        decision, change, allowed = verdict
         watch, self.watch = self.watch, None
-        record = {'event': 'live_check', 'checkpoint': str(n.deployed), 'live': live,
-                  'expected': watch.expected, 'floor': watch.floor, 'decision': decision}
+        record = {'event': 'live_check', 'checkpoint': str(n.deployed), 'live_change': change,
+                  'allowed': allowed, 'gate_gain': watch.gain, 'decision': decision}
+        figures = (f'live {change:+.1f} per episode against the previous checkpoint on the same '
+                   f'contexts (gate {watch.gain:+.1f}, allowed -{allowed:.1f})')
         if decision == 'keep':
-            line = (f'continual: live check kept {n.deployed.name}: {live:.1f} per episode '
-                    f'(expected {watch.expected:.1f}, floor {watch.floor:.1f})')
+            line = f'continual: live check kept {n.deployed.name}: {figures}'
             self.log.info(line)
             c.append_history(n.history, record)
             n.report('keep', line)
@@ -274,9 +276,8 @@ class Trainer:
         if why is None:
             n.counts['rollbacks'] += 1
             bad, n.deployed, n.previous = n.deployed, n.previous, None
-            line = (f'continual: ROLLED BACK {bad.name} -> {n.deployed.name}: live {live:.1f} '
-                    f'per episode below the floor {watch.floor:.1f} (expected '
-                    f'{watch.expected:.1f})')
+            self.since_segment = watch.since_segment  # the restored one's segments count again
+            line = f'continual: ROLLED BACK {bad.name} -> {n.deployed.name}: {figures}'
         else:
             line = f'continual: rollback of {n.deployed.name} failed: {why}'
         self.log.warning(line)

@@ -50,6 +50,10 @@ CLOSED_STATES = ('closed', 'recovered', None)
 a writer that writes it only at close (`zeus collect`, `ros2 bag record`); 'provisional' (the
 recorder's bag being written) and 'unfinished' (no metadata) may still grow."""
 STEP_TOPIC = '/zeus/step'
+CORRUPTION = -1.0
+"""The drill's corrupted rewards: every reward times this (negated: the opposite task). Scaled
+up (x -10) the TD errors grow so large that a weak policy's round can land anywhere, better
+included (measured once: +126 on a weak Cheetah-Run-v0 policy), so the drill stays a flip."""
 WARMUP_ACTOR_PERIOD = 10**9
 """actor_update_freq during the critic warm-up: no warm-up update index is a multiple of it."""
 
@@ -243,9 +247,9 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
                     stop: Callable[[], bool] = lambda: False) -> Candidate:
     """Continue `deployed` on new + old bags; write `out`/candidate.pt and its card.
 
-    `corrupt_rewards` negates every reward: the deliberately bad candidate the gate must
-    refuse. `stop` is asked every 50 updates (a shutdown: RoundStopped). Raises TrainError (bad
-    data, another task, non-finite training).
+    `corrupt_rewards` multiplies every reward by CORRUPTION: the deliberately bad candidate
+    the gate must refuse. `stop` is asked every 50 updates (a shutdown: RoundStopped).
+    Raises TrainError (bad data, another task, non-finite training).
     """
     from zeus_ros.learning.checkpoint import save_checkpoint
     from zeus_ros.learning.errors import CheckpointError
@@ -264,7 +268,7 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
     seen = seen_contexts(ingest_bags(list(new_bags)) if old_bags else dataset,
                          settings.max_seen_values)
     if corrupt_rewards:
-        dataset.episodes = [replace(ep, reward=-ep.reward) for ep in dataset.episodes]
+        dataset.episodes = [replace(ep, reward=CORRUPTION * ep.reward) for ep in dataset.episodes]
     config = agent.config
     for group in agent.optimizers['actor'].param_groups:
         group['lr'] = config.actor_lr * settings.actor_lr_scale

@@ -2,10 +2,14 @@
 
 ROS-free arithmetic the live trainer feeds from zeus/step and zeus/context_truth:
 - `SegmentReturns` sums the reward of each context segment as it streams by;
-- `LiveCheck` compares the return the swapped-in checkpoint earns live (per step, scaled to an
-  episode, over the first `segments` complete segments after the swap) with what the gate
-  measured for the checkpoint it replaced, less the gate's tolerance: below that, the swap made
-  the robot worse than before and is rolled back;
+- `LiveCheck` compares the return per step the swapped-in checkpoint earns live in the first
+  `segments` complete segments after the swap with what the replaced checkpoint earned live in
+  segments **of the same context** (paired by the context truth, since its own deployment);
+  scaled to an episode, a mean loss beyond the gate's tolerance rolls the swap back. Live is
+  compared with live (same schedule, exploration and mid-episode segments): the gate's
+  in-process episodes start from resets and read differently, so its gain only sets the
+  logged expectation. Segments whose context the replaced checkpoint never met are not judged
+  (the check waits for paired ones, at most 3 x `segments`, then compares unpaired);
 - `prune_recording` deletes the oldest closed splits beyond a byte budget, never one still
   needed (those since the last swap) and never the split being written.
 """
@@ -26,10 +30,22 @@ class SegmentReturns:
 
     current: int = -1
     totals: dict[int, list[float]] = field(default_factory=dict)
+    contexts: dict[int, tuple[float, ...]] = field(default_factory=dict)
 
-    def on_truth(self, segment: int) -> None:
-        """A ContextTruth: the segment the next rewards belong to."""
+    def on_truth(self, segment: int, values: Sequence[float] = ()) -> None:
+        """A ContextTruth: the segment (and its context) the next rewards belong to."""
         self.current = int(segment)
+        self.contexts.setdefault(self.current, tuple(round(float(v), 4) for v in values))
+
+    def rates(self, first: int, last: int) -> dict[tuple[float, ...], float]:
+        """Reward per step per context over the complete segments first..last-1."""
+        sums: dict[tuple[float, ...], list[float]] = {}
+        for s, (reward, steps) in self.totals.items():
+            if first <= s < last and s < self.current and steps:
+                total = sums.setdefault(self.contexts.get(s, ()), [0.0, 0])
+                total[0] += reward
+                total[1] += steps
+        return {c: r / n for c, (r, n) in sums.items()}
 
     def on_step(self, reward: float, first: bool) -> None:
         """A StepFeedback: its reward counts for the current segment (a reset earns none)."""
@@ -45,27 +61,43 @@ class SegmentReturns:
                 if segment < s < self.current and t[1] > 0]
 
 
+
 @dataclass
 class LiveCheck:
-    """One swap under watch: the gate's figures and when the watch started."""
+    """One swap under watch: the live baseline, the gate's figures, when the watch started."""
 
     after_segment: int
     """The segment in progress at the swap: it mixes both checkpoints, so it is not judged."""
-    expected: float
-    """The gate's return per episode for the candidate on the seen contexts."""
-    floor: float
-    """The deployed checkpoint's gate return less the gate's tolerance: the live minimum."""
+    since_segment: int
+    """The first segment of the replaced checkpoint (its own swap, or the start)."""
+    gain: float
+    """The gate's paired gain per episode: what the swap should add (logged)."""
+    tolerance: float
+    tolerance_floor: float
     episode_length: int
     segments: int = 2
 
-    def verdict(self, returns: SegmentReturns) -> tuple[str, float] | None:
-        """None while watching; ('keep' | 'rollback', live return per episode) at the end."""
-        done = returns.complete_after(self.after_segment)[:self.segments]
-        if len(done) < self.segments:
+    def verdict(self, returns: SegmentReturns) -> tuple[str, float, float] | None:
+        """None while watching; ('keep' | 'rollback', live change, allowed loss) per episode."""
+        before = returns.rates(self.since_segment, self.after_segment)
+        done = returns.complete_after(self.after_segment)
+        paired = [(s, r, n) for s, r, n in done if returns.contexts.get(s, ()) in before]
+        judged = paired[:self.segments]
+        if len(judged) < self.segments and len(done) < 3 * self.segments:
             return None
-        steps = sum(s for _, _, s in done)
-        live = sum(r for _, r, _ in done) / max(steps, 1) * self.episode_length
-        return ('rollback' if live < self.floor else 'keep'), live
+        if len(judged) < self.segments:  # no context met by both: the mean of all before
+            judged = done[:self.segments]
+            base = (sum(before.values()) / len(before)) if before else 0.0
+            bases = [base] * len(judged)
+        else:
+            bases = [before[returns.contexts.get(s, ())] for s, _, _ in judged]
+        steps = sum(n for _, _, n in judged)
+        live = sum(r for _, r, _ in judged) / steps * self.episode_length
+        base = sum(b * n for b, (_, _, n) in zip(bases, judged, strict=True)) / steps
+        base *= self.episode_length
+        allowed = max(self.tolerance_floor, self.tolerance * abs(base))
+        change = live - base
+        return ('rollback' if change < -allowed else 'keep'), change, allowed
 
 
 def folder_bytes(folder: Path) -> int:
