@@ -144,3 +144,14 @@ def test_every_params_file_the_docs_name_exists() -> None:
                                                      doc.read_text())}
     missing = sorted((doc, path) for doc, path in named if not (ROOT / path).is_file())
     assert not missing, missing
+
+
+def test_every_installed_checkpoint_is_in_the_index() -> None:
+    """Each .pt of the installed zoo folders has its sha256 in checkpoints/README.md."""
+    manifest = yaml.safe_load((ROOT / 'checkpoints' / 'zoo.yaml').read_text())['families']
+    index = (ROOT / 'checkpoints' / 'README.md').read_text()
+    for task in manifest:
+        for path in (ROOT / 'checkpoints' / task.lower().replace('-', '_')).glob('*.pt'):
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+            assert f'`{digest[:12]}`' in index, path
+            assert path.with_suffix('.md').is_file(), path
