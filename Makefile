@@ -3,7 +3,7 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := source scripts/env.sh
 
-.PHONY: help setup demo test lint bench faults soak
+.PHONY: help setup demo test test-continual lint bench faults soak
 
 help:
 	@echo 'make demo   set up, then run the live demo'
@@ -12,6 +12,7 @@ help:
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
 	@echo 'make faults set up, then run the whole fault matrix (test/faults; make test skips its long rows)'
 	@echo 'make soak   set up, then run the three-node loop for an hour (RSS growth, step gaps)'
+	@echo 'make test-continual  the live continual run (swap + refusal; timing-dependent, not in make test)'
 
 setup:
 	@bash scripts/setup.sh
@@ -20,13 +21,16 @@ demo: setup
 	@$(ENV) && python -m zeus_ros.demo $(DEMO_ARGS)
 
 test: setup
-	@$(ENV) && ruff check . && python -m pytest -q -m 'not faults_only' $(PYTEST_ARGS)
+	@$(ENV) && ruff check . && python -m pytest -q -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
 
 lint: setup
 	@$(ENV) && ruff check .
 
 bench: setup
 	@$(ENV) && for b in benchmarks/bench_*.py; do echo "== $$b"; python "$$b" || exit 1; done
+
+test-continual: setup
+	@$(ENV) && python -m pytest -q -m continual_live test/test_continual_live.py $(PYTEST_ARGS)
 
 faults: setup
 	@$(ENV) && python -m pytest -q test/faults $(PYTEST_ARGS)

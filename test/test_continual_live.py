@@ -17,6 +17,7 @@ import sys
 import time
 
 from continual_fixtures import FULL_RUN_V0, WEAK_TASK, weak_checkpoint
+import pytest
 import yaml
 
 from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
@@ -46,6 +47,7 @@ def _history(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+@pytest.mark.continual_live  # timing-dependent on a loaded machine: `make test-continual`
 def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
         tmp_path: Path) -> None:
     require_ros()
