@@ -60,11 +60,13 @@ def adaptation_rows(seed: int, live: Sequence[Any], frozen: Sequence[Any],
 
 
 def _mean_se(values: Sequence[float]) -> tuple[float, float, int]:
-    array = np.asarray(values, dtype=float)
-    if not len(array):
+    """report.mean_se with the count; the s.e. of fewer than two values is NaN (not shown)."""
+    from zeus_ros.offline.evaluation.report import mean_se
+
+    if not len(values):
         return float('nan'), float('nan'), 0
-    se = float(array.std(ddof=1) / np.sqrt(len(array))) if len(array) > 1 else float('nan')
-    return float(array.mean()), se, len(array)
+    mean, se = mean_se(list(values))
+    return mean, (se if len(values) > 1 else float('nan')), len(values)
 
 
 def summarize_adaptation(rows: Sequence[AdaptationRow], every: int) -> tuple[dict[str, Any], str]:

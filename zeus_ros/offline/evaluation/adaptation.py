@@ -26,7 +26,8 @@ __all__ = ['AdaptationReport', 'format_reports', 'main', 'measure_adaptation']
 
 EVAL_SEED = 200
 """Initial states that chose nothing: the archive cards and the zoo's choice used seed 100."""
-SPLITS = ('train', 'extrapolation')
+MEASURED_SPLITS = ('train', 'extrapolation')
+"""Where adapting is reported: the training values and beyond the range (of sim_bridge SPLITS)."""
 
 
 @dataclass
@@ -42,20 +43,13 @@ class AdaptationReport:
     sensitivity: float = float('nan')
 
 
-def mean_se(values: Sequence[float]) -> tuple[float, float]:
-    """Mean and standard error (ddof 1) of per-value numbers."""
-    array = np.asarray(values, dtype=float)
-    se = float(array.std(ddof=1) / np.sqrt(len(array))) if len(array) > 1 else float('nan')
-    return float(array.mean()), se
-
-
 def _per_value(rows: Sequence[dict[str, Any]], episodes: int) -> np.ndarray:
     returns = np.array([row['return'] for row in rows], dtype=float)
     return returns.reshape(-1, episodes).mean(axis=1)
 
 
 def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_SEED,
-                       splits: Sequence[str] = SPLITS, progress: bool = True
+                       splits: Sequence[str] = MEASURED_SPLITS, progress: bool = True
                        ) -> AdaptationReport:
     """Returns and value of adaptation of one checkpoint on its family's splits."""
     from zeus_ros.learning.inference import InferenceAgent
@@ -65,6 +59,7 @@ def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_
         overall_mean_context,
         split_values,
     )
+    from zeus_ros.offline.evaluation.report import mean_se
 
     agent = InferenceAgent.from_checkpoint(checkpoint)
     report = AdaptationReport(Path(checkpoint), agent.task, agent.method)
@@ -96,12 +91,12 @@ def fmt(pair: tuple[float, float] | None) -> str:
 
 def format_reports(reports: Sequence[tuple[str, AdaptationReport]]) -> str:
     """A table, one row per checkpoint, and a sentence per learned-context checkpoint."""
-    header = ['', 'method', *(f'return {s}' for s in SPLITS),
-              *(f'adaptation {s}' for s in SPLITS), 'sensitivity']
+    header = ['', 'method', *(f'return {s}' for s in MEASURED_SPLITS),
+              *(f'adaptation {s}' for s in MEASURED_SPLITS), 'sensitivity']
     rows = [header]
     for label, r in reports:
-        rows.append([label, r.method, *(fmt(r.returns.get(s)) for s in SPLITS),
-                     *(fmt(r.adaptation.get(s)) for s in SPLITS),
+        rows.append([label, r.method, *(fmt(r.returns.get(s)) for s in MEASURED_SPLITS),
+                     *(fmt(r.adaptation.get(s)) for s in MEASURED_SPLITS),
                      '-' if np.isnan(r.sensitivity) else f'{r.sensitivity:.3f}'])
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
     lines = ['  '.join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip()

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from sim_bridge.presets import SPLITS
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
@@ -57,7 +58,7 @@ METRICS = ('mean_return', 'switching_return', 'mean_latency', 'spearman', *DIAGN
 REFERENCE, BOUND = 'no_context', 'oracle'
 """Headroom = BOUND - REFERENCE: what knowing the context is worth on a split."""
 RUN_NAME = re.compile(r'^(?P<method>.+)_s(?P<seed>\d+)$')
-SPLIT_ORDER = ('train', 'interpolation', 'extrapolation')
+SPLIT_ORDER = SPLITS
 METHOD_ORDER = METHODS
 
 
