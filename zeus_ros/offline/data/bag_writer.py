@@ -23,6 +23,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from ruamel.yaml import YAML
 
+from zeus_ros.atomic_file import injected_write_fault
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
@@ -141,6 +142,7 @@ class StepBagWriter:
         self._conns: dict[str, Connection] = {}
         self._writer: Writer | None = None
         try:
+            injected_write_fault(self.path)
             writer = JazzyWriter(self.path, version=BAG_VERSION, storage_plugin=_PLUGINS[storage])
             writer.open()
         except Exception as exc:  # rosbags raises WriterError, OSError

@@ -18,7 +18,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
-from zeus_ros.atomic_file import replace_text
+from zeus_ros.atomic_file import injected_write_fault, replace_text
 from zeus_ros.offline.data.bag_writer import (
     BAG_VERSION,
     ROS_DISTRO,
@@ -100,6 +100,7 @@ class DurableBagWriter(StepBagWriter):
         writer = self._writer
         if writer is None:
             return
+        injected_write_fault(self.file_path)
         storage = writer.storage
         if isinstance(storage, McapWriter):
             if storage.chunk.msgs:  # a chunk holding only schemas waits for its first message

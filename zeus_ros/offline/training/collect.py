@@ -9,8 +9,10 @@ from __future__ import annotations
 import argparse
 from collections import deque
 from collections.abc import Callable
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
+import shutil
 import signal
 import sys
 import time
@@ -112,6 +114,28 @@ def parse_schedule(text: str) -> dict[str, Any]:
             raise ValueError(f'--schedule {text!r}: option {item!r} is not KEY=VALUE')
         config[key] = yaml.safe_load(value)
     return config
+
+
+def disk_full_line(error: BaseException, bag: Path, writer: StepBagWriter | None,
+                   steps: int) -> str | None:
+    """A full disk as one line (None for any other error); the half-written bag is removed.
+
+    The space needed is what the steps written so far took, scaled to all `steps`.
+    """
+    from zeus_ros.atomic_file import disk_full, free_space, size_text
+    from zeus_ros.offline.data.schema import TOPIC_STEP
+
+    if disk_full(error) is None:
+        return None
+    if writer is not None:
+        with contextlib.suppress(Exception):  # closing a bag on a full disk fails again
+            writer.close()
+    shutil.rmtree(bag, ignore_errors=True)
+    done = writer.counts.get(TOPIC_STEP, 0) if writer is not None else 0
+    need = (f'{steps} steps need about {size_text(writer.bytes_written * steps // done)}, '
+            if writer is not None and done else '')
+    return (f'no space left on the device writing {bag}: {need}{size_text(free_space(bag.parent))}'
+            ' free there; nothing was kept (the half-written bag is removed)')
 
 
 def next_bag_path(out: Path, *, append: bool) -> Path:
@@ -426,14 +450,21 @@ def main(argv: list[str] | None = None) -> int:
         return main_workers(args, schedule_config, bag)
     # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    args.out.mkdir(parents=True, exist_ok=True)
+    writer: StepBagWriter | None = None
     try:
+        args.out.mkdir(parents=True, exist_ok=True)
         with StepBagWriter(bag, storage=args.storage, pixels=args.pixels) as writer:
             stats = collect(env, task, policy, writer, args.steps, progress=not args.no_progress)
     except KeyboardInterrupt:
         print(f'zeus collect: interrupted; the steps written so far are in {bag}',
               file=sys.stderr)
         return 130
+    except Exception as error:  # a full disk is one line; anything else is a bug: traceback
+        line = disk_full_line(error, bag, writer, args.steps)
+        if line is None:
+            raise
+        print(f'zeus collect: {line}', file=sys.stderr)
+        return 2
     finally:
         task.close()
     print(f'wrote {stats.steps} steps ({stats.episodes} episode starts) to {stats.bag} in '

@@ -584,6 +584,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except Exception as error:  # torch wraps ENOSPC in a RuntimeError: look behind it
+        from zeus_ros.atomic_file import disk_full_message
+
+        full = disk_full_message(error, args.out)
+        if full is None:
+            raise
+        print(f'zeus train: {full}; --resume continues from the last checkpoint written',
+              file=sys.stderr)
+        return 2
     finally:
         warnings.showwarning = default_showwarning
     return 0
