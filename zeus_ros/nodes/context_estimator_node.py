@@ -30,6 +30,14 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.handshake import handshake_of
+from zeus_ros.nodes.health import (
+    ClockWatch,
+    WindowCounts,
+    latency_problems,
+    latency_specs,
+    rate_problems,
+)
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
@@ -46,7 +54,10 @@ SPECS: dict[str, Spec] = {
     'device': Spec('cpu', 'torch device'),
     'torch_threads': Spec(1, 'torch intra-op threads', low=1),
     **HEARD_SPECS,
+    **latency_specs(20.0, 200.0, 'observation -> context'),
 }
+WARN_COUNTS = ('gaps', 'rejected', 'foreign')
+"""Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
 
 
 class ContextEstimatorNode(Node):
@@ -62,23 +73,29 @@ class ContextEstimatorNode(Node):
         self.history = self.agent.new_history()
         self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
                                           self.params['image_size'])
-        self.counts = dict.fromkeys(('estimates', 'gaps', 'missing_steps', 'rejected'), 0)
+        self.counts = dict.fromkeys(('estimates', 'gaps', 'missing_steps', 'rejected',
+                                     'foreign'), 0)
         self._prev: tuple[int, np.ndarray] | None = None
         self._missing_in_episode = 0
         self._rate = RateMeter()
         self._latency = LatencyMeter()  # observation in -> context out
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self._window = WindowCounts()
+        self._clock_watch = ClockWatch(self)
+        handshake_of(self).sha256 = lambda: self.loaded.sha256  # the start hello's checkpoint
         expected = self.params['expected_subscribers']
+        # Steps, observations (and true contexts) from one step source only: paired by GID.
         self.inputs = StepInputs(
             self, self.decoder, self._on_step, self._reject, mode=self.params['mode'],
             extra_parts=['truth'] if self.agent.needs_true_context else [],
-            subscribe=not expected)
+            subscribe=not expected, source=self.params['step_source'])
         self.assembler = self.inputs.assembler
         readers = []  # what must hear its publisher before the steps are subscribed
         if self.agent.needs_true_context:
-            readers.append((self.create_subscription(
+            readers.append((self.inputs.subscription(
                 ContextTruth, TOPICS.CONTEXT_TRUTH,
-                lambda m: self.assembler.add(m.step, 'truth', m), step_qos()), 1))
+                lambda m: self.assembler.add(m.step, 'truth', m), step_qos(), 'true contexts'),
+                1))
         # Publisher last: a peer that sees it knows the subscriptions above already exist;
         # with expected_subscribers the steps are subscribed once the readers hear the context.
         self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT,
@@ -212,12 +229,19 @@ class ContextEstimatorNode(Node):
 
     def _publish_diagnostics(self) -> None:
         (p50, p99), _ = self._latency.report()
+        self.counts['foreign'] = self.inputs.refused
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{p50:.2f}',
                   'latency_p99_ms': f'{p99:.2f}', 'dropped': self.assembler.dropped,
                   'late': self.assembler.late, **self.counts}
-        problems = [f'{self.counts[key]} {key}' for key in ('gaps', 'rejected')
-                    if self.counts[key]]
-        self._pub_diag.publish(diagnostics_message(self, 'context', values, problems))
+        grown = self._window.delta(self.counts)
+        problems = self._window.problems(grown, WARN_COUNTS)
+        _, stalled = rate_problems(self._rate.rate, grown['estimates'], 0.0, 0.0,
+                                   self.counts['estimates'] > 0, what='estimates')
+        slow, late = latency_problems(p99, self.params['latency_warn_ms'],
+                                      self.params['latency_error_ms'], 'observation -> context')
+        errors = [*self.inputs.errors(), *self._clock_watch.errors(), *stalled, *late]
+        self._pub_diag.publish(diagnostics_message(self, 'context', values, [*problems, *slow],
+                                                   errors))
         if self._novelty is not None:
             # WARN while most steps of the last second lay outside the training contexts.
             novel, usual = self._novel_steps
@@ -231,6 +255,12 @@ class ContextEstimatorNode(Node):
                 self, 'context novelty', {'novelty': f'{last:.3f}',
                                           'threshold': f'{threshold:.3f}',
                                           'novel_steps': novel, 'steps': novel + usual}, warn))
+
+
+    def destroy_node(self) -> None:
+        """The step subscriptions are ours (not rclpy's): they go before the node."""
+        self.inputs.destroy()
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -22,6 +22,7 @@ from zeus_ros.nodes.common import (
     unmatched_readers,
 )
 from zeus_ros.nodes.params import Spec
+from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -32,6 +33,9 @@ HEARD_SPECS: dict[str, Spec] = {
     'expected_subscribers': Spec(0, "subscribe to the steps only once this node's output has "
                                  'matched this many subscribers (launchers set it: readers + '
                                  'recorder), so none misses step 0; 0: do not wait', low=0),
+    'step_source': Spec('', 'node whose steps and observations are used, e.g. /r1/sim_bridge '
+                        '(empty: the only publisher of zeus/step when the first step arrives); '
+                        'any other publisher is refused and an ERROR (docs/security.md)'),
     'subscriber_timeout': Spec(20.0, 'seconds to wait for expected_subscribers (and for the '
                                'step source and the inputs to match); then log what is still '
                                'short and subscribe anyway', low=0.0),
@@ -71,6 +75,10 @@ class ObservationDecoder:
 class StepInputs:
     """Subscribes a node to StepFeedback and its observation topic; assembles them per step.
 
+    Both come from one step source only, paired by publisher GID and node name (`source`, the
+    `step_source` parameter, or the only publisher of the steps; senders.py): messages of any
+    other publisher are refused unread and counted (`refused`), and `errors()` names it.
+
     `on_step` receives StepParts with 'feedback' (the StepFeedback) and 'obs' (receipt time,
     validated raw array), plus any `extra_parts` the node adds itself through `assembler.add`.
     A message that fails validation goes to `on_reject(step, topic, error)` and is dropped.
@@ -80,7 +88,8 @@ class StepInputs:
     def __init__(self, node: Node, decoder: ObservationDecoder,
                  on_step: Callable[[StepParts], None],
                  on_reject: Callable[[int, str, ValueError], None], *, mode: str,
-                 extra_parts: Sequence[str] = (), subscribe: bool = True) -> None:
+                 extra_parts: Sequence[str] = (), subscribe: bool = True,
+                 source: str = '') -> None:
         self.node = node
         self.decoder = decoder
         self.on_reject = on_reject
@@ -88,20 +97,57 @@ class StepInputs:
         self.assembler = StepAssembler(['feedback', 'obs', *extra_parts], on_step)
         self._join = StampJoin(lambda step, value: self.assembler.add(step, 'obs', value))
         self.subscribed = False
+        self.pairings: list[SenderPairing] = []
+        self._subscriptions: list[SenderSubscription] = []
+        self._steps = self.pairing(TOPICS.STEP, 'steps', source)
         if subscribe:
             self.subscribe()
+
+    def pairing(self, topic: str, what: str, source: str = '') -> SenderPairing:
+        """A pairing on `topic` with the step source (the first one made decides who it is)."""
+        first = self.pairings[0] if self.pairings else None
+        pairing = SenderPairing(self.node, self.node.resolve_topic_name(topic), source,
+                                what=what, setting='step_source', follow=first)
+        self.pairings.append(pairing)
+        return pairing
+
+    def subscription(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
+                     qos: Any, what: str) -> SenderSubscription:
+        """A subscription of the step source's `topic` (paired like the steps)."""
+        pairing = self._steps if topic == TOPICS.STEP else self.pairing(topic, what)
+        subscription = SenderSubscription(self.node, msg_type, topic, qos, callback,
+                                          admit=pairing.accepts)
+        self._subscriptions.append(subscription)
+        return subscription
+
+    @property
+    def refused(self) -> int:
+        """Messages refused from publishers other than the step source."""
+        return sum(pairing.refused for pairing in self.pairings)
+
+    def errors(self) -> list[str]:
+        """ERROR lines naming every other publisher on the step source's topics."""
+        return [line for pairing in self.pairings for line in pairing.errors()]
+
+    def destroy(self) -> None:
+        """Our subscriptions are waitables: they go before the node."""
+        for subscription in self._subscriptions:
+            subscription.destroy()
+        self._subscriptions.clear()
 
     def subscribe(self) -> None:
         """Subscribe to StepFeedback and the observation topic (once)."""
         if self.subscribed:
             return
         self.subscribed = True
-        node = self.node
-        node.create_subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos())
+        self._steps.pair()  # now, if the graph names the source; else at the first step
+        self.subscription(StepFeedback, TOPICS.STEP, self._on_feedback, step_qos(), 'steps')
         if self.decoder.obs_kind == 'pixels':
-            node.create_subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(self.mode))
+            self.subscription(Image, TOPICS.IMAGE, self._on_image, image_qos(self.mode),
+                              'frames')
         else:
-            node.create_subscription(StateVector, TOPICS.STATE, self._on_state, step_qos())
+            self.subscription(StateVector, TOPICS.STATE, self._on_state, step_qos(),
+                              'observations')
 
     def subscribe_when_heard(self, output: Any, expected: int, timeout: float,
                              readers: Sequence[tuple[Any, int]] = ()) -> None:

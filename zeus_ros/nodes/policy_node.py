@@ -39,7 +39,15 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
-from zeus_ros.nodes.meters import RateMeter
+from zeus_ros.nodes.handshake import handshake_of
+from zeus_ros.nodes.health import (
+    ClockWatch,
+    WindowCounts,
+    latency_problems,
+    latency_specs,
+    rate_problems,
+)
+from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
@@ -68,8 +76,14 @@ SPECS: dict[str, Spec] = {
     'frozen_context': Spec('', 'comma-separated context values used at every step instead of '
                            'the live estimate (value of adaptation); empty: live context',
                            live=True),
+    'context_source': Spec('', 'node whose contexts are used, e.g. /r1/context_estimator '
+                           '(empty: the only publisher of zeus/context at the first context); '
+                           'any other is refused and an ERROR (docs/security.md)'),
     **HEARD_SPECS,
+    **latency_specs(40.0, 200.0, 'observation -> action'),
 }
+WARN_COUNTS = ('stale', 'safe', 'rejected', 'mismatched', 'foreign')
+"""Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
 
 
 class PolicyNode(Node):
@@ -113,18 +127,27 @@ class PolicyNode(Node):
         self._episode_start = 0  # step of the current episode's first observation
         self._first_context: int | None = None  # first context's step since start / redeploy
         self._rate = RateMeter()
-        self._started = time.monotonic()
+        self._latency = LatencyMeter()  # observation in -> action out
+        self._received: tuple[int, float] | None = None  # the newest observation's step, time
+        self._first_step_at: float | None = None  # "no context for N s" counts from here
+        self._window = WindowCounts()
+        self._clock_watch = ClockWatch(self)
+        handshake_of(self).sha256 = lambda: '' if self.loaded is None else self.loaded.sha256
 
         mode = self.params['mode']
         self._pub: Any = None
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        # Steps and observations from one step source only (paired by GID and name, as the
+        # contexts below): another publisher on them is refused, counted and an ERROR.
         self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
-                                 mode=mode, subscribe=not self.params['expected_subscribers'])
+                                 mode=mode, subscribe=not self.params['expected_subscribers'],
+                                 source=self.params['step_source'])
         self.assembler = self.inputs.assembler
-        # Contexts come from one estimator only (the only publisher, by GID; followed when it
-        # restarts): another publisher on zeus/context is refused, counted and an ERROR.
+        # Contexts come from one estimator only (the only publisher, by GID; followed through
+        # the handshake when it restarts): another publisher is refused, counted and an ERROR.
         self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.CONTEXT),
-                                      what='contexts', setting='')
+                                      self.params['context_source'], what='contexts',
+                                      setting='context_source')
         self._sub_context = SenderSubscription(
             self, ContextEstimate, TOPICS.CONTEXT, step_qos(depth=100), self._on_context,
             admit=self._senders.accepts) if self.needs_context else None
@@ -255,6 +278,9 @@ class PolicyNode(Node):
             self._expire_waiting()
         if feedback.first:
             self._episode_start = parts.step
+        self._received = (parts.step, parts.parts['obs'][0])
+        if self._first_step_at is None:
+            self._first_step_at = self._received[1]
         wanted = self._wanted_context(parts.step)
         if not self.needs_context:
             self._act(parts.step, feedback, obs, np.zeros(0, np.float32), 'fresh')
@@ -289,7 +315,10 @@ class PolicyNode(Node):
         self._waiting = None
         self._deadline_timer.cancel()
         newest = self._newest_context
-        last_seen = self._started if newest is None else newest[0]
+        # From the last context, or from the first step: not from node start (a node that
+        # waited a minute for its peers has not been without a context for a minute).
+        first = self._first_step_at if self._first_step_at is not None else time.monotonic()
+        last_seen = first if newest is None else newest[0]
         if newest is None or time.monotonic() - last_seen > self.params['context_timeout']:
             self._publish(step, feedback, self._safe_action(), 'safe')
             self.get_logger().warning(
@@ -326,20 +355,32 @@ class PolicyNode(Node):
         self.counts['actions'] += 1
         self.counts[kind] += 1
         self._rate.tick()
+        if self._received is not None and self._received[0] == step:
+            self._latency.add(time.monotonic() - self._received[1])
+            self._received = None
 
     def _publish_diagnostics(self) -> None:
-        self.counts['foreign'] = self._senders.refused
+        self.counts['foreign'] = self._senders.refused + self.inputs.refused
+        (p50, p99), _ = self._latency.report()
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
-                  'context_lag': self.params['context_lag'], **self.counts}
-        problems = [f'{self.counts[key]} {key}' for key in
-                    ('stale', 'safe', 'rejected', 'mismatched', 'foreign') if self.counts[key]]
-        errors = self._senders.errors() if self.needs_context else []
-        self._pub_diag.publish(diagnostics_message(self, 'actions', values, problems, errors))
+                  'context_lag': self.params['context_lag'], 'latency_p50_ms': f'{p50:.2f}',
+                  'latency_p99_ms': f'{p99:.2f}', **self.counts}
+        grown = self._window.delta(self.counts)
+        problems = self._window.problems(grown, WARN_COUNTS)
+        _, stalled = rate_problems(self._rate.rate, grown['actions'], 0.0, 0.0,
+                                   self.counts['actions'] > 0, what='actions')
+        slow, late = latency_problems(p99, self.params['latency_warn_ms'],
+                                      self.params['latency_error_ms'], 'observation -> action')
+        errors = [*(self._senders.errors() if self.needs_context else []),
+                  *self.inputs.errors(), *self._clock_watch.errors(), *stalled, *late]
+        self._pub_diag.publish(diagnostics_message(self, 'actions', values, [*problems, *slow],
+                                                   errors))
 
     def destroy_node(self) -> None:
         """The context subscription is ours (not rclpy's): it goes before the node."""
         if self._sub_context is not None:
             self._sub_context.destroy()
+        self.inputs.destroy()
         super().destroy_node()
 
 

@@ -6,12 +6,15 @@ A robot must be driven by its own policy only. DDS lets any process on the domai
 (rclpy#1466 adds it in later releases), so `SenderSubscription` takes each message through
 rcl's serialized take with ctypes, which fills the whole message info, and deserializes it with
 rclpy. `SenderPairing` then pairs the topic with one publisher of the ROS graph (a configured
-node, or the only publisher at start-up), follows that node when it restarts (a new GID, the
-same name), refuses and counts everything else, and names every other publisher once.
+node, or the only publisher at start-up), refuses and counts everything else, and names every
+other publisher once. A paired node that restarts (a new GID, the same name) is followed only
+through the explicit handshake of handshake.py (a new start nonce, the same checkpoint, the
+launch key's proof), never by its name alone.
 
-This is a guard against mistakes and stray processes, not access control: a process that
-takes the paired node's name after it died is believed. The real answer is SROS2 (enclaves
-and a permissions file that lets only the policy publish `zeus/action`): docs/security.md.
+This is a guard against mistakes and stray processes, not access control: without a launch
+key, a process running our own node code under the paired node's name after it died is
+believed. The real answer is SROS2 (enclaves and a permissions file that lets only the policy
+publish `zeus/action`): docs/security.md.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ from rclpy.serialization import deserialize_message
 from rclpy.type_support import check_is_valid_msg_type
 from rclpy.waitable import NumberOfEntities, Waitable
 
+from zeus_ros.nodes.handshake import Hello, handshake_of
+
 if TYPE_CHECKING:
     from rclpy.callback_groups import CallbackGroup
     from rclpy.event_handler import SubscriptionEventCallbacks
@@ -34,11 +39,15 @@ if TYPE_CHECKING:
     from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
 
-__all__ = ['PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'SenderSubscription', 'publisher_gid']
+__all__ = ['INTRODUCTION_S', 'PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'SenderSubscription',
+           'publisher_gid']
 
 _GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
 PAIRING_SETTLE_S = 0.5
 """Seconds the action publishers must stay the same before a bridge pairs with the only one."""
+INTRODUCTION_S = 3.0
+"""Seconds a newcomer under the paired node's name has to complete the handshake (its hello
+may come after its first messages) before it is named as an impostor."""
 _TAKE_OK = 0
 _TAKE_EMPTY = 401  # RCL_RET_SUBSCRIPTION_TAKE_FAILED: nothing to take
 _UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
@@ -244,30 +253,56 @@ class SenderPairing:
     """Which publisher of a topic may drive this node; counts and names everyone else.
 
     `expected` ('' or a fully qualified node name such as /r1/policy) says whom to pair with;
-    empty means the only publisher on the topic when `pair()` is called (start-up); `setting`
-    names the parameter that sets it, for messages ('' when the node has none). A paired
-    node that restarts publishes under a new GID: its new publisher (same node name) is paired
-    once the old one has left the graph or has been silent for `takeover_after` seconds (a
-    killed process stays in the graph until its DDS lease ends, ~20 s). Everything else is
-    refused (`refused` counts it) and named once.
+    empty means the node `follow` (another pairing of this node, e.g. the steps for the
+    observations) paired with, else the only publisher on the topic when `pair()` is called
+    (start-up); `setting` names the parameter that sets it, for messages ('' when the node
+    has none). The pair is agreed by publisher GID and node name, and with the hello the node
+    sent at its start (handshake.py). A paired node that restarts publishes under a new GID:
+    its new publisher (same node name) is paired once the old one has left the graph or has
+    been silent for `takeover_after` seconds (a killed process stays in the graph until its
+    DDS lease ends), and only when its hello passes `Handshake.introduces`. Everything else
+    is refused (`refused` counts it) and named once.
     """
 
     def __init__(self, node: Node, topic: str, expected: str = '', what: str = 'messages',
-                 takeover_after: float = 1.0, setting: str = 'action_sender') -> None:
+                 takeover_after: float = 1.0, setting: str = 'action_sender',
+                 follow: SenderPairing | None = None) -> None:
         self._node = node
         self.topic = topic
-        self.expected = expected
+        self._expected = expected
+        self.follow = follow
         self.what = what
         self.setting = setting
         self.paired: Sender | None = None
         self.refused = 0
         self.takeover_after = takeover_after
+        self._handshake = handshake_of(node)
+        self._agreed: Hello | None = None  # the paired node's hello (its start nonce)
         self._heard = time.monotonic()
         self._retired: set[bytes] = set()  # earlier paired publishers (a restarted node's)
         self._graph: dict[bytes, Sender] = {}
         self._graph_at = -1.0
         self._named: set[bytes] = set()
+        self._newcomers: dict[bytes, float] = {}  # same-name GIDs: first seen (monotonic)
+        self._why: dict[bytes, str] = {}  # why a same-name newcomer was not re-paired
         self._settling: tuple[frozenset[bytes], float] = (frozenset(), 0.0)
+
+    @property
+    def expected(self) -> str:
+        """The node to pair with: the configured one, else the followed pairing's node."""
+        if self._expected:
+            return self._expected
+        if self.follow is not None and self.follow.paired is not None:
+            return self.follow.paired.node
+        return ''
+
+    def agreed(self) -> Hello | None:
+        """The hello of the paired node (its newest: a live redeploy updates its sha256)."""
+        if self.paired is not None:
+            hello = self._handshake.hello_of(self.paired.gid)
+            if hello is not None:
+                self._agreed = hello
+        return self._agreed
 
     def publishers(self, max_age: float = 0.0) -> dict[bytes, Sender]:
         """The topic's publishers from the graph, re-read when older than `max_age` seconds."""
@@ -310,6 +345,7 @@ class SenderPairing:
                         f' or set {self.setting} to the node to follow' if self.setting
                         else ''))
         self.paired = candidates[0]
+        self._agreed = None
         self._heard = time.monotonic()
         self._node.get_logger().info(
             f'paired with {self.paired} on {self.topic}: only its {self.what} are applied')
@@ -330,11 +366,14 @@ class SenderPairing:
             self._heard = time.monotonic()
             if old is not None:
                 self._retired.add(old.gid)
+                self._agreed = self._handshake.hello_of(sender.gid)
                 self._node.get_logger().warning(
-                    f'{sender} now drives {self.topic}: {old.node} restarted')
+                    f'{sender} now drives {self.topic}: {old.node} restarted (handshake: new '
+                    f'start nonce, checkpoint sha256 {self._agreed.sha256[:12] or "(none)"})'
+                    if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
         self.refused += 1
-        if sender is not None:
+        if sender is not None and not self._introducing(sender):
             self._name_once(sender)
         return False
 
@@ -346,11 +385,23 @@ class SenderPairing:
         return self._successor(sender, graph)
 
     def _successor(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
-        """The paired node under a new GID, its old publisher gone or silent: a restart."""
-        if self.paired is None or sender.node != self.paired.node:
+        """The paired node under a new GID, its old publisher gone or silent, introduced."""
+        if self.paired is None or sender.node != self.paired.node or \
+                sender.gid in self._retired:
             return False
         silent = time.monotonic() - self._heard >= self.takeover_after
-        return self.paired.gid not in graph or silent
+        if self.paired.gid in graph and not silent:
+            return False
+        why = self._handshake.introduces(sender.gid, sender.node, self.agreed())
+        if why is not None:
+            self._why[sender.gid] = why
+            self._newcomers.setdefault(sender.gid, time.monotonic())
+        return why is None
+
+    def _introducing(self, sender: Sender) -> bool:
+        """A newcomer under the paired name still within INTRODUCTION_S of its handshake."""
+        first = self._newcomers.get(sender.gid)
+        return first is not None and time.monotonic() - first < INTRODUCTION_S
 
     def others(self) -> list[Sender]:
         """Publishers on the topic besides the paired one (each is named once in the log)."""
@@ -358,7 +409,7 @@ class SenderPairing:
         if self.paired is None:  # one publisher is the one to pair with; more are ambiguous
             return list(graph.values()) if len(graph) > 1 else []
         found = [s for gid, s in graph.items() if gid not in self._retired
-                 and gid != self.paired.gid and not self._successor(s, graph)]
+                 and gid != self.paired.gid and not self._introducing(s)]
         for sender in found:
             self._name_once(sender)
         return found
@@ -366,14 +417,20 @@ class SenderPairing:
     def errors(self) -> list[str]:
         """The /diagnostics ERROR line while other publishers exist (empty: none)."""
         others = self.others()
-        return [f'{len(others)} other publisher(s) on {self.topic}: '
-                f'{", ".join(map(str, others))}; their {self.what} are refused'] if others else []
+        if not others:
+            return []
+        named = ', '.join(f'{s}' + (f' [same name as the paired node: {self._why[s.gid]}]'
+                                    if s.gid in self._why else '') for s in others)
+        return [f'{len(others)} other publisher(s) on {self.topic}: {named}; their '
+                f'{self.what} are refused']
 
     def _name_once(self, sender: Sender) -> None:
         if sender.gid in self._named or not sender.node:  # named once the graph knows it
             return
         self._named.add(sender.gid)
         paired = self.paired or self.expected or 'nobody yet'
+        why = self._why.get(sender.gid)
         self._node.get_logger().error(
             f'a second publisher on {self.topic}: {sender}; its {self.what} are refused '
-            f'(paired with {paired}). Use SROS2 to keep it off the domain (docs/security.md)')
+            f'(paired with {paired})' + (f'; under the paired name but {why}' if why else '')
+            + '. Use SROS2 to keep it off the domain (docs/security.md)')

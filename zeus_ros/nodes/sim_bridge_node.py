@@ -38,6 +38,8 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.handshake import handshake_of
+from zeus_ros.nodes.health import ClockWatch, WindowCounts, latency_problems, rate_problems
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
@@ -70,7 +72,18 @@ SPECS: dict[str, Spec] = {
                           'action publisher at step 0); others are refused (docs/security.md)'),
     'log_every': Spec(0, 'log step, episode and context every N steps (0: never)',
                       live=True, low=0),
+    'expected_rate': Spec(0.0, "/diagnostics: steps per second expected (0: the task's control "
+                          'rate, realtime: control_rate); slower by more than rate_tolerance: '
+                          'WARN', live=True, low=0.0),
+    'rate_tolerance': Spec(0.1, '/diagnostics: fraction the rate may fall short of (realtime: '
+                           'also exceed) expected_rate', live=True, low=0.0, high=1.0),
+    'latency_warn_ms': Spec(0.0, '/diagnostics: WARN when observation -> action p99 exceeds it '
+                            '(0: one control period)', live=True, low=0.0),
+    'latency_error_ms': Spec(0.0, '/diagnostics: ERROR when observation -> action p99 exceeds '
+                             'it (0: five control periods)', live=True, low=0.0),
 }
+WARN_COUNTS = ('timeouts', 'rejected', 'stale', 'unexpected', 'foreign')
+"""Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
 
 
 class SimBridgeNode(Node):
@@ -117,6 +130,9 @@ class SimBridgeNode(Node):
         from diagnostic_msgs.msg import DiagnosticArray
 
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self._window = WindowCounts()
+        self._clock_watch = ClockWatch(self, own=self._pub_clock)
+        handshake_of(self)  # the start hello: how a restart of this node is told apart
         # Only the paired sender's actions get through (by publisher GID); a deep reader
         # history keeps its action while a flood from elsewhere is drained and counted.
         self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.ACTION),
@@ -322,13 +338,26 @@ class SimBridgeNode(Node):
 
     def _publish_diagnostics(self) -> None:
         self.counts['foreign'] = self._senders.refused
-        problems = [f'{self.counts[key]} {key}' for key in
-                    ('timeouts', 'rejected', 'stale', 'foreign') if self.counts[key]]
-        errors = self._senders.errors()
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
                   **self._latency.diagnostics_values(), **self.counts}
+        problems, errors = self._checks(float(values['latency_p99_ms']))
         self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems, errors))
+
+    def _checks(self, p99_ms: float) -> tuple[list[str], list[str]]:
+        """(WARN, ERROR) lines: faults of the window, rate, latency, other senders and clocks."""
+        grown = self._window.delta(self.counts)
+        problems = self._window.problems(grown, WARN_COUNTS)
+        period = self._period if self.mode == 'realtime' else self.env.task.agent_period
+        expected = self.params['expected_rate'] or 1.0 / period
+        warn, error = rate_problems(self._rate.rate, grown['steps'], expected,
+                                    self.params['rate_tolerance'], self._started,
+                                    upper=self.mode == 'realtime')
+        slow, late = latency_problems(p99_ms, self.params['latency_warn_ms'] or period * 1e3,
+                                      self.params['latency_error_ms'] or 5 * period * 1e3,
+                                      'observation -> action')
+        errors = [*self._senders.errors(), *self._clock_watch.errors(), *error, *late]
+        return [*problems, *warn, *slow], errors
 
     def destroy_node(self) -> None:
         """The action subscription is ours (not rclpy's): it goes before the node."""
