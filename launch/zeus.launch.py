@@ -5,6 +5,8 @@ r"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder), se
         checkpoint:=/path/to/ckpt.pt params_file:=/path/to/params.yaml log_level:=debug
     ros2 launch zeus_ros zeus.launch.py single_process:=true   # the loop's nodes in one process
     ros2 launch zeus_ros zeus.launch.py continual:=true   # record, retrain, gate, swap live
+    ros2 launch zeus_ros zeus.launch.py namespace:=r1 use_sim_time:=true clock:=namespace
+        # a second simulated system beside another: its own /r1/clock
 
 Runs from any folder with only the installed files: the params file defaults to
 share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's
@@ -13,6 +15,8 @@ folder, then the package share. Arguments, defaults and parameter overrides come
 `ros2 launch zeus_ros zeus.launch.py --show-args` lists the arguments. Any node but the recorder
 and the continual trainer exiting shuts the whole launch down. Discovery scope and domain come
 from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID before launching).
+Every node gets the launch's pairing key ($ZEUS_PAIRING_KEY, kept if already set): a restarted
+peer is re-paired only when its start hello proves it (docs/security.md).
 """
 
 from launch import LaunchContext, LaunchDescription
@@ -30,7 +34,7 @@ def launch_nodes(context: LaunchContext) -> list:
     values = {argument.name: LaunchConfiguration(argument.name).perform(context)
               for argument in launch_defaults.ARGUMENTS}
     plan = launch_defaults.plan_from_arguments(values)
-    env = dds_env()
+    env = {**dds_env(), **launch_defaults.launch_env()}
     actions = []
     if plan.contained:
         # No name, namespace or parameters on the container itself: each node inside gets its
@@ -47,6 +51,7 @@ def launch_nodes(context: LaunchContext) -> list:
         node = Node(package=launch_defaults.PACKAGE, executable=spec.executable,
                     name=spec.name, namespace=plan.namespace or None,
                     parameters=[str(plan.params_file), spec.parameters],
+                    remappings=plan.remappings,
                     ros_arguments=['--log-level', plan.log_level], output='screen',
                     additional_env=env)
         actions.append(node)

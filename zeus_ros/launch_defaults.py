@@ -19,12 +19,39 @@ import yaml
 
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
-__all__ = ['AGENT_NODES', 'ARGUMENTS', 'BACKGROUND', 'CONTAINER', 'CONTAINER_EXECUTABLE',
-           'CONTAINER_MODULE', 'CONTAINER_NO_INTRA', 'LOG_LEVELS', 'NODES', 'PACKAGE', 'TRAINER',
-           'LaunchArgument',
-           'LaunchPlan', 'NodePlan', 'default_params_file', 'param_args', 'parse_bool', 'plan',
-           'plan_from_arguments', 'resolve_path', 'ros_arg_value', 'share_dir', 'start_args',
-           'start_parameters', 'task_overrides', 'zoo_checkpoint']
+__all__ = [
+    'AGENT_NODES',
+    'ARGUMENTS',
+    'BACKGROUND',
+    'CLOCK_CHOICES',
+    'CONTAINER',
+    'CONTAINER_EXECUTABLE',
+    'CONTAINER_MODULE',
+    'CONTAINER_NO_INTRA',
+    'LOG_LEVELS',
+    'NODES',
+    'PACKAGE',
+    'PAIRINGS',
+    'TRAINER',
+    'LaunchArgument',
+    'LaunchPlan',
+    'NodePlan',
+    'clock_topic',
+    'default_params_file',
+    'launch_env',
+    'pairing_parameters',
+    'param_args',
+    'parse_bool',
+    'plan',
+    'plan_from_arguments',
+    'resolve_path',
+    'ros_arg_value',
+    'share_dir',
+    'start_args',
+    'start_parameters',
+    'task_overrides',
+    'zoo_checkpoint',
+]
 
 PACKAGE = 'zeus_ros'
 NODES: dict[str, str] = {
@@ -89,6 +116,9 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    '/clock and /diagnostics stay global)'),
     LaunchArgument('use_sim_time', 'false', 'every node runs on /clock, which sim_bridge '
                    'publishes'),
+    LaunchArgument('clock', 'global', 'where the simulation clock goes: global (/clock), '
+                   'namespace (<namespace>/clock: several simulated systems in one domain, '
+                   'each on its own time) or an absolute topic; every node is remapped'),
     LaunchArgument('params_file', '', 'ROS 2 params file for all nodes (empty: the installed '
                    'share/zeus_ros/params/zeus.yaml)'),
     LaunchArgument('task', '', "task family to run (empty: the params file's): sim_bridge runs "
@@ -149,6 +179,13 @@ class LaunchPlan:
     nodes: tuple[NodePlan, ...]
     single_process: bool = False
     intra_process: bool = True
+    clock: str = ''
+    """The clock topic every node is remapped to ('': /clock)."""
+
+    @property
+    def remappings(self) -> list[tuple[str, str]]:
+        """(from, to) remaps of every node: the clock, when it is not /clock."""
+        return [('/clock', self.clock)] if self.clock else []
 
     @property
     def contained(self) -> tuple[NodePlan, ...]:
@@ -175,7 +212,36 @@ class LaunchPlan:
         args = ['--params-file', str(self.params_file)]
         if self.namespace:
             args += ['-r', f'__ns:={self.namespace}']
+        for source, target in self.remappings:
+            args += ['-r', f'{source}:={target}']
         return [*args, *param_args(node.parameters), '--log-level', self.log_level]
+
+
+CLOCK_CHOICES = ('global', 'namespace')
+
+
+def clock_topic(clock: str, namespace: str) -> str:
+    """The clock topic `clock` names in `namespace` ('' for /clock); ValueError says why not.
+
+    global: /clock, ROS's one clock; namespace: <namespace>/clock, so two simulated systems in
+    one domain each run on their own time (a second publisher on a clock is an ERROR on
+    /diagnostics); an absolute topic: that topic.
+    """
+    value = clock.strip()
+    if value in ('', 'global', '/clock'):
+        return ''
+    if value == 'namespace':
+        if not namespace:
+            raise ValueError('clock:=namespace (--clock namespace) needs a namespace '
+                             '(namespace:=r1 / --namespace r1)')
+        return f'{namespace}/clock'
+    parts = value.split('/')
+    if not value.startswith('/') or not all(
+            part and (part[0].isalpha() or part[0] == '_')
+            and all(c.isalnum() or c == '_' for c in part) for part in parts[1:]):
+        raise ValueError(f'clock {value!r}: choose {" or ".join(CLOCK_CHOICES)}, or an '
+                         'absolute topic name such as /r1/clock')
+    return value
 
 
 def param_args(values: Mapping[str, Any]) -> list[str]:
@@ -366,6 +432,42 @@ def start_parameters(name: str, group: Sequence[str]) -> dict[str, int | list[st
     return {}
 
 
+PAIRINGS: dict[str, dict[str, tuple[str, ...]]] = {
+    'sim_bridge': {'action_sender': ('policy',)},
+    'robot_bridge': {'action_sender': ('policy',)},
+    'context_estimator': {'step_source': tuple(sorted(STEP_SOURCES))},
+    'policy': {'step_source': tuple(sorted(STEP_SOURCES)),
+               'context_source': ('context_estimator',)},
+}
+"""Per node, the parameter naming each peer it pairs with, and who in a group that peer is."""
+
+
+def pairing_parameters(name: str, group: Sequence[str], namespace: str = '') -> dict[str, str]:
+    """The fully qualified peers node `name` pairs with in `group` (senders.py), by parameter.
+
+    Named by the launch rather than found at start: a stray publisher that happens to be the
+    only one when a node starts can then never be paired with.
+    """
+    found = {}
+    for key, peers in PAIRINGS.get(name, {}).items():
+        peer = next((other for other in group if other in peers), None)
+        if peer is not None:
+            found[key] = f'{namespace}/{peer}'
+    return found
+
+
+def launch_env() -> dict[str, str]:
+    """What a launch adds to its nodes' environment: one pairing key for the whole group.
+
+    With it a node re-pairs with a restarted peer only when the peer's start hello proves the
+    key (nodes/handshake.py); a key already in the environment is kept (several launches
+    that must pair with each other share it).
+    """
+    from zeus_ros.nodes.handshake import KEY_ENV, new_key
+
+    return {KEY_ENV: os.environ.get(KEY_ENV) or new_key()}
+
+
 def start_args(name: str, group: Sequence[str]) -> list[str]:
     """start_parameters as `-p` arguments: for nodes started one by one (the demo, tests)."""
     return param_args(start_parameters(name, group))
@@ -385,6 +487,7 @@ def plan(
     single_process: bool = False,
     intra_process: bool = True,
     continual: bool = False,
+    clock: str = '',
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -398,7 +501,9 @@ def plan(
     only) whether the container's nodes hand each other messages in process. `task` runs
     another family than the params file's: its demo schedule on sim_bridge, its zoo checkpoint
     on the agent nodes (unless `checkpoint` is given). `continual` records and adds the
-    continual trainer, pointed at the recorder's output and the agents' checkpoint.
+    continual trainer, pointed at the recorder's output and the agents' checkpoint. `clock`
+    moves the simulation clock of every node (`clock_topic`). Each node is told whom it pairs
+    with (`pairing_parameters`) unless the params file names one.
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -427,11 +532,15 @@ def plan(
     if task and not checkpoint:
         checkpoint = str(family_overrides.pop('checkpoint'))
     ns = namespace.strip().strip('/')
+    clock_to = clock_topic(clock, f'/{ns}' if ns else '')
     planned = []
     loop = [name for name in names if name != TRAINER]
     for name in names:
         overrides: dict[str, Any] = {}
         overrides.update(start_parameters(name, loop))
+        overrides.update({key: value for key, value in
+                          pairing_parameters(name, loop, f'/{ns}' if ns else '').items()
+                          if not any(s.get(key) for s in _node_sections(params, name))})
         for key in PATH_PARAMETERS.get(name, ()):
             if key == 'checkpoint' and checkpoint:
                 overrides[key] = str(resolve_path(checkpoint, None, 'checkpoint'))
@@ -450,7 +559,8 @@ def plan(
         planned = _continual_plan(planned, params, task)
     return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
                       log_level=log_level.lower(), nodes=tuple(planned),
-                      single_process=single_process, intra_process=intra_process)
+                      single_process=single_process, intra_process=intra_process,
+                      clock=clock_to)
 
 
 def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: str
@@ -500,4 +610,4 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                 robot=parse_bool('robot', get['robot']),
                 single_process=parse_bool('single_process', get['single_process']),
                 intra_process=parse_bool('intra_process', get['intra_process']),
-                continual=parse_bool('continual', get['continual']))
+                continual=parse_bool('continual', get['continual']), clock=get['clock'])

@@ -289,6 +289,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--namespace', default='',
                         help='run the group in this namespace (zeus/* topics move with it; '
                         '/clock and /diagnostics stay global)')
+    parser.add_argument('--clock', default='global',
+                        help='with --sim-time: global (/clock), namespace (<namespace>/clock: '
+                        'several simulated systems in one domain) or an absolute topic')
     parser.add_argument('--sim-time', action='store_true',
                         help='every node sets use_sim_time (sim_bridge publishes /clock)')
     parser.add_argument('--single-process', action='store_true',
@@ -308,14 +311,15 @@ def main(argv: list[str] | None = None) -> int:
             checkpoint=args.checkpoint, task=args.task, record=args.record,
             log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
-            intra_process=not args.no_intra_process, continual=args.continual)
+            intra_process=not args.no_intra_process, continual=args.continual,
+            clock=args.clock)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2
     print(f'[zeus launch] params {launch.params_file}; ' + '; '.join(
         f'{node.name} {node.parameters}' for node in launch.nodes if node.parameters),
         flush=True)
-    env = ros_env(args.domain_id)
+    env = {**ros_env(args.domain_id), **launch_defaults.launch_env()}  # + the pairing key
     if args.no_progress:
         return run_group(plan_processes(launch), env, args.timeout)
     from zeus_ros.launch_progress import Progress

@@ -41,6 +41,8 @@ from zeus_ros.nodes.common import (
     steady_timer,
     step_qos,
 )
+from zeus_ros.nodes.handshake import handshake_of
+from zeus_ros.nodes.health import ClockWatch, WindowCounts, latency_problems, rate_problems
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.robot_io import (
@@ -98,6 +100,12 @@ SPECS: dict[str, Spec] = {
     'observers': Spec([''], 'names of the nodes that must subscribe to zeus/step before step 0 '
                       '(launchers: the group; empty: min_observers alone counts)', live=True),
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
+    'rate_tolerance': Spec(0.1, '/diagnostics: fraction the step rate may miss control_rate by '
+                           'before it WARNs', live=True, low=0.0, high=1.0),
+    'latency_warn_ms': Spec(0.0, '/diagnostics: WARN when observation -> action p99 exceeds it '
+                            '(0: one control period)', live=True, low=0.0),
+    'latency_error_ms': Spec(0.0, '/diagnostics: ERROR when observation -> action p99 exceeds '
+                             'it (0: five control periods)', live=True, low=0.0),
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',
           'rejected_inputs', 'bad_rewards', 'foreign')
@@ -159,6 +167,9 @@ class RobotBridgeNode(Node):
         self._pub_truth = self.create_publisher(ContextTruth, TOPICS.CONTEXT_TRUTH, qos)
         self._pub_state = self.create_publisher(StateVector, TOPICS.STATE, qos)
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self._window = WindowCounts()
+        self._clock_watch = ClockWatch(self)
+        handshake_of(self)  # the start hello: how a restart of this node is told apart
         # Only the paired policy drives the robot (by publisher GID, as sim_bridge does); a deep
         # reader history keeps its action while a flood from elsewhere is drained and counted.
         self._senders = SenderPairing(self, self.resolve_topic_name(TOPICS.ACTION),
@@ -387,14 +398,22 @@ class RobotBridgeNode(Node):
 
     def _publish_diagnostics(self) -> None:
         self.counts['foreign'] = self._senders.refused
-        problems = [f'{self.counts[key]} {key}' for key in COUNTS[3:] if self.counts[key]]
-        others = self._senders.others()
-        errors = [f'{len(others)} other publisher(s) on {self._senders.topic}: '
-                  f'{", ".join(map(str, others))}; their actions are refused'] if others else []
         values = {'task': self.spec.task, 'rate_hz': f'{self._rate.rate:.1f}',
                   'action_sender': str(self._senders.paired),
                   **self._latency.diagnostics_values(), **self.counts}
-        self._pub_diag.publish(diagnostics_message(self, 'robot loop', values, problems, errors))
+        grown = self._window.delta(self.counts)
+        problems = self._window.problems(grown, COUNTS[3:])
+        warn, stalled = rate_problems(self._rate.rate, grown['steps'],
+                                      self.params['control_rate'], self.params['rate_tolerance'],
+                                      self._started, upper=True)
+        ms = self.period * 1e3
+        slow, late = latency_problems(float(values['latency_p99_ms']),
+                                      self.params['latency_warn_ms'] or ms,
+                                      self.params['latency_error_ms'] or 5 * ms,
+                                      'observation -> action')
+        errors = [*self._senders.errors(), *self._clock_watch.errors(), *stalled, *late]
+        self._pub_diag.publish(diagnostics_message(self, 'robot loop', values,
+                                                   [*problems, *warn, *slow], errors))
 
     def close(self) -> None:
         """Say how far the loop got."""
