@@ -2,10 +2,14 @@
 
 Every child gets loopback-only discovery and one shared domain id, its output is streamed with
 a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node of the control
-loop exits: a non-zero exit names the node that died. Logging never stops control: a recorder
-that dies is restarted into a new bag (up to 3 times) while the loop keeps running, and the
-gap is reported. Exit status: 0 clean, 1 a node died or failed to stop, 3 the loop ran but the
-recording has gaps (the unfinished bag is named; `zeus recover` closes it). Nodes, parameters
+loop exits for good: a non-zero exit names the node that died. A dead context estimator, policy
+or recorder is restarted (by default up to 3 times per 60 s, after a 1 s back-off that doubles;
+per node from the params file's `/**/zeus_launch` section or --respawn, zeus_ros/respawn.py)
+while the bridge applies its safe action; logging never stops control: the recorder restarts
+into a new bag, a recorder that cannot write retries on its own, and every gap is reported.
+Exit status: 0 clean, 1 a node died for good or failed to stop, 3 the loop ran but degraded (a
+node was restarted or the recording has gaps; an unfinished bag is named, `zeus recover`
+closes it). Nodes, parameters
 and defaults come from `zeus_ros.launch_defaults`, exactly as for `ros2 launch zeus_ros
 zeus.launch.py`: without --params the installed share/zeus_ros/params/zeus.yaml applies, from
 any folder.
@@ -36,14 +40,22 @@ from zeus_ros.launch_defaults import (
     LaunchPlan,
 )
 from zeus_ros.processes import ros_env, start_node, stop_nodes
+from zeus_ros.respawn import (
+    DEFAULT_POLICIES,
+    RespawnPolicy,
+    RespawnState,
+    parse_cli,
+    policies_from_params,
+)
 
-RECORDER_RESPAWNS = 3
-"""How often a recorder that dies is restarted before the loop runs on unrecorded."""
 BAD_PARAMETERS = 2
 """A node's exit status for parameters it refused at start (run_node)."""
 RECORDING_GAPS = 3
-"""Exit status of a run whose control loop was fine but whose recording has gaps."""
+"""Exit status of a run whose control loop ran to its end degraded: a node was restarted or the
+recording has gaps."""
 _RECORDING_TO = re.compile(r'recording \d+ topics to (.+) \((?:mcap|sqlite3)\)')
+_NOT_RECORDED = re.compile(r'not recorded: (\d+ steps \(.*?\)) \(')
+"""The recorder's closing line for steps it could not write (disk full, permission)."""
 
 RECORDER_DRAIN_S = 0.5
 """Pause between the producers' exit and the recorder's signal: DDS may still be delivering
@@ -59,6 +71,8 @@ class NodeProcess:
     process: subprocess.Popen[bytes] | None = None
     reader: threading.Thread | None = None
     lines: list[str] = field(default_factory=list)
+    restart_at: float | None = None
+    """Monotonic time of a restart waiting out its back-off (None: none pending)."""
 
 
 def node_argv(name: str, params_file: Path | None, extra: Sequence[str] = ()) -> list[str]:
@@ -95,12 +109,16 @@ class Supervisor:
     """Starts a group of nodes and stops all of them together."""
 
     def __init__(self, nodes: list[NodeProcess], env: dict[str, str],
-                 out: IO[str] = sys.stdout) -> None:
+                 out: IO[str] = sys.stdout,
+                 policies: dict[str, RespawnPolicy] | None = None) -> None:
         self.nodes = nodes
         self.env = env
         self.out = out
         self.started = time.monotonic()
         self.gaps: list[str] = []  # one line per recorder death: when, why, which bag
+        self.restarts: list[str] = []  # one line per restart of a node of the loop
+        self.respawns = {name: RespawnState(policy) for name, policy in
+                         (DEFAULT_POLICIES if policies is None else policies).items()}
 
     def start(self) -> None:
         """Start every node in order (sim_bridge first: it waits for its peers)."""
@@ -123,6 +141,11 @@ class Supervisor:
         while True:
             for node in list(self.nodes):  # _respawn may drop a node
                 assert node.process is not None
+                if node.restart_at is not None:  # dead, its back-off running
+                    if time.monotonic() >= node.restart_at:
+                        node.restart_at = None
+                        self._start(node)
+                    continue
                 code = node.process.poll()
                 if code is None:
                     continue
@@ -138,10 +161,42 @@ class Supervisor:
                 if node.name in RECORDS_OTHERS and others and code != BAD_PARAMETERS:
                     self._respawn(node, code)
                     continue
+                if code not in (0, BAD_PARAMETERS) and self._restart_loop_node(node, code):
+                    continue
                 return node.name, code
             if deadline is not None and time.monotonic() > deadline:
                 return None, 0
             time.sleep(0.1)
+
+    def _delay(self, node: NodeProcess) -> float | None:
+        """Seconds before restarting `node` (its policy's back-off); None: not again."""
+        state = self.respawns.get(node.name)
+        return None if state is None else state.next_delay(time.monotonic())
+
+    def _restart_loop_node(self, node: NodeProcess, code: int) -> bool:
+        """A node of the loop crashed: restart it after its back-off if its policy allows.
+
+        Meanwhile the bridge applies its safe action (no action within its action_timeout).
+        """
+        delay = self._delay(node)
+        when = time.monotonic() - self.started
+        if delay is None:
+            state = self.respawns.get(node.name)
+            if state is not None and state.policy.limit:
+                print(f'[zeus launch] {node.name} died with exit code {code}, more than '
+                      f'{state.policy.text()}: not restarting it again', file=sys.stderr,
+                      flush=True)
+            return False
+        if node.reader is not None:
+            node.reader.join(timeout=2)
+        state = self.respawns[node.name]
+        self.restarts.append(f'{node.name} died at {when:.1f} s (exit code {code}), restarted')
+        print(f'[zeus launch] {node.name} died with exit code {code}; the loop keeps running '
+              f'on the safe action; restarting it in {delay:g} s (restart {len(state.deaths)}; '
+              f'{state.policy.text()})', file=sys.stderr, flush=True)
+        node.lines = []
+        node.restart_at = time.monotonic() + delay
+        return True
 
     def _respawn(self, node: NodeProcess, code: int) -> None:
         """Logging must not stop control: report the dead recorder, restart it into a new bag."""
@@ -155,7 +210,8 @@ class Supervisor:
             bag = f'its bag {bags[-1]} is closed'
         else:
             bag = f'its bag {bags[-1]} is unfinished: `zeus recover {bags[-1]}`'
-        respawn = len(self.gaps) < RECORDER_RESPAWNS
+        delay = self._delay(node)
+        respawn = delay is not None
         self.gaps.append(f'{node.name} died at {when:.1f} s (exit code {code}); {bag}')
         base = re.sub(r'_respawn\d+$', '', bags[-1]) if bags else ''
         new_output = f'{base}_respawn{len(self.gaps)}' if bags else ''
@@ -163,14 +219,27 @@ class Supervisor:
               f'running; {bag}; ' + (
                   f'restarting it into {new_output or "a new bag"} (steps until it records '
                   'again are not in any bag)' if respawn else
-                  f'not restarting it again ({RECORDER_RESPAWNS} restarts): the rest of the '
+                  f'not restarting it again ({self._policy_text(node)}): the rest of the '
                   'run is not recorded'), file=sys.stderr, flush=True)
         if not respawn:
             self.nodes.remove(node)
             return
         node.argv = [*node.argv, '-p', f'output:={new_output}'] if new_output else node.argv
         node.lines = []
-        self._start(node)
+        node.restart_at = time.monotonic() + (delay or 0.0)
+
+    def _policy_text(self, node: NodeProcess) -> str:
+        state = self.respawns.get(node.name)
+        return 'never restarted' if state is None else state.policy.text()
+
+    def unrecorded(self) -> list[str]:
+        """What each recorder said it could not write (its closing 'not recorded:' line)."""
+        found = []
+        for node in self.nodes:
+            if node.name in RECORDS_OTHERS:
+                found += [f'{node.name} could not write {m.group(1)}'
+                          for m in map(_NOT_RECORDED.search, node.lines) if m]
+        return found
 
     def stop(self, grace: float = 10.0) -> dict[str, int]:
         """SIGINT every running node, wait up to `grace` seconds, then SIGTERM, then SIGKILL.
@@ -193,6 +262,8 @@ class Supervisor:
         # step they published, not just those that arrived before the signal.
         producers = [node for node in self.nodes if node.name not in RECORDS_OTHERS]
         recorders = [node for node in self.nodes if node.name in RECORDS_OTHERS]
+        for node in self.nodes:  # a restart still waiting: nothing to stop, none to start
+            node.restart_at = None
         for group in (producers, recorders):
             if group is recorders and recorders and producers:
                 time.sleep(RECORDER_DRAIN_S)  # the producers' last messages are still in flight
@@ -213,7 +284,8 @@ class Supervisor:
 
 
 def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | None = None,
-              out: IO[str] = sys.stdout) -> int:
+              out: IO[str] = sys.stdout,
+              policies: dict[str, RespawnPolicy] | None = None) -> int:
     """Start, supervise and stop a group; the exit code tells whether a node failed.
 
     SIGTERM (systemd, `timeout`, a supervisor) stops the group like Ctrl-C: the children run in
@@ -221,7 +293,7 @@ def run_group(nodes: list[NodeProcess], env: dict[str, str], timeout: float | No
     is taken explicitly too (as `ros2 launch` does): a launcher started as a background job of a
     script inherits SIGINT ignored and would otherwise never stop on `kill -INT`.
     """
-    supervisor = Supervisor(nodes, env, out)
+    supervisor = Supervisor(nodes, env, out, policies)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _interrupt)
     try:
@@ -248,12 +320,15 @@ def _interrupt(_signum: int, _frame: object) -> None:
 
 
 def _with_gaps(supervisor: Supervisor, status: int) -> int:
-    """Name every recording gap at the end; a clean run with gaps exits RECORDING_GAPS."""
-    if not supervisor.gaps:
-        return status
-    print(f'[zeus launch] the recording has {len(supervisor.gaps)} gap(s): '
-          + '; '.join(supervisor.gaps), file=sys.stderr, flush=True)
-    return status or RECORDING_GAPS
+    """Name every recording gap and restart at the end; a clean run with any exits 3."""
+    gaps = supervisor.gaps + supervisor.unrecorded()
+    if gaps:
+        print(f'[zeus launch] the recording has {len(gaps)} gap(s): ' + '; '.join(gaps),
+              file=sys.stderr, flush=True)
+    if supervisor.restarts:
+        print(f'[zeus launch] {len(supervisor.restarts)} restart(s): '
+              + '; '.join(supervisor.restarts), file=sys.stderr, flush=True)
+    return status or (RECORDING_GAPS if gaps or supervisor.restarts else 0)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -300,6 +375,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-intra-process', action='store_true',
                         help='with --single-process: messages between its nodes through DDS, '
                         'not handed over in process')
+    parser.add_argument('--respawn', action='append', default=[], metavar='NODE=N[/W[/B]]',
+                        help='restart NODE up to N times per W seconds (default 60), B seconds '
+                        'after it died (default 1, doubling); N=0: never. Over the params '
+                        "file's /**/zeus_launch respawn: section. Default: context_estimator, "
+                        'policy and recorder 3/60/1 (recorder 0.5 s), the bridges never')
     parser.add_argument('--no-progress', action='store_true',
                         help='no status line (steps, rate, episode, segment return; rewritten '
                         'in place on a terminal, a line every 10 s otherwise)')
@@ -313,6 +393,9 @@ def main(argv: list[str] | None = None) -> int:
             nodes=names, robot=args.robot, single_process=args.single_process,
             intra_process=not args.no_intra_process, continual=args.continual,
             clock=args.clock)
+        known = [*NODES, CONTAINER]
+        policies = parse_cli(args.respawn, known, policies_from_params(
+            launch_defaults.read_params(launch.params_file), known))
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2
@@ -321,12 +404,13 @@ def main(argv: list[str] | None = None) -> int:
         flush=True)
     env = {**ros_env(args.domain_id), **launch_defaults.launch_env()}  # + the pairing key
     if args.no_progress:
-        return run_group(plan_processes(launch), env, args.timeout)
+        return run_group(plan_processes(launch), env, args.timeout, policies=policies)
     from zeus_ros.launch_progress import Progress
 
     progress = Progress(env, launch.namespace)
     try:
-        return run_group(plan_processes(launch), env, args.timeout, out=progress.out)
+        return run_group(plan_processes(launch), env, args.timeout, out=progress.out,
+                         policies=policies)
     finally:
         progress.close()
 

@@ -10,14 +10,12 @@ the old checkpoint byte for byte the same.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
 import hashlib
-import os
 from pathlib import Path
-import shutil
 import subprocess
 
 import pytest
+from small_disk import SmallDisk, mount_tmpfs
 
 from zeus_ros.atomic_file import WRITE_FAULT_ENV
 from zeus_ros.offline.training import collect, train
@@ -27,44 +25,6 @@ from tiny_config import MINIMAL, write_config
 TASK = 'Cheetah-Run-v0'
 
 
-@dataclass
-class SmallDisk:
-    """A folder whose file system can be filled (`fill`) and freed (`free`) during a test."""
-
-    root: Path
-    mounted: bool
-    switch: Path
-
-    def fill(self) -> None:
-        """Leave about 4 KiB free: a filler file on the tmpfs, or the injection's switch."""
-        if self.mounted:
-            free = shutil.disk_usage(self.root).free
-            with (self.root / 'filler').open('wb') as handle:
-                handle.truncate(0)
-                handle.write(b'\0' * max(0, free - 4096))
-        else:
-            self.switch.write_text('ENOSPC')
-
-    def free(self) -> None:
-        """Give the space back."""
-        (self.root / 'filler').unlink(missing_ok=True)
-        self.switch.unlink(missing_ok=True)
-
-    @property
-    def how(self) -> str:
-        """What stands in for the full disk, for the test's report line."""
-        return 'a 2 MiB tmpfs' if self.mounted else f'{WRITE_FAULT_ENV} (no mount allowed)'
-
-
-def _mount_tmpfs(folder: Path, size: str) -> bool:
-    """Mount a tmpfs of `size` on `folder`; False where this user may not."""
-    if os.geteuid() != 0 or shutil.which('mount') is None:
-        return False
-    done = subprocess.run(['mount', '-t', 'tmpfs', '-o', f'size={size}', 'tmpfs', str(folder)],
-                          capture_output=True, check=False)
-    return done.returncode == 0
-
-
 @pytest.fixture
 def small_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[SmallDisk]:
     """A 2 MiB file system at tmp/disk (or the injection, armed by `fill`)."""
@@ -72,7 +32,7 @@ def small_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Smal
     root.mkdir()
     switch = tmp_path / 'write_fault'
     monkeypatch.setenv(WRITE_FAULT_ENV, str(switch))
-    mounted = _mount_tmpfs(root, '2m')
+    mounted = mount_tmpfs(root, '2m')
     try:
         yield SmallDisk(root, mounted, switch)
     finally:

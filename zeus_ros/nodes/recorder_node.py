@@ -5,6 +5,12 @@ Messages are taken raw (no deserialization) and written through the same bag sch
 crash-safe (mcap chunk out / sqlite3 commit, provisional metadata.yaml): after a SIGKILL,
 `zeus recover` restores everything but the last flush period. SIGINT / SIGTERM close the bag
 properly. Counts, step gaps (drops), bytes and flushes are on /diagnostics while recording.
+
+Logging never stops control: a bag that cannot be written (disk full, permission denied, a
+read-only or vanished folder) is an ERROR on the log and /diagnostics, the node keeps running,
+drops the bag (what it flushed stays recoverable) and tries a new one with back-off
+(`retry_s` doubling to `retry_max_s`). The steps it could not record are counted and named, as
+ranges, on /diagnostics and in its closing line ("not recorded: steps ...").
 """
 
 from __future__ import annotations
@@ -14,6 +20,8 @@ from dataclasses import dataclass
 from functools import partial
 import importlib
 from pathlib import Path
+import shutil
+import sqlite3
 import time
 from typing import TYPE_CHECKING, Any, cast
 
@@ -39,6 +47,7 @@ from zeus_ros.nodes.common import (
     unmatched_readers,
 )
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.unrecorded import Unrecorded
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.durable import DurableBagWriter
 from zeus_ros.offline.data.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
@@ -69,7 +78,14 @@ SPECS: dict[str, Spec] = {
                                 "(launchers set it; '': none)"),
     'publisher_timeout': Spec(20.0, 'seconds to wait for expected_publishers; then log what is '
                               'short and subscribe to the steps anyway', low=0.0),
+    'retry_s': Spec(1.0, 'first wait before a new bag after a write failed (disk full, '
+                    'permission); doubles per failed try', low=0.05, high=MAX_FLUSH_PERIOD_S),
+    'retry_max_s': Spec(30.0, 'longest wait between tries of a new bag', low=0.05,
+                        high=3600.0),
 }
+WRITE_ERRORS = (OSError, BagError, sqlite3.Error)
+"""What a bag write raises when the disk or folder fails us (sqlite3: 'database or disk is
+full'); anything else is a bug and ends the node."""
 RECORD_DEPTH = 1000
 """Reliable keep-last depth: what arrives while the recorder is held up (a slow flush, no CPU
 on a busy machine) waits here; with 100, a fast lockstep loop (a few hundred steps/s in one
@@ -142,6 +158,11 @@ class RecorderNode(Node):
         self._opened = time.monotonic()
         self._sources: dict[str, str] = {}
         """bag topic -> the name subscribed (relative: follows namespace and remaps)."""
+        self.unrecorded = Unrecorded(self.params['retry_s'], self.params['retry_max_s'])
+        self._heard_step = -1
+        """Highest step heard (written or not): where a range of unrecorded steps ends."""
+        self._flushed_step = -1
+        """Highest step heard at the last flush that succeeded: everything up to it is on disk."""
 
         # zeus/step last: a step producer that sees this subscription (min_observers) knows the
         # others exist, and it waits until its own publishers have matched them; this node
@@ -149,7 +170,7 @@ class RecorderNode(Node):
         # on both sides of every match).
         self._readers = {topic: self._subscribe(topic) for topic in self.topics
                          if topic != TOPIC_STEP}
-        self._open_next_bag()  # a start-up failure above leaves no empty bag behind
+        self._start_first_bag()  # a start-up failure above leaves no empty bag behind
         if TOPIC_STEP in self.topics and self.params['expected_publishers']:
             self._subscribe_steps_when_heard()
         elif TOPIC_STEP in self.topics:  # by hand: from whatever step it first hears
@@ -230,16 +251,27 @@ class RecorderNode(Node):
                              'directory; choose a new one (bags are never overwritten)')
 
     # -- recording --------------------------------------------------------------------------
+    def _start_first_bag(self) -> None:
+        """The first bag; a folder that cannot be written is a write failure, not bad params."""
+        try:
+            self._open_next_bag()
+        except WRITE_ERRORS as exc:
+            self._fail(exc)
+
     def _open_next_bag(self) -> None:
-        """Start bag OUTPUT/<name>_<NNN> (NNN counts splits from 000)."""
+        """Start bag OUTPUT/<name>_<NNN> (NNN counts splits and retries from 000).
+
+        Raises what the disk raises (WRITE_ERRORS); a bag folder it half made is removed.
+        """
         path = self.output / f'{self.output.name}_{len(self.bags):03d}'
         try:
             self.output.mkdir(parents=True, exist_ok=True)
             self._writer = DurableBagWriter(
                 path, storage=cast('Storage', self.storage), pixels=TOPIC_IMAGE in self.topics,
                 offered_qos=self._offered_qos)
-        except (BagError, OSError) as exc:
-            raise ValueError(f'recorder: parameter output={str(self.output)!r}: {exc}') from exc
+        except WRITE_ERRORS:
+            shutil.rmtree(path, ignore_errors=True)
+            raise
         self.bags.append(path)
         self._opened = time.monotonic()
         if len(self.bags) > 1:
@@ -274,8 +306,23 @@ class RecorderNode(Node):
                 closing.writer.flush()
 
     def _on_message(self, topic: str, data: bytes) -> None:
-        """Write one serialized message; count it and the steps it skipped."""
+        """Write one serialized message; count it and the steps it skipped.
+
+        While no bag can be written, the message is dropped and its step noted as unrecorded.
+        """
         step = step_from_cdr(data) if topic in STEP_TOPICS else None
+        if step is not None:
+            self._heard_step = max(self._heard_step, step)
+        if self._writer is None:  # failing: the loop goes on, this step is in no bag
+            if step is not None:
+                self.unrecorded.note(step)
+            return
+        try:
+            self._write(topic, data, step)
+        except WRITE_ERRORS as exc:
+            self._fail(exc)
+
+    def _write(self, topic: str, data: bytes, step: int | None) -> None:
         stamp = stamp_from_cdr(data)
         if step is not None and stamp is not None:
             self._recent[stamp] = step
@@ -315,14 +362,66 @@ class RecorderNode(Node):
         self.last_step[topic] = step  # a smaller step means a restarted simulator: follow it
 
     def _on_flush_timer(self) -> None:
-        """Make the bags crash-safe; close a split-off bag after its grace; split by duration."""
-        assert self._writer is not None
-        self._writer.flush()
+        """Make the bags crash-safe; close a split-off bag after its grace; split by duration.
+
+        While failing: try a new bag when the back-off is over.
+        """
         now = time.monotonic()
-        self._close_old(now)
-        duration = self.params['split_duration_s']
-        if duration and now - self._opened >= duration:
-            self._split()
+        if self._writer is None:
+            self._retry(now)
+            return
+        heard = self._heard_step
+        try:
+            self._writer.flush()
+            self._close_old(now)
+            duration = self.params['split_duration_s']
+            if duration and now - self._opened >= duration:
+                self._split()
+        except WRITE_ERRORS as exc:
+            self._fail(exc)
+            return
+        self._flushed_step = heard
+
+    def _fail(self, exc: BaseException) -> None:
+        """A bag write failed: ERROR, let go of every open bag, the next try after a back-off.
+
+        The steps since the last flush that succeeded are counted as unrecorded (a recovered
+        bag may hold a few of them); the node keeps running and never stops the loop.
+        """
+        bag = self.bags[-1] if self.bags and self._writer is not None else None
+        for writer in [c.writer for c in self._closing] + [self._writer]:
+            if writer is not None:
+                self.flushes += writer.flushes
+                writer.abandon()
+        self._closing.clear()
+        self._writer = None
+        heard = self._heard_step if self._heard_step > self._flushed_step else None
+        self.unrecorded.fail(str(exc), time.monotonic(), self._flushed_step + 1, heard)
+        kept = f'; `zeus recover {bag}` closes what it flushed' if bag else ''
+        self.get_logger().error(
+            f'cannot write {bag or self.output}: {exc}; the control loop is not affected, the '
+            f'steps from {self._flushed_step + 1} (the last flush) on are not recorded{kept}; '
+            'trying a new bag '
+            f'every {self.unrecorded.wait_s:g} s or more (at most {self.unrecorded.max_s:g} s)')
+
+    def _retry(self, now: float) -> None:
+        """Try a new bag once the back-off is over; say when recording goes on."""
+        if not self.unrecorded.retry_due(now):
+            return
+        try:
+            self._open_next_bag()
+        except WRITE_ERRORS as exc:
+            self.unrecorded.retry_failed(str(exc), now)
+            self.get_logger().error(
+                f'still cannot write {self.output}: {exc}; next try in '
+                f'{self.unrecorded.wait_s:g} s', throttle_duration_sec=10.0)
+            return
+        lost = self.unrecorded.recovered()
+        self._flushed_step = self._heard_step
+        self._first_step = self._heard_step + 1
+        self.get_logger().warning(
+            f'recording again into {self.bags[-1]}; not recorded so far: steps {lost} '
+            f'({self.unrecorded.steps} steps)')
 
     def _publish_diagnostics(self) -> None:
         open_writers = [c.writer for c in self._closing]
@@ -338,19 +437,32 @@ class RecorderNode(Node):
                 values[f'gaps {topic}'] = self.gaps[topic]
                 values[f'last_step {topic}'] = self.last_step.get(topic, '')
         problems = [f'{n} steps missing on {t}' for t, n in self.gaps.items() if n]
+        values['unrecorded steps'] = self.unrecorded.steps
+        values['unrecorded'] = self.unrecorded.summary()
+        values['write failures'] = self.unrecorded.failures
+        errors = [f'cannot write bags ({self.unrecorded.error}): {self.unrecorded.summary()} not '
+                  f'recorded so far, next try in '
+                  f'{max(0.0, self.unrecorded.retry_at - time.monotonic()):.1f} s'
+                  ] if self.unrecorded.failing else []
         try:
-            self._pub_diag.publish(diagnostics_message(self, 'bag', values, problems))
+            self._pub_diag.publish(diagnostics_message(self, 'bag', values, problems, errors))
         except Exception:  # rclpy's RCLError when SIGTERM shut the context down mid-callback
             if self.context.ok():
                 raise
 
     def close(self) -> None:
-        """Finalize the open bag (mcap footer, final metadata.yaml) and log the totals."""
-        self._close_old()
-        if self._writer is None:
-            return
-        self._writer.close()
-        self.flushes += self._writer.flushes
+        """Finalize the open bag (mcap footer, final metadata.yaml) and log the totals.
+
+        Steps that no bag holds (write failures) are named on a line of their own, which
+        `zeus launch` reports among the recording's gaps.
+        """
+        try:
+            self._close_old()
+            if self._writer is not None:
+                self._writer.close()
+                self.flushes += self._writer.flushes
+        except WRITE_ERRORS as exc:  # the disk failed at the very end: the bag stays provisional
+            self._fail(exc)
         self._writer = None
         gaps = {t: n for t, n in self.gaps.items() if n}
         self.get_logger().info(
@@ -358,6 +470,10 @@ class RecorderNode(Node):
             f'messages, {self.bytes_written} bytes, {self.flushes} flushes, '
             f'step gaps {gaps or "none"}'
         )
+        if self.unrecorded.ranges:
+            self.get_logger().error(
+                f'not recorded: {self.unrecorded.summary()} ({self.unrecorded.failures} write '
+                f'failure(s), last: {self.unrecorded.error or "recovered"})')
 
 
 def main(args: list[str] | None = None) -> int:

@@ -9,6 +9,7 @@ provisional metadata.yaml, so a killed recorder loses at most the data since its
 
 from __future__ import annotations
 
+import contextlib
 from io import StringIO
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -120,3 +121,21 @@ class DurableBagWriter(StepBagWriter):
             self.storage, self.file_path.name, topics, writer.min_timestamp,
             writer.max_timestamp, 'provisional'))
         self.flushes += 1
+
+    def abandon(self) -> None:
+        """Let go of a bag that cannot be written (disk full, permission), writing nothing more.
+
+        Its files stay as a crash leaves them: what was flushed and the provisional
+        metadata.yaml, which `zeus recover` closes. A close would write the footer and the
+        final metadata.yaml onto the failing disk, and could leave that metadata.yaml empty.
+        """
+        writer, self._writer = self._writer, None
+        if writer is None:
+            return
+        storage = writer.storage
+        handle = getattr(storage, 'bio', None)
+        with contextlib.suppress(Exception):
+            if handle is not None:  # the raw file: closing the buffer would write once more
+                getattr(handle, 'raw', handle).close()
+            elif isinstance(storage, Sqlite3Writer):
+                storage.conn.close()  # the open transaction is rolled back
