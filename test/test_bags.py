@@ -161,16 +161,24 @@ def test_truncated_bag_named(tmp_path: Path, storage: str) -> None:
 
 
 def test_unclosed_bag_named(tmp_path: Path) -> None:
-    """A bag folder without metadata.yaml: the error names the .mcap inside and both remedies."""
+    """A torn bag folder (no metadata.yaml, no mcap footer): the error names zeus recover.
+
+    (A complete mcap without metadata.yaml is another writer's: test_ingest_foreign.py.)
+    """
+    from test_ingest_foreign import cut_like_a_kill
+
+    from zeus_ros.offline.data import recover
+
     bag = _write_synthetic(tmp_path / 'killed', 12)
     (bag / 'metadata.yaml').unlink()
+    cut_like_a_kill(bag / 'killed.mcap')
     with pytest.raises(BagError, match=r'no metadata\.yaml') as info:
         ingest_bags(tmp_path)
     assert info.value.path == bag
     text = str(info.value)
     assert 'killed.mcap' in text and f'zeus recover {bag}' in text, text
-    assert str(bag / 'killed.mcap') in text  # ... which, passed as it says, reads
-    assert ingest_bags(bag / 'killed.mcap').num_transitions == 10
+    assert recover.main([str(bag)]) == 0  # ... which, run as it says, makes it readable
+    assert ingest_bags(bag).num_transitions == 10
 
 
 def test_bag_metadata_is_what_jazzy_writes(tmp_path: Path) -> None:

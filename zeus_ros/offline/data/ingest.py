@@ -29,6 +29,7 @@ from operator import attrgetter, itemgetter
 import os
 from pathlib import Path
 import re
+import struct
 import sys
 import time
 from typing import TYPE_CHECKING, Any
@@ -41,6 +42,7 @@ from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError, IngestError
 from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
 from zeus_ros.offline.data.frames import FrameStore
+from zeus_ros.offline.data.mcap_file import channel_qos, closed_by_writer, qos_text
 from zeus_ros.offline.data.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -261,14 +263,15 @@ def bag_topic(topic: str, namespace: str = '') -> str:
 
 
 def _without_metadata(path: Path) -> BagError:
-    """A bag folder without metadata.yaml: say what is inside and the two ways to read it."""
+    """A bag folder without metadata.yaml and no complete mcap: torn; say what `zeus recover` does.
+
+    (A complete mcap without metadata.yaml, closed by another writer, is read as it is.)
+    """
     files = sorted(path.glob('*.mcap')) + sorted(path.glob('*.db3'))
-    inside = ', '.join(f.name for f in files)
-    mcaps = [f for f in files if f.suffix == '.mcap']
-    read_file = f', or pass the file itself ({mcaps[0]}) to read it as it is' if mcaps else ''
-    return BagError(path, f'no metadata.yaml in this bag folder (the recorder did not close it: '
-                          f'killed?); it holds {inside}. Run `zeus recover {path}` to rebuild '
-                          f'the metadata{read_file}')
+    inside = ', '.join(f.name for f in files) or 'no .mcap or .db3 file'
+    return BagError(path, f'no metadata.yaml in this bag folder and no complete file (a mcap '
+                          f'without its footer: the recorder was killed or its disk filled); it '
+                          f'holds {inside}. Run `zeus recover {path}` to close it')
 
 
 def _no_zeus_topics(path: Path, topics: list[str], namespace: str) -> BagError:
@@ -294,15 +297,7 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     """Deserialize the zeus topics of one bag, reporting duplicates; raise BagError if broken."""
     cdc = codec()
     topics: dict[str, _Topic] = {t: _Topic() for t in _STEP_TOPICS}
-    if path.is_dir() and not (path / 'metadata.yaml').exists():
-        raise _without_metadata(path)
-    try:
-        reader = Reader(path)
-        reader.open()
-    except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
-        raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}; if a '
-                             f'crash cut it short, `zeus recover {path}` restores what was '
-                             'written') from exc
+    reader = _open_reader(path, report)
     count = 0
     raws: dict[str, list[bytes]] = {t: [] for t in _READ_TOPICS}
     frames: FrameStore | None = None
@@ -355,6 +350,55 @@ def _read_bag(path: Path, report: IngestReport, namespace: str = '') -> dict[str
     report.messages += count
     _check_counts(path, conns, read, report)
     return {'topics': topics, 'frames': frames}
+
+
+def _open_reader(path: Path, report: IngestReport) -> Reader:
+    """The bag's reader; the .mcap file itself where metadata.yaml cannot describe it.
+
+    A folder without metadata.yaml whose mcap its writer closed (another tool's recording) is
+    read as it is, not called cut short; one whose mcap has no footer is torn (`zeus recover`).
+    Where metadata.yaml and the file disagree on a topic's QoS, rosbags would leave that
+    topic's messages unread: the mismatch is reported (an issue, refused with --strict) and
+    the file is read with its own channels.
+    """
+    mcaps = sorted(path.glob('*.mcap')) if path.is_dir() else []
+    source = path
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        if len(mcaps) != 1 or not closed_by_writer(mcaps[0]):
+            raise _without_metadata(path)
+        source = mcaps[0]  # complete, closed by a writer that writes no metadata.yaml
+    try:
+        reader = Reader(source)
+        reader.open()
+    except Exception as exc:  # rosbags raises ReaderError, FileNotFoundError, yaml errors
+        raise BagError(path, f'cannot open bag (corrupt or not closed properly?): {exc}; if a '
+                             f'crash cut it short, `zeus recover {path}` restores what was '
+                             'written') from exc
+    if source is path and len(mcaps) == 1 and _qos_mismatches(path, mcaps[0], reader, report):
+        reader.close()
+        reader = Reader(mcaps[0])
+        reader.open()
+    return reader
+
+
+def _qos_mismatches(path: Path, mcap: Path, reader: Reader, report: IngestReport) -> bool:
+    """Report each topic whose QoS in metadata.yaml differs from its channel's in the file."""
+    try:
+        in_file = channel_qos(mcap)
+    except (OSError, ValueError, struct.error):  # a torn file: the read names it
+        return False
+    found = False
+    for conn in reader.connections:
+        listed = qos_text(list(conn.ext.offered_qos_profiles))
+        recorded = qos_text(in_file.get(conn.topic, []))
+        if conn.topic in in_file and listed != recorded:
+            found = True
+            report.issues.append(Issue(
+                str(path), conn.topic, None, 'qos',
+                f'metadata.yaml offers QoS {listed} but the file recorded {recorded}; rosbags '
+                f'pairs them by QoS and would read none of its messages: read from {mcap.name} '
+                'itself (fix or regenerate metadata.yaml to silence this)'))
+    return found
 
 
 def read_failure(path: Path, count: int | None, exc: Exception, report: IngestReport | None,

@@ -25,6 +25,7 @@ from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.offline.data.bag_errors import BagError
 from zeus_ros.offline.data.bag_writer import BAG_VERSION, JazzyWriter
 from zeus_ros.offline.data.durable import STATE_KEY, bag_metadata
+from zeus_ros.offline.data.mcap_file import closed_by_writer
 from zeus_ros.offline.data.schema import MSGTYPES, typestore
 
 if TYPE_CHECKING:
@@ -264,13 +265,16 @@ def _tally(report: RecoveryReport, messages: Iterable[tuple[str, bytes]],
 def bag_state(bag: Path) -> str | None:
     """How a bag was left, from its metadata.yaml: 'closed', 'recovered', 'provisional'.
 
-    'recovered': cut by a crash and rebuilt by `zeus recover`; 'unfinished': no metadata (not
-    closed); None when the metadata says nothing (not written by zeus).
+    'recovered': cut by a crash and rebuilt by `zeus recover`; 'unfinished': no metadata and
+    no complete file (not closed); None when the metadata says nothing (not written by zeus) or
+    a complete mcap has none (closed by another writer).
     """
     bag = bag.parent if bag.is_file() else bag
     meta = bag / 'metadata.yaml'
     if not meta.exists():
-        return 'unfinished'
+        mcaps = sorted(bag.glob('*.mcap'))
+        # A complete mcap another writer closed without a metadata.yaml is not cut short.
+        return None if len(mcaps) == 1 and closed_by_writer(mcaps[0]) else 'unfinished'
     try:
         info = YAML(typ='safe').load(meta.read_text('utf8'))['rosbag2_bagfile_information']
     except Exception:  # an unreadable metadata.yaml: ingest names what is wrong with it
