@@ -27,6 +27,8 @@ from rclpy.qos import (
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 
+from zeus_ros.nodes.shutdown import bounded, start_stop_limit
+
 if TYPE_CHECKING:
     from rclpy.context import Context
     from rclpy.node import Node
@@ -535,6 +537,13 @@ def params_file_errors(args: Sequence[str]) -> list[str]:
     return errors
 
 
+def _stop_signal(signals: list[int], signum: int) -> None:
+    """Note a stop signal for the spin loop; the first one bounds the whole stop."""
+    if not signals:
+        start_stop_limit()
+    signals.append(signum)
+
+
 def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = None,
               drain: float = 0.0) -> NoReturn:
     """`run_node` for several nodes in one process on one executor (a component container).
@@ -550,7 +559,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         _exit_now(2)
     signals: list[int] = []
     for stop_signal in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(stop_signal, lambda signum, _frame: signals.append(signum))
+        signal.signal(stop_signal, lambda signum, _frame: _stop_signal(signals, signum))
     # `kill -USR1 <pid>`: every thread's Python stack on stderr, the node running on; for a
     # node that does not stop or answer (a test times out on it and asks it).
     faulthandler.register(STACKS_SIGNAL, all_threads=True)
@@ -587,17 +596,19 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: list[str] | None = 
         if rclpy.ok():
             raise
     finally:
-        for node in nodes:  # as rclpy.spin leaves its executor
-            executor.remove_node(node)
-        if not isinstance(executor, SingleThreadedExecutor):
-            executor.shutdown()  # the events executor drops its rcl callbacks only here
-        # Destroyed first, then closed (close() may log its summary after its node is gone).
-        for node in nodes:
-            node.destroy_node()
+        with bounded():  # never hang here (shutdown.py): past the limit, stacks and exit 1
+            for node in nodes:  # as rclpy.spin leaves its executor
+                executor.remove_node(node)
+            if not isinstance(executor, SingleThreadedExecutor):
+                executor.shutdown()  # the events executor drops its rcl callbacks only here
+            # Destroyed first, then closed (close() may log its summary after its node is gone).
+            for node in nodes:
+                node.destroy_node()
         for node in nodes:
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
-        rclpy.try_shutdown()  # also finalizes ROS logging (log files flushed)
+        with bounded():
+            rclpy.try_shutdown()  # also finalizes ROS logging (log files flushed)
     codes = [int(getattr(node, 'exit_code', 0)) for node in nodes]
     _exit_now(next((code for code in codes if code), 0))
