@@ -62,7 +62,8 @@ def test_defaults_are_the_installed_params_and_checkpoint() -> None:
     assert [n.name for n in plan.nodes] == ['sim_bridge', 'context_estimator', 'policy']
     nodes = {n.name: n.parameters for n in plan.nodes}
     assert nodes['sim_bridge'] == {'min_observers': 2,
-                                   'observers': ['context_estimator', 'policy']}
+                                   'observers': ['context_estimator', 'policy'],
+                                   'action_sender': '/policy'}  # its pairing, by name
     assert nodes['context_estimator']['expected_subscribers'] == 1  # the policy
     assert nodes['policy']['expected_subscribers'] == 1  # sim_bridge
     for name in d.AGENT_NODES:
@@ -116,6 +117,34 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
             d.plan_from_arguments(bad)
 
 
+def test_clock_and_pairing_peers_follow_the_namespace(tmp_path: Path) -> None:
+    """clock:=namespace remaps every node's /clock into it; each node names its peers there.
+
+    A peer the params file names is left as the file says; a bad clock is one clear error.
+    """
+    from zeus_ros import launch_defaults as d
+
+    plan = d.plan_from_arguments({'namespace': 'r1', 'use_sim_time': 'true',
+                                  'clock': 'namespace', 'record': 'true'})
+    nodes = {n.name: n.parameters for n in plan.nodes}
+    assert plan.remappings == [('/clock', '/r1/clock')]
+    assert all(plan.ros_args(n)[4:6] == ['-r', '/clock:=/r1/clock'] for n in plan.nodes)
+    assert nodes['sim_bridge']['action_sender'] == '/r1/policy'
+    assert nodes['policy']['step_source'] == nodes['context_estimator']['step_source'] == \
+        '/r1/sim_bridge'
+    assert nodes['policy']['context_source'] == '/r1/context_estimator'
+    assert d.plan(clock='/sim/clock').remappings == [('/clock', '/sim/clock')]
+    assert d.plan().remappings == []
+    params = tmp_path / 'p.yaml'
+    params.write_text('/**/sim_bridge:\n  ros__parameters:\n    action_sender: /mine\n')
+    assert 'action_sender' not in d.plan(params_file=params, nodes=['sim_bridge']).nodes[0] \
+        .parameters
+    with pytest.raises(ValueError, match='needs a namespace'):
+        d.plan(clock='namespace')
+    with pytest.raises(ValueError, match='absolute topic'):
+        d.plan(clock='clock')
+
+
 def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
                                                               monkeypatch: Any) -> None:
     """`checkpoint: mine.pt` is the file beside the params file.
@@ -132,7 +161,8 @@ def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
     plan = d.plan(params_file='cfg/p.yaml', nodes=['sim_bridge', 'policy'])
     assert plan.params_file == params
     assert plan.nodes[1].parameters == {'checkpoint': str(tmp_path / 'cfg' / 'mine.pt'),
-                                        'expected_subscribers': 1}
+                                        'expected_subscribers': 1,
+                                        'step_source': '/sim_bridge'}
     params.write_text('policy:\n  ros__parameters:\n    checkpoint: typo.pt\n')
     with pytest.raises(ValueError, match=r"policy checkpoint .*'typo.pt' not found; looked "
                        rf'in: {tmp_path}/cfg/typo.pt, .*share.*'):

@@ -391,15 +391,19 @@ class SenderPairing:
             return False
         silent = time.monotonic() - self._heard >= self.takeover_after
         if self.paired.gid in graph and not silent:
-            return False
+            return False  # the paired node talks: this one is a second publisher, no restart
+        self._newcomers.setdefault(sender.gid, time.monotonic())  # its handshake's grace
         why = self._handshake.introduces(sender.gid, sender.node, self.agreed())
         if why is not None:
             self._why[sender.gid] = why
-            self._newcomers.setdefault(sender.gid, time.monotonic())
         return why is None
 
     def _introducing(self, sender: Sender) -> bool:
-        """A newcomer under the paired name still within INTRODUCTION_S of its handshake."""
+        """A same-name newcomer within INTRODUCTION_S of its handshake (a restart, perhaps).
+
+        Only one first seen while the paired node was silent or gone: beside a paired node
+        that talks, a same-name publisher is a second publisher at once.
+        """
         first = self._newcomers.get(sender.gid)
         return first is not None and time.monotonic() - first < INTRODUCTION_S
 
@@ -419,8 +423,10 @@ class SenderPairing:
         others = self.others()
         if not others:
             return []
-        named = ', '.join(f'{s}' + (f' [same name as the paired node: {self._why[s.gid]}]'
-                                    if s.gid in self._why else '') for s in others)
+        paired = self.paired.node if self.paired is not None else None
+        named = ', '.join(f'{s}' + (f' [same name as the paired node: '
+                                    f'{self._why.get(s.gid, "the paired publisher is alive")}]'
+                                    if s.node == paired else '') for s in others)
         return [f'{len(others)} other publisher(s) on {self.topic}: {named}; their '
                 f'{self.what} are refused']
 

@@ -1,0 +1,137 @@
+"""Fault matrix, pairing rows: every consumed topic has one sender; impostors are named.
+
+Real processes: sim_bridge, context_estimator and policy (a tiny checkpoint) in lockstep, and
+one after another, each while the loop runs: a foreign node named /policy while the real one
+is paused for 2.5 s (the issue's spoof: it drove 482 of 483 steps), a foreign node named
+/context_estimator stamping the pair's own checkpoint sha256, a node injecting observations
+and steps, and a second sim_bridge on the same names. None of their messages is used; each is
+an ERROR on /diagnostics naming it; the loop goes on with the real nodes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+import signal
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from live_fixtures import TASK, node, tiny_checkpoint
+from ros_harness import ProcessGroup, driver_node, spin_until
+
+pytestmark = pytest.mark.ros
+
+IMPOSTOR = Path(__file__).with_name('impostor.py')
+
+
+def _errors(diagnostics: list[Any], name: str) -> list[str]:
+    """Every ERROR message `name` (a node's fully qualified name) published."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    return [s.message for array in diagnostics for s in array.status
+            if s.name.startswith(f'{name}:') and s.level == DiagnosticStatus.ERROR]
+
+
+def _newest(diagnostics: list[Any], name: str) -> dict[str, str]:
+    found = [s for array in diagnostics for s in array.status if s.name.startswith(f'{name}:')]
+    return {kv.key: kv.value for kv in found[-1].values} if found else {}
+
+
+def _pose(group: ProcessGroup, probe: Any, label: str, *args: str) -> None:
+    """Run impostor.py with `args` to its end (the probe spins meanwhile)."""
+    process = group.start(label, [sys.executable, str(IMPOSTOR), *args])
+    assert spin_until(probe, lambda: process.poll() is not None, 60), group.log_text(label)
+    assert 'published' in group.log_text(label), group.log_text(label)
+
+
+def test_spoofed_injected_and_second_sources_are_refused_and_named(
+        ros_processes: ProcessGroup, tmp_path: Path) -> None:
+    """Name spoofing, context and observation injection, a second sim_bridge: all refused."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from impostor import INJECTED_STEP, MARK
+    from zeus_msgs.msg import Action, StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    sha256 = hashlib.sha256(checkpoint.read_bytes()).hexdigest()
+    ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}', 'min_observers:=2',
+                                           'action_timeout:=0.5'))
+    ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
+    policy = ros_processes.start('policy', node('policy', f'checkpoint:={checkpoint}'))
+    steps: list[StepFeedback] = []
+    actions: list[int] = []
+    diagnostics: list[Any] = []
+    started = time.monotonic()
+    with driver_node(ros_processes.domain_id) as probe:
+        probe.create_subscription(StepFeedback, TOPICS.STEP, steps.append, step_qos(200))
+        probe.create_subscription(Action, TOPICS.ACTION, lambda m: actions.append(m.step),
+                                  step_qos(200))
+        probe.create_subscription(DiagnosticArray, TOPICS.DIAGNOSTICS, diagnostics.append, 100)
+        assert spin_until(probe, lambda: len(steps) > 60, 90), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+        looping = time.monotonic()
+
+        # 1. A foreign /policy while the real one is paused (SIGSTOP) for 2.5 s.
+        spoof = ros_processes.start('fake_policy', [sys.executable, str(IMPOSTOR), 'policy',
+                                                    'action', '6'])
+        assert spin_until(probe, lambda: 'posing' in ros_processes.log_text('fake_policy'), 30)
+        spin_until(probe, lambda: False, 0.5)
+        os.kill(policy.pid, signal.SIGSTOP)
+        try:
+            spin_until(probe, lambda: False, 2.5)
+        finally:
+            os.kill(policy.pid, signal.SIGCONT)
+        assert spin_until(probe, lambda: spoof.poll() is not None, 30)
+        resumed = len(steps)
+        assert spin_until(probe, lambda: sum(m.action_status == m.ACTION_OK
+                                             for m in steps[resumed:]) > 20, 30), \
+            'the real policy did not drive again after its pause'
+
+        # 2. A foreign /context_estimator stamping the pair's own checkpoint sha256.
+        _pose(ros_processes, probe, 'fake_estimator', 'context_estimator', 'context', '2',
+              sha256)
+        # 3. Observations and steps injected by another node.
+        _pose(ros_processes, probe, 'injector', 'intruder', 'observation', '3')
+        # 4. A second sim_bridge on the same names (it stops after 5 unanswered steps).
+        second = ros_processes.start('sim_bridge2', node(
+            'sim_bridge', f'task:={TASK}', 'max_steps:=5', 'action_timeout:=0.3',
+            'peer_grace:=0.0'))
+        assert spin_until(probe, lambda: second.poll() is not None, 60), \
+            ros_processes.log_text('sim_bridge2')[-2000:]
+        before = len(steps)
+        assert spin_until(probe, lambda: len(steps) > before + 30, 30), 'the loop stopped'
+        spin_until(probe, lambda: False, 1.2)  # every node's next /diagnostics
+    ended = time.monotonic()
+
+    ours = [m for m in steps if m.step < INJECTED_STEP]
+    applied = np.asarray([m.applied_action for m in ours if len(m.applied_action) == 6])
+    marked = int(np.isclose(applied, MARK, atol=1e-6).all(axis=1).sum())
+    assert marked == 0, f'{marked} steps applied an impostor action'
+    assert not [s for s in actions if s >= INJECTED_STEP], 'the policy acted on an injection'
+    # The second bridge's own steps: none answered (they all waited out action_timeout).
+    log2 = ros_processes.log_text('sim_bridge2')
+    assert "'ok': 0" in log2 and "'timeouts': 6" in log2, log2[-1500:]
+
+    bridge = _errors(diagnostics, '/sim_bridge')
+    assert any('/policy' in e and 'same name as the paired node' in e for e in bridge), bridge
+    assert any('/clock' in e and 'besides this node' in e for e in bridge), bridge
+    policy_errors = _errors(diagnostics, '/policy')
+    estimator_errors = _errors(diagnostics, '/context_estimator')
+    assert any('/zeus/context: /context_estimator' in e for e in policy_errors), policy_errors
+    for name, errors in (('policy', policy_errors), ('estimator', estimator_errors)):
+        assert any('/intruder' in e and 'refused' in e for e in errors), (name, errors)
+        assert any('/zeus/step: /sim_bridge' in e for e in errors), (name, errors)
+    values = _newest(diagnostics, '/policy')
+    assert int(values['foreign']) > 0 and int(values['mismatched']) == 0, values
+    assert int(_newest(diagnostics, '/context_estimator')['foreign']) > 0
+    for label in ('policy', 'estimator'):
+        assert 'a second publisher' in ros_processes.log_text(label)
+    print(f'pairing rows: {marked} of {len(applied)} steps used an impostor action; policy '
+          f'foreign {values["foreign"]}; start-up {looping - started:.1f} s, rows '
+          f'{ended - looping:.1f} s')
