@@ -1,7 +1,7 @@
 """Drift scenario of issue 37: the same run with and without `zeus launch --continual`.
 
 Cheetah-Bias-v0 deploys its zoo checkpoint while the motor bias steps through values beyond
-every preset (0.35-0.7, the train range ends at 0.3, extrapolation at 0.55), one value per
+every preset (0.6-0.9; the train range ends at 0.3, extrapolation at 0.55), one value per
 `--every` steps, in realtime at `--rate` steps/s, for `--wall` seconds per mode. Reported, per
 mode: return per context segment over time (reward per step x the 40-step episode, from the
 recording), the trainer's swaps, refusals and rollbacks (its history), its CPU share (its
@@ -32,7 +32,9 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-BEYOND = [0.35, 0.45, 0.55, 0.6, 0.65, 0.7]
+BEYOND = [0.6, 0.7, 0.75, 0.8, 0.85, 0.9]
+"""Far beyond the train range (which ends at 0.3): there the zoo checkpoint loses most
+(-98 per episode against the oracle's -40, measured at evaluation seed 300)."""
 EPISODE = 40
 
 
@@ -49,7 +51,7 @@ def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
                                                       'output': str(folder / 'rec')})
     params['/**/continual_trainer'] = {'ros__parameters': {
         'new_steps': args.new_steps, 'warmup_updates': args.warmup, 'updates': args.updates,
-        'episodes': 1, 'max_train_values': 4, 'poll_s': 1.0,
+        'bc_weight': args.bc_weight, 'max_train_values': 4, 'poll_s': 1.0,
         **({'corrupt_rounds': [1], 'force_rounds': [1]} if mode == 'drill' else {})}}
     path = folder / 'params.yaml'
     path.write_text(yaml.safe_dump(params))
@@ -191,9 +193,10 @@ def main() -> int:
     parser.add_argument('--rate', type=float, default=50.0, help='control steps per second')
     parser.add_argument('--every', type=int, default=200, help='steps per bias value')
     parser.add_argument('--noise', type=float, default=0.1)
-    parser.add_argument('--new-steps', type=int, default=1500)
-    parser.add_argument('--warmup', type=int, default=300)
-    parser.add_argument('--updates', type=int, default=600)
+    parser.add_argument('--new-steps', type=int, default=2000)
+    parser.add_argument('--warmup', type=int, default=2000)
+    parser.add_argument('--updates', type=int, default=2000)
+    parser.add_argument('--bc-weight', type=float, default=1.0)
     parser.add_argument('--modes', default='fixed,continual,drill')
     parser.add_argument('--reuse', action='store_true',
                         help='analyse the runs already in --out (info.json) instead of rerunning')

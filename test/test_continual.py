@@ -86,8 +86,9 @@ def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
 def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path) -> None:
     weak = weak_checkpoint(tmp_path / 'weak.pt')
     bags = record(tmp_path / 'run2', WEAK_TASK, [0.75, 1.25], weak, splits=2, steps=400)
+    # bc_weight 0: a weak policy has nothing worth staying near
     settings = c.ContinualSettings(updates=500, episodes=1, max_seen_values=2,
-                                   max_train_values=2)
+                                   max_train_values=2, bc_weight=0.0)
     same = c.gate(weak, weak, [{'torso_length': 1.25}], settings)
     assert same.gain == 0 and not same.deploy  # paired: same initial states, same returns
     history = tmp_path / 'history.jsonl'

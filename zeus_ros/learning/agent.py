@@ -439,9 +439,16 @@ class ZeusAgent:
         with torch.no_grad():
             x = torch.cat([m['encoder'](batch.obs), self.policy_context(context, noise)],
                           dim=-1)
-        sample = squashed_sample(m['actor'](x))
+        out = m['actor'](x)
+        sample = squashed_sample(out)
         actor_q = m['critic'](x, sample.action).min()
         actor_loss = (self.alpha.detach() * sample.log_prob - actor_q).mean()
+        if self.config.actor_bc_weight > 0:  # TD3+BC: Q on a unit scale, stay near the data
+            actor_loss = actor_loss / actor_q.abs().mean().detach().clamp_min(1e-6)
+            mode = torch.tanh(out.mu)
+            bc = F.mse_loss(mode, self.normalize_action(batch.action))
+            actor_loss = actor_loss + self.config.actor_bc_weight * bc
+            metrics['loss/actor_bc'] = bc
         self.optimizers['actor'].zero_grad(set_to_none=True)
         actor_loss.backward()
         self.optimizers['actor'].step()

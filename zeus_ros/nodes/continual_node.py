@@ -13,6 +13,7 @@ of OUT/history.jsonl.
 
 from __future__ import annotations
 
+from dataclasses import fields
 import os
 from pathlib import Path
 import shutil
@@ -34,13 +35,14 @@ from zeus_ros.offline.training.continual_watch import (
 
 TARGETS = ('context_estimator', 'policy')
 """Set in this order: the policy refuses the estimator's new estimates until it follows."""
+SETTINGS = tuple(f.name for f in fields(c.ContinualSettings)
+                 if f.name not in ('eval_seed', 'seed'))
+"""What a round does: parameters of the same name, defaults from ContinualSettings."""
 DEFAULTS: dict[str, Any] = {
-    'recording': '', 'checkpoint': '', 'out': '', 'task': '', 'new_steps': 2000,
-    'warmup_updates': 200, 'updates': 1000, 'episodes': 2, 'max_seen_values': 6,
-    'max_train_values': 0, 'margin': 1.0, 'tolerance': 0.10, 'tolerance_floor': 2.0,
-    'actor_lr_scale': 0.3, 'old_ratio': 1.0, 'max_old_steps': 20000, 'threads': 1, 'nice': 10,
-    'check_segments': 2, 'keep_recording_mb': 2048, 'keep_candidates': 5,
-    'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
+    'recording': '', 'checkpoint': '', 'out': '', 'task': '',
+    **{name: getattr(c.ContinualSettings(), name) for name in SETTINGS},
+    'threads': 1, 'nice': 10, 'check_segments': 2, 'keep_recording_mb': 2048,
+    'keep_candidates': 5, 'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
 }
 """Parameters; `corrupt_rounds` / `force_rounds` (round numbers from 1; 0: none) are drills:
 that round trains on negated rewards / is swapped in whatever the gate says."""
@@ -64,10 +66,7 @@ class ContinualTrainer(Node):
         self.deployed = Path(p['checkpoint']).resolve()
         self.previous: Path | None = None
         self.last_gate: c.GateResult | None = None
-        self.settings = c.ContinualSettings(**{k: p[k] for k in (
-            'new_steps', 'warmup_updates', 'updates', 'episodes', 'max_seen_values',
-            'max_train_values', 'margin', 'tolerance', 'tolerance_floor', 'actor_lr_scale',
-            'old_ratio', 'max_old_steps')})
+        self.settings = c.ContinualSettings(**{k: p[k] for k in SETTINGS})
         self.returns = SegmentReturns()
         self.lock = threading.Lock()
         self.state = 'waiting'
