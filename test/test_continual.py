@@ -135,3 +135,22 @@ def test_retention_deletes_the_oldest_splits_but_never_the_protected(
     assert removed == [copies[1]]  # the oldest that is not protected
     assert [b.exists() for b in copies] == [True, False, True]
     assert prune_recording(copies, keep_bytes=0) == []  # 0: keep everything
+
+
+def test_novelty_alarm_needs_a_full_window_mostly_novel() -> None:
+    from zeus_ros.offline.training.continual_watch import NoveltyAlarm
+
+    alarm = NoveltyAlarm(window=10, fraction=0.5)
+    for _ in range(9):
+        alarm.on_novelty(True)
+    assert not alarm.raised  # 9 scored steps: the window is not full yet
+    alarm.on_novelty(False)
+    assert alarm.raised and alarm.novel_share == 0.9
+    for _ in range(6):
+        alarm.on_novelty(False)  # the last 10: 3 novel
+    assert not alarm.raised and alarm.novel_share == 0.3
+    off = NoveltyAlarm(window=0, fraction=0.5)
+    off.on_novelty(True)
+    assert not off.raised
+    with pytest.raises(ValueError, match='fraction'):
+        NoveltyAlarm(window=10, fraction=0.0)

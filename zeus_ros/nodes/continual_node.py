@@ -29,6 +29,7 @@ from rclpy.parameter import Parameter
 from zeus_ros.offline.training import continual as c
 from zeus_ros.offline.training.continual_watch import (
     LiveCheck,
+    NoveltyAlarm,
     SegmentReturns,
     prune_recording,
 )
@@ -43,9 +44,13 @@ DEFAULTS: dict[str, Any] = {
     **{name: getattr(c.ContinualSettings(), name) for name in SETTINGS},
     'threads': 1, 'nice': 10, 'check_segments': 2, 'keep_recording_mb': 2048,
     'keep_candidates': 5, 'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
+    'novelty_window': 200, 'novelty_fraction': 0.5, 'novelty_min_steps': 500,
 }
 """Parameters; `corrupt_rounds` / `force_rounds` (round numbers from 1; 0: none) are drills:
-that round trains on negated rewards / is swapped in whatever the gate says."""
+that round trains on negated rewards / is swapped in whatever the gate says. A novelty alarm
+(at least `novelty_fraction` of the last `novelty_window` scored steps outside the
+checkpoint's training contexts; window 0: off) starts a round after `novelty_min_steps` new
+closed steps instead of `new_steps`."""
 
 
 class ContinualTrainer(Node):
@@ -80,6 +85,10 @@ class ContinualTrainer(Node):
         self.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, step_qos(100))
         self.create_subscription(ContextTruth, TOPICS.CONTEXT_TRUTH, self._on_truth,
                                  step_qos(100))
+        self.novelty = NoveltyAlarm(int(p['novelty_window']), float(p['novelty_fraction']))
+        if self.novelty.window:
+            self.create_subscription(ContextTruth, TOPICS.CONTEXT_NOVELTY, self._on_novelty,
+                                     step_qos(100))
         from rclpy.parameter_client import AsyncParameterClient
 
         self.clients_ = {name: AsyncParameterClient(self, name) for name in TARGETS}
@@ -88,6 +97,12 @@ class ContinualTrainer(Node):
     def _on_step(self, msg: Any) -> None:
         with self.lock:
             self.returns.on_step(msg.reward, msg.first)
+
+    def _on_novelty(self, msg: Any) -> None:
+        names = list(msg.names)
+        if 'novel' in names and len(msg.values) == len(names):  # else not the estimator's
+            with self.lock:
+                self.novelty.on_novelty(msg.values[names.index('novel')] > 0.5)
 
     def _on_truth(self, msg: Any) -> None:
         with self.lock:
@@ -166,10 +181,16 @@ class Trainer:
         self.since_swap += [b for b in splits if b.resolve() not in known
                             and b.resolve() not in self.used]
         total = sum(c.split_steps(b) for b in self.since_swap)
-        if self.watch is not None or total - self.steps_at_round < n.settings.new_steps:
+        with n.lock:
+            novel = n.novelty.raised
+        needed = min(n.settings.new_steps, int(n.p['novelty_min_steps'])) if novel \
+            else n.settings.new_steps
+        if self.watch is not None or total - self.steps_at_round < needed:
             return
+        trigger = ('novelty alarm' if total - self.steps_at_round < n.settings.new_steps
+                   else 'new steps')
         self.steps_at_round = total
-        self.round(splits)
+        self.round(splits, trigger)
         removed = prune_recording(c.closed_splits(n.recording),
                                   int(n.p['keep_recording_mb'] * 1e6), self.since_swap)
         if removed:
@@ -177,7 +198,7 @@ class Trainer:
                           f'({", ".join(b.name for b in removed)}) to stay under '
                           f'{n.p["keep_recording_mb"]} MB')
 
-    def round(self, splits: list[Path]) -> None:
+    def round(self, splits: list[Path], trigger: str = 'new steps') -> None:
         """Train and gate a candidate; swap it in when it passes (or is forced)."""
         n = self.node
         n.counts['rounds'] += 1
@@ -185,7 +206,9 @@ class Trainer:
         new = self._newest(self.since_swap, 4 * n.settings.new_steps)
         corrupt = number in n.p['corrupt_rounds']
         n.state = 'training'
-        n.report('round', f'round {number}: training on {len(new)} new split(s)')
+        n.report('round', f'round {number} ({trigger}): training on {len(new)} new split(s)')
+        c.append_history(n.history, {'event': 'round', 'round': number, 'trigger': trigger,
+                                     'new_splits': len(new)})
         folder = n.out / f'round_{number:03d}'
         try:
             result = c.continual_round(n.deployed, new, splits, folder, n.history, n.settings,

@@ -10,18 +10,22 @@ ROS-free arithmetic the live trainer feeds from zeus/step and zeus/context_truth
   in-process episodes start from resets and read differently, so its gain only sets the
   logged expectation. Segments whose context the replaced checkpoint never met are not judged
   (the check waits for paired ones, at most 3 x `segments`, then compares unpaired);
+- `NoveltyAlarm` watches the estimator's novelty flag (zeus/context_novelty): when most of
+  the recent steps are outside the checkpoint's training contexts, a round need not wait for
+  the full `new_steps` (the contexts it was not trained for are where a round can gain);
 - `prune_recording` deletes the oldest closed splits beyond a byte budget, never one still
   needed (those since the last swap) and never the split being written.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 import shutil
 
-__all__ = ['LiveCheck', 'SegmentReturns', 'folder_bytes', 'prune_recording']
+__all__ = ['LiveCheck', 'NoveltyAlarm', 'SegmentReturns', 'folder_bytes', 'prune_recording']
 
 
 @dataclass
@@ -98,6 +102,38 @@ class LiveCheck:
         allowed = max(self.tolerance_floor, self.tolerance * abs(base))
         change = live - base
         return ('rollback' if change < -allowed else 'keep'), change, allowed
+
+
+class NoveltyAlarm:
+    """Raised while at least `fraction` of the last `window` scored steps were novel.
+
+    `window` 0 turns it off. The estimator scores a step only once its history holds k
+    transitions, so episode starts do not dilute the window.
+    """
+
+    def __init__(self, window: int, fraction: float) -> None:
+        if window < 0 or not 0.0 < fraction <= 1.0:
+            raise ValueError(f'novelty window must be >= 0 and fraction in (0, 1], got '
+                             f'{window}, {fraction}')
+        self.window = window
+        self.fraction = fraction
+        self.flags: deque[bool] = deque(maxlen=max(window, 1))
+
+    def on_novelty(self, novel: bool) -> None:
+        """One scored step's flag."""
+        self.flags.append(bool(novel))
+
+    @property
+    def novel_share(self) -> float:
+        """Share of novel steps in the window (0 before it is full)."""
+        if not self.window or len(self.flags) < self.window:
+            return 0.0
+        return sum(self.flags) / len(self.flags)
+
+    @property
+    def raised(self) -> bool:
+        """Whether a round may start early."""
+        return bool(self.window) and self.novel_share >= self.fraction
 
 
 def folder_bytes(folder: Path) -> int:
