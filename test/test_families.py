@@ -136,6 +136,26 @@ def test_launch_with_a_task_runs_its_schedule_and_zoo_checkpoint() -> None:
     assert {n.name for n in given.nodes} >= {'sim_bridge', 'policy'}
 
 
+def test_launch_with_pixels_renders_frames_for_the_zoo_pixel_checkpoint() -> None:
+    """`zeus launch --obs pixels` / obs:=pixels: sim_bridge's frames and the pixel pair."""
+    from zeus_ros import launch_defaults
+
+    plan = launch_defaults.plan_from_arguments({'obs': 'pixels'})
+    nodes = {node.name: node.parameters for node in plan.nodes}
+    assert nodes['sim_bridge']['pixels'] is True
+    pair = {nodes[n]['checkpoint'] for n in ('context_estimator', 'policy')}
+    assert pair == {str(ROOT / 'checkpoints' / 'cheetah_bias_v0' / 'pixels_student.pt')}
+    state = launch_defaults.plan(obs='state')
+    assert {n.name: n.parameters for n in state.nodes}['sim_bridge']['pixels'] is False
+    assert 'pixels' not in {n.name: n.parameters for n in launch_defaults.plan().nodes}[
+        'sim_bridge']  # '': the params file decides
+    with pytest.raises(ValueError, match=r'Cheetah-Run-v1 has no pixel checkpoint.*'
+                       r'families with one: Cheetah-Bias-v0'):
+        launch_defaults.plan(task='Cheetah-Run-v1', obs='pixels')
+    with pytest.raises(ValueError, match="obs 'camera'"):
+        launch_defaults.plan(obs='camera')
+
+
 def test_every_params_file_the_docs_name_exists() -> None:
     """A config, task or params file named in the README or docs/ is one a user can open."""
     named = set()

@@ -36,7 +36,12 @@ from zeus_ros.demo_summary import (
     write_rows,
 )
 from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import RECORDED_ANSWERS, start_args, zoo_checkpoint
+from zeus_ros.launch_defaults import (
+    RECORDED_ANSWERS,
+    pixel_checkpoint,
+    start_args,
+    zoo_checkpoint,
+)
 from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
 from zeus_ros.processes import group_domain_id, ros_env
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
@@ -95,6 +100,7 @@ def build_nodes(args: argparse.Namespace, checkpoint: Path | None,
     values = schedule if isinstance(schedule, str) else (
         '[' + ','.join(f'{float(v)}' for v in schedule) + ']')
     bridge = ['-p', f'task:={args.task}', '-p', f'max_steps:={args.steps}',
+              '-p', f'pixels:={str(args.pixels).lower()}',
               '-p', f'seed:={args.seed}', '-p', 'schedule.kind:=switch',
               '-p', f'schedule.every:={args.every}', '-p', f'schedule.values:={values}']
     group = demo_group(args, checkpoint)
@@ -131,6 +137,10 @@ def main(argv: list[str] | None = None) -> int:
                         '--checkpoint (checkpoints/README.md lists the families that have one)')
     parser.add_argument('--checkpoint', type=Path, default=None,
                         help="default: the family's zoo checkpoint")
+    parser.add_argument('--obs', choices=('state', 'pixels'), default='state',
+                        help="pixels: sim_bridge renders 84x84 frames and the family's zoo "
+                        'pixel checkpoint acts on them (experimental; about 20 steps/s on '
+                        'this CPU)')
     parser.add_argument('--random-policy', action='store_true',
                         help='no checkpoint: a uniform-random policy and no estimator')
     parser.add_argument('--steps', type=at_least(1),
@@ -150,10 +160,11 @@ def main(argv: list[str] | None = None) -> int:
     every, steps = schedule_lengths(args.task)
     args.every = every if args.every is None else args.every
     args.steps = steps if args.steps is None else args.steps
-    checkpoint = None
+    checkpoint, args.pixels = None, args.obs == 'pixels'
     if not args.random_policy:
         try:
-            checkpoint = (args.checkpoint or default_checkpoint(args.task)).resolve()
+            checkpoint = (args.checkpoint or (pixel_checkpoint(args.task) if args.obs == 'pixels'
+                                              else default_checkpoint(args.task))).resolve()
         except ValueError as error:
             print(f'zeus demo: --task {args.task}: {error} (--checkpoint FILE) or pass '
                   '--random-policy', file=sys.stderr)
@@ -167,10 +178,11 @@ def main(argv: list[str] | None = None) -> int:
         from zeus_ros.learning.errors import CheckpointError
 
         try:  # before any node starts or any file is written: a bad file leaves no results
-            load_checkpoint(checkpoint, expect_task=args.task, load_optimizers=False)
+            loaded = load_checkpoint(checkpoint, expect_task=args.task, load_optimizers=False)
         except CheckpointError as error:
             print(f'zeus demo: --checkpoint: {error}', file=sys.stderr)
             return 2
+        args.pixels = loaded.spec.obs_kind == 'pixels'  # its frames, whatever --obs said
         checkpoint = with_readout(checkpoint, args.out)
     domain = group_domain_id()
     env = ros_env(domain)

@@ -30,6 +30,7 @@ __all__ = [
     'CONTAINER_NO_INTRA',
     'LOG_LEVELS',
     'NODES',
+    'OBS_CHOICES',
     'PACKAGE',
     'PAIRINGS',
     'TRAINER',
@@ -42,6 +43,7 @@ __all__ = [
     'pairing_parameters',
     'param_args',
     'parse_bool',
+    'pixel_checkpoint',
     'plan',
     'plan_from_arguments',
     'resolve_path',
@@ -98,6 +100,10 @@ CONTAINER_NO_INTRA = '--no-intra-process'
 PATH_PARAMETERS = {'context_estimator': ('checkpoint',), 'policy': ('checkpoint',)}
 """Parameters holding a file to read: resolved to an absolute path before the node starts."""
 LOG_LEVELS = ('debug', 'info', 'warn', 'error', 'fatal')
+OBS_CHOICES = ('', 'state', 'pixels')
+"""`obs`: '' keeps the params file's sim_bridge `pixels`."""
+PIXEL_METHOD = 'pixels_student'
+"""The zoo file name of a family's pixel checkpoint (<family>/pixels_student.pt)."""
 _TRUE = ('true', '1', 'yes', 'on')
 _FALSE = ('false', '0', 'no', 'off', '')
 
@@ -126,6 +132,9 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    '(params/tasks/<task>.yaml)'),
     LaunchArgument('checkpoint', '', 'checkpoint for context_estimator AND policy (empty: '
                    "the one in the params file, or the task's zoo checkpoint)"),
+    LaunchArgument('obs', '', 'what the agent sees: pixels (sim_bridge renders 84x84 frames '
+                   "and, without a checkpoint, the task's zoo pixel checkpoint acts: "
+                   "experimental) or state (empty: the params file's)"),
     LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
     LaunchArgument('continual', 'false', 'record, and retrain from the closed splits in the '
                    'background (continual_trainer, niced, 1 torch thread): gate each candidate '
@@ -296,6 +305,33 @@ def task_overrides(task: str, checkpoint: str = '') -> dict[str, Any]:
     if not checkpoint:
         overrides['checkpoint'] = str(zoo_checkpoint(task))
     return overrides
+
+
+def pixel_checkpoint(task: str) -> Path:
+    """The family's zoo pixel checkpoint (ValueError naming the families that have one)."""
+    try:
+        return zoo_checkpoint(task, PIXEL_METHOD)
+    except ValueError:
+        from sim_bridge.registry import TASK_NAMES
+
+        have = []
+        for name in TASK_NAMES:
+            try:
+                zoo_checkpoint(name, PIXEL_METHOD)
+            except ValueError:
+                continue
+            have.append(name)
+        raise ValueError(f'{task} has no pixel checkpoint in the zoo (families with one: '
+                         f'{", ".join(have) or "none"}); pass a pixel checkpoint you trained '
+                         '(zeus distill)') from None
+
+
+def _params_task(params: Mapping[str, Any], path: Path) -> str:
+    """sim_bridge's task in the params file (what runs when no task is given)."""
+    tasks = [s['task'] for s in _node_sections(params, 'sim_bridge') if s.get('task')]
+    if not tasks:
+        raise ValueError(f'{path} names no sim_bridge task: pass task:= / --task')
+    return str(tasks[-1])
 
 
 def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
@@ -488,6 +524,7 @@ def plan(
     intra_process: bool = True,
     continual: bool = False,
     clock: str = '',
+    obs: str = '',
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -503,7 +540,8 @@ def plan(
     on the agent nodes (unless `checkpoint` is given). `continual` records and adds the
     continual trainer, pointed at the recorder's output and the agents' checkpoint. `clock`
     moves the simulation clock of every node (`clock_topic`). Each node is told whom it pairs
-    with (`pairing_parameters`) unless the params file names one.
+    with (`pairing_parameters`) unless the params file names one. `obs` 'pixels' turns on
+    sim_bridge's frames and, without `checkpoint`, deploys the family's zoo pixel checkpoint.
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -528,7 +566,13 @@ def plan(
         for section in _node_sections(params, node))
     if random_robot:
         names = [name for name in names if name != 'context_estimator']
+    if obs not in OBS_CHOICES:
+        raise ValueError(f'obs {obs!r}: choose one of {", ".join(o for o in OBS_CHOICES if o)}')
+    if obs == 'pixels' and not checkpoint:
+        checkpoint = str(pixel_checkpoint(task or _params_task(params, path)))
     family_overrides = task_overrides(task, checkpoint) if task else {}
+    if obs:
+        family_overrides.setdefault('sim_bridge', {})['pixels'] = obs == 'pixels'
     if task and not checkpoint:
         checkpoint = str(family_overrides.pop('checkpoint'))
     ns = namespace.strip().strip('/')
@@ -610,4 +654,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                 robot=parse_bool('robot', get['robot']),
                 single_process=parse_bool('single_process', get['single_process']),
                 intra_process=parse_bool('intra_process', get['intra_process']),
-                continual=parse_bool('continual', get['continual']), clock=get['clock'])
+                continual=parse_bool('continual', get['continual']), clock=get['clock'],
+                obs=get['obs'])

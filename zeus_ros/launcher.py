@@ -355,6 +355,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--checkpoint', default='',
                         help="checkpoint for context_estimator and policy (default: the params "
                         "file's, or the --task family's zoo checkpoint)")
+    parser.add_argument('--obs', default='', choices=[o for o in launch_defaults.OBS_CHOICES if o],
+                        help='what the agent sees: pixels (sim_bridge renders frames; without '
+                        "--checkpoint the task's zoo pixel checkpoint, experimental) or state "
+                        "(default: the params file's)")
     parser.add_argument('--log-level', default='info', choices=launch_defaults.LOG_LEVELS,
                         help='log level of every node')
     parser.add_argument('--domain-id', type=at_least(0, int, 232), default=None,
@@ -392,7 +396,7 @@ def main(argv: list[str] | None = None) -> int:
             log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
             intra_process=not args.no_intra_process, continual=args.continual,
-            clock=args.clock)
+            clock=args.clock, obs=args.obs)
         known = [*NODES, CONTAINER]
         policies = parse_cli(args.respawn, known, policies_from_params(
             launch_defaults.read_params(launch.params_file), known))
