@@ -24,6 +24,7 @@ import hmac
 import json
 import os
 import secrets
+import time
 from typing import TYPE_CHECKING
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -43,6 +44,8 @@ KEY_ENV = 'ZEUS_PAIRING_KEY'
 _QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                   reliability=ReliabilityPolicy.RELIABLE,
                   durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RESEND_S = 1.0
+"""Seconds between two sends of an unchanged hello."""
 _KEPT = 4096  # GIDs remembered (a node restarting a hundred times forgets its oldest ones)
 
 
@@ -93,8 +96,10 @@ class Handshake:
     """The node's own hello out; the peers' hellos in, by the GIDs they list.
 
     `sha256` says the node's checkpoint now (a live redeploy re-announces it under the same
-    nonce). The hello is re-sent when the node's publishers or checkpoint change (checked
-    every `period` seconds on the steady clock).
+    nonce). The hello is sent again when the node's publishers or checkpoint change (checked
+    every `period` seconds on the steady clock) and every `RESEND_S` seconds anyway: a late
+    reader gets a transient-local sample only after the writer's next heartbeat (Fast DDS:
+    3 s), and a restarted peer must not wait that long to be re-paired.
     """
 
     def __init__(self, node: Node, period: float = 0.25) -> None:
@@ -107,18 +112,20 @@ class Handshake:
         self.sha256: Callable[[], str] = lambda: ''
         self._by_gid: dict[str, Hello] = {}
         self._sent: tuple[int, str] = (-1, '')
+        self._sent_at = -RESEND_S
         self.malformed = 0
         self._pub = node.create_publisher(String, PAIRING_TOPIC, _QOS)
         self._sub = node.create_subscription(String, PAIRING_TOPIC, self._on_hello, _QOS)
         steady_timer(node, period, self.announce)
 
     def announce(self) -> None:
-        """Send this start's hello if the publishers or the checkpoint changed since the last."""
+        """Send this start's hello if it changed, or if it was last sent RESEND_S ago."""
         from zeus_ros.nodes.senders import publisher_gid
 
         publishers = list(self._node.publishers)
         sha256 = self.sha256()
-        if (len(publishers), sha256) == self._sent:
+        now = time.monotonic()
+        if (len(publishers), sha256) == self._sent and now - self._sent_at < RESEND_S:
             return
         gids = []
         for publisher in publishers:
@@ -128,7 +135,7 @@ class Handshake:
                 return
         hello = Hello(self.name, self.nonce, sha256, frozenset(gids)).signed(self.key)
         self._pub.publish(String(data=hello.to_text()))
-        self._sent = (len(publishers), sha256)
+        self._sent, self._sent_at = (len(publishers), sha256), now
 
     def _on_hello(self, msg: String) -> None:
         hello = Hello.from_text(msg.data)
