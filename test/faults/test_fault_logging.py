@@ -16,6 +16,7 @@ import re
 import signal
 import subprocess
 import sys
+from typing import Any
 
 import pytest
 from small_disk import SmallDisk, mount_tmpfs
@@ -23,7 +24,16 @@ from small_disk import SmallDisk, mount_tmpfs
 from zeus_ros.atomic_file import WRITE_FAULT_ENV
 
 from live_fixtures import TASK, tiny_checkpoint
-from ros_harness import REPO, child_pids, fresh_domain_id, read_until, ros_environment, stop_launch
+from ros_harness import (
+    REPO,
+    child_pids,
+    driver_node,
+    fresh_domain_id,
+    read_until,
+    ros_environment,
+    spin_until,
+    stop_launch,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -67,7 +77,21 @@ def test_a_recorder_that_cannot_write_and_a_killed_policy_never_stop_the_loop(
     switch = tmp_path / 'write_fault'
     disk = SmallDisk(root, mount_tmpfs(root, '64m'), switch)
     out = root / 'bag'
-    env = ros_environment(fresh_domain_id()) | {WRITE_FAULT_ENV: str(switch)}
+    domain = fresh_domain_id()
+    env = ros_environment(domain) | {WRITE_FAULT_ENV: str(switch)}
+    with driver_node(domain) as probe:
+        _run(probe, env, tmp_path, disk, out)
+
+
+def _run(probe: Any, env: dict[str, str], tmp_path: Path, disk: SmallDisk, out: Path) -> None:
+    """The group under zeus launch through the faults; `probe` watches /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    recorder: dict[str, Any] = {}
+    probe.create_subscription(DiagnosticArray, '/diagnostics', lambda msg: recorder.update(
+        {s.name.rsplit(':', 1)[-1].strip(): s for s in msg.status
+         if s.name.startswith('/recorder')}), 10)
+    root, switch = disk.root, disk.switch
     launch = subprocess.Popen(
         [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(_params(tmp_path, out)),
          '--record', '--no-progress'], cwd=REPO, env=env, stdout=subprocess.PIPE,
@@ -77,10 +101,15 @@ def test_a_recorder_that_cannot_write_and_a_killed_policy_never_stop_the_loop(
         read_until(launch, 'step 200 ', lines)
         disk.fill()
         read_until(launch, 'cannot write', lines)
+        assert spin_until(probe, lambda: 'bag' in recorder and recorder['bag'].level ==
+                          DiagnosticStatus.ERROR, 10), recorder
+        assert 'cannot write bags' in recorder['bag'].message, recorder['bag'].message
         for _ in range(2):  # the loop keeps stepping while nothing can be written
             read_until(launch, 'sim_bridge]: step ', lines)
         disk.free()
         read_until(launch, 'recording again into', lines)
+        assert spin_until(probe, lambda: recorder['bag'].level == DiagnosticStatus.OK, 10), \
+            recorder['bag'].message  # the ERROR clears with its cause; the count stays
         read_until(launch, 'sim_bridge]: step ', lines)  # the new bag holds steps
         switch.write_text('EACCES')
         read_until(launch, 'Permission denied', lines)

@@ -316,6 +316,7 @@ class RecorderNode(Node):
         if self._writer is None:  # failing: the loop goes on, this step is in no bag
             if step is not None:
                 self.unrecorded.note(step)
+                self.last_step[topic] = step  # named as unrecorded, not as a drop upstream
             return
         try:
             self._write(topic, data, step)
