@@ -1,8 +1,11 @@
 """Soak: the three-node loop (`zeus launch`, the shipped checkpoint) for a long time.
 
 Fails (exit 1) when a node's resident memory grows by more than --max-rss-growth MiB between
-the end of the warm-up and the end of the run, or when two consecutive /zeus/step messages
-arrive more than --max-gap seconds apart, or when a node exits. sim_bridge runs in realtime
+the end of the warm-up and the end of the run, or when sim_bridge published two consecutive
+/zeus/step messages more than --max-gap seconds apart (their DDS source timestamps: the loop's
+own pace), or when a node exits. How late they reached this probe is reported beside it: under
+CPU burners the probe itself waits for a core, and that is not the loop stalling
+(benchmarks/bench_load_gaps.py, docs/faults.md). sim_bridge runs in realtime
 mode at the task's own rate: a deployment's pace, and the machine stays usable meanwhile.
 
     source scripts/env.sh && python benchmarks/soak.py --minutes 60      # `make soak`
@@ -106,7 +109,10 @@ def main() -> int:
     parser.add_argument('--max-gap', type=float, default=1.0, help='seconds between steps')
     parser.add_argument('--report-every', type=float, default=300.0,
                         help='seconds between progress lines (figures so far)')
+    parser.add_argument('--burners', type=int, default=0, help='busy-loop processes beside '
+                        'the loop from the baseline on (the load row of docs/faults.md: 2)')
     args = parser.parse_args()
+    burners: list[subprocess.Popen[bytes]] = []
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     stop = _watch_signals()  # before any import starts a thread
     domain = group_domain_id()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE
@@ -125,17 +131,20 @@ def main() -> int:
             stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_unblock_signals)
         rclpy.init(domain_id=domain)
         probe = rclpy.create_node('soak_probe')
-        arrivals: list[float] = [0, 0.0, 0.0]  # count, last arrival, longest gap
+        # count, last arrival, longest arrival gap, last source stamp, longest published gap
+        arrivals: list[float] = [0, 0.0, 0.0, 0.0, 0.0]
         started_at: list[float] = []
 
-        def on_step(_msg: StepFeedback) -> None:
-            now = time.monotonic()
+        def on_step(_msg: StepFeedback, info: dict[str, int]) -> None:
+            now, source = time.monotonic(), info['source_timestamp'] / 1e9
             if arrivals[0]:
                 arrivals[2] = max(arrivals[2], now - arrivals[1])
+                arrivals[4] = max(arrivals[4], source - arrivals[3])
             else:
                 started_at.append(now)
             arrivals[0] += 1
             arrivals[1] = now
+            arrivals[3] = source
 
         probe.create_subscription(StepFeedback, TOPICS.STEP, on_step, step_qos())
         executor = SingleThreadedExecutor()
@@ -162,29 +171,35 @@ def main() -> int:
                 if not baseline and now - started_at[0] >= args.warmup:
                     pids = node_pids(launch.pid)
                     baseline = {name: rss_mib(pid) for name, pid in pids.items()}
-                    arrivals[2] = 0.0  # gaps count from the baseline on
+                    arrivals[2] = arrivals[4] = 0.0  # gaps count from the baseline on
                     end = now + args.minutes * 60
+                    burners = [subprocess.Popen([sys.executable, '-c', 'while True: pass'])
+                               for _ in range(args.burners)]
                     print(f'soak: baseline RSS (MiB) {baseline}; running {args.minutes} min',
                           flush=True)
                 if baseline and now >= report_at:
                     report_at = now + args.report_every
                     sizes = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
                     print(f'soak: +{(now - started_at[0]) / 60:.0f} min, {int(arrivals[0])} '
-                          f'steps, longest gap {arrivals[2] * 1000:.0f} ms, RSS growth (MiB) '
+                          f'steps, longest gap {arrivals[4] * 1000:.0f} ms (as received '
+                          f'{arrivals[2] * 1000:.0f} ms), RSS growth (MiB) '
                           + ', '.join(f'{n} {sizes.get(n, float("nan")) - v:+.2f}'
                                       for n, v in baseline.items()), flush=True)
                 if end is not None and now >= end:
                     break
             final = {name: rss_mib(pid) for name, pid in node_pids(launch.pid).items()}
         finally:
+            for burner in burners:
+                burner.kill()
             if launch.poll() is None:  # SIGTERM: SIGINT is ignored in a background job
                 launch.terminate()
                 launch.wait(timeout=30)
             probe.destroy_node()
             rclpy.try_shutdown()
     growth = {name: final.get(name, float('nan')) - rss for name, rss in baseline.items()}
-    steps, gap = int(arrivals[0]), arrivals[2]
-    print(f'soak: {steps} steps; longest step gap {gap * 1000:.0f} ms; RSS growth (MiB) '
+    steps, gap = int(arrivals[0]), arrivals[4]
+    print(f'soak: {steps} steps; longest step gap {gap * 1000:.0f} ms as published (as received '
+          f'here {arrivals[2] * 1000:.0f} ms); RSS growth (MiB) '
           + ', '.join(f'{name} {value:+.2f}' for name, value in growth.items()))
     if not failed and not baseline:
         failed = 'the loop never ran past the warm-up'
