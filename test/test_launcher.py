@@ -223,11 +223,12 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     defaults = {a.args[0]: a.kwargs['default_value'] for a in declared}
     assert list(defaults) == [a.name for a in d.ARGUMENTS]
     assert defaults['params_file'] == str(d.default_params_file())
-    context = {**defaults, 'record': 'true', 'namespace': 'r1', 'use_sim_time': 'true'}
+    context = {**defaults, 'record': 'true', 'namespace': 'r1', 'use_sim_time': 'true',
+               'clock': 'namespace'}
     actions = opaque.kwargs['function'](context)
     nodes = [a for a in actions if type(a).__name__ == 'Node']
     stops = [a for a in actions if type(a).__name__ == 'RegisterEventHandler']
-    plan = d.plan(record=True, namespace='r1', use_sim_time=True)
+    plan = d.plan(record=True, namespace='r1', use_sim_time=True, clock='namespace')
     assert len(stops) == 3 and len(nodes) == 4
     children = plan_processes(plan)
     for node, planned, child in zip(nodes, plan.nodes, children, strict=True):
@@ -235,6 +236,8 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
         assert (kwargs['executable'], kwargs['name'], kwargs['namespace']) == (
             f'{planned.name}_node', planned.name, '/r1')
         assert kwargs['parameters'] == [str(plan.params_file), planned.parameters]
+        assert kwargs['remappings'] == [('/clock', '/r1/clock')]  # the system's own clock
+        assert len(kwargs['additional_env']['ZEUS_PAIRING_KEY']) == 32  # one key per launch
         assert child.argv[-len(plan.ros_args(planned)):] == plan.ros_args(planned)
     assert nodes[0].kwargs['parameters'][1]['min_observers'] == 3
 
