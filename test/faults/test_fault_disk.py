@@ -75,8 +75,6 @@ def test_train_on_a_full_disk_is_one_line_and_keeps_the_old_checkpoint(
     assert 'needs about' in lines[0] and 'free there' in lines[0], err
     assert _sha(checkpoint) == before  # the old checkpoint survives, byte for byte
     assert not [p.name for p in out.iterdir() if '.tmp' in p.name]  # no half-written file
-    small_disk.free()
-    assert train.main([*argv, '--resume', '--updates', '12']) == 0  # space back: it goes on
     print(f'train on a full disk ({small_disk.how}): {lines[0]}')
 
 
@@ -84,8 +82,8 @@ def test_collect_on_a_full_disk_is_one_line_and_leaves_no_half_bag(
         small_disk: SmallDisk, capsys: pytest.CaptureFixture[str]) -> None:
     """Collect more than fits: exit 2, one line with the steps' size, the partial bag removed."""
     out = small_disk.root / 'bags'
-    if small_disk.mounted:  # 20,000 steps take ~8 MiB: the tmpfs fills on the way
-        steps = '20000'
+    if small_disk.mounted:  # 8,000 steps take ~3.2 MiB: the 2 MiB tmpfs fills on the way
+        steps = '8000'
     else:  # the injection refuses the bag at once
         steps = '200'
         small_disk.fill()
