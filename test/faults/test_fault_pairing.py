@@ -132,6 +132,11 @@ def test_spoofed_injected_and_second_sources_are_refused_and_named(
     assert int(_newest(diagnostics, '/context_estimator')['foreign']) > 0
     for label in ('policy', 'estimator'):
         assert 'a second publisher' in ros_processes.log_text(label)
-    print(f'pairing rows: {marked} of {len(applied)} steps used an impostor action; policy '
-          f'foreign {values["foreign"]}; start-up {looping - started:.1f} s, rows '
-          f'{ended - looping:.1f} s')
+    sent = {label: ros_processes.log_text(label).split('published ')[1].split()[0]
+            for label in ('fake_policy', 'fake_estimator', 'injector')}
+    bridge_values = _newest(diagnostics, '/sim_bridge')
+    print(f'pairing rows: {marked} of {len(applied)} steps used an impostor action; sent '
+          f'{sent}; refused: sim_bridge {bridge_values.get("foreign")}, estimator '
+          f'{_newest(diagnostics, "/context_estimator")["foreign"]}, policy '
+          f'{values["foreign"]}; the second sim_bridge: 0 of 6 steps answered; start-up '
+          f'{looping - started:.1f} s, rows {ended - looping:.1f} s')

@@ -13,7 +13,9 @@ steps old (`experiments/context_lag.py` measures that price in-process; `zeus co
 
 It acts only on estimates stamped with its own checkpoint's sha256: while a live redeploy has
 reached one of the pair but not the other, estimates are refused (counted as `mismatched`) and
-the safe action goes out instead.
+the safe action goes out instead. Steps and observations come from its bridge only, contexts from
+its estimator only (paired by publisher GID and node name: `step_source`, `context_source`;
+senders.py): any other publisher is refused unread and an ERROR on /diagnostics.
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ or applies the newest action on a wall-clock timer (realtime). The physics loop 
 `sim_bridge.env.ScheduledEnv`, shared with the in-process tools. Its /diagnostics says how
 long the loop takes to answer: StepFeedback k published to Action k received, p50 / p99 over
 the last second and over the run (`latency_*_ms`, `latency_*_ms_run`), measured with no reader
-of its own on the loop's topics.
+of its own on the loop's topics, and checks the loop against an expected rate and latency
+thresholds (nodes/health.py: WARN / ERROR that clear with their cause).
 """
 
 from __future__ import annotations
