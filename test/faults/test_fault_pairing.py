@@ -140,3 +140,43 @@ def test_spoofed_injected_and_second_sources_are_refused_and_named(
           f'{_newest(diagnostics, "/context_estimator")["foreign"]}, policy '
           f'{values["foreign"]}; the second sim_bridge: 0 of 6 steps answered; start-up '
           f'{looping - started:.1f} s, rows {ended - looping:.1f} s')
+
+
+@pytest.mark.faults_only
+def test_a_restart_without_the_launch_key_is_never_re_paired(ros_processes: ProcessGroup) -> None:
+    """The paired policy is killed; a policy with another key takes its name: refused, named.
+
+    The same node code, the same (random-policy) checkpoint, a fresh nonce: only the key's
+    proof is missing. The restart with the launch's key is re-paired.
+    """
+    from zeus_msgs.msg import StepFeedback
+
+    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.handshake import KEY_ENV
+
+    key = {KEY_ENV: 'a1' * 16}
+    ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}', 'action_timeout:=0.2'),
+                        key)
+    policy = ros_processes.start('policy', node('policy', f'task:={TASK}'), key)
+    steps: list[StepFeedback] = []
+    with driver_node(ros_processes.domain_id) as probe:
+        probe.create_subscription(StepFeedback, TOPICS.STEP, steps.append, step_qos(200))
+        assert spin_until(probe, lambda: len(steps) > 50, 90)
+        ros_processes.stop(policy, signal.SIGKILL)
+        ros_processes.start('keyless', node('policy', f'task:={TASK}'), {KEY_ENV: 'b2' * 16})
+        assert spin_until(probe, lambda: 'a second publisher on /zeus/action: /policy' in
+                          ros_processes.log_text('sim_bridge'), 60), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+        refused_from = len(steps)
+        spin_until(probe, lambda: False, 2.0)
+        refused = [m.action_status for m in steps[refused_from:]]
+        ros_processes.start('rightful', node('policy', f'task:={TASK}'), key)
+        restarted = len(steps)
+        assert spin_until(probe, lambda: sum(m.action_status == m.ACTION_OK
+                                             for m in steps[restarted:]) > 30, 90), \
+            ros_processes.log_text('sim_bridge')[-2000:]
+    log = ros_processes.log_text('sim_bridge')
+    assert 'no valid proof of the launch key' in log, log[-2000:]
+    assert refused and all(s != StepFeedback.ACTION_OK for s in refused), refused
+    assert log.count('/policy restarted') == 1, log[-2000:]
+    print(f'key row: {len(refused)} steps while the keyless policy published: none applied it')

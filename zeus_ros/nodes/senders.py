@@ -284,7 +284,6 @@ class SenderPairing:
         self._graph_at = -1.0
         self._named: set[bytes] = set()
         self._newcomers: dict[bytes, float] = {}  # same-name GIDs: first seen (monotonic)
-        self._why: dict[bytes, str] = {}  # why a same-name newcomer was not re-paired
         self._settling: tuple[frozenset[bytes], float] = (frozenset(), 0.0)
 
     @property
@@ -373,8 +372,8 @@ class SenderPairing:
                     if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
         self.refused += 1
-        if sender is not None and not self._introducing(sender):
-            self._name_once(sender)
+        if sender is not None and not self._introducing(sender, graph):
+            self._name_once(sender, graph)
         return False
 
     def _may_take_over(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
@@ -386,26 +385,30 @@ class SenderPairing:
 
     def _successor(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
         """The paired node under a new GID, its old publisher gone or silent, introduced."""
+        if not self._may_be_restart(sender, graph):
+            return False
+        return self._handshake.introduces(sender.gid, sender.node, self.agreed()) is None
+
+    def _may_be_restart(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
+        """Same name as the paired node, which is silent or gone: perhaps its restart.
+
+        Beside a paired node that talks, a same-name publisher is a second publisher at once.
+        Its handshake's grace (INTRODUCTION_S) starts when it is first seen so.
+        """
         if self.paired is None or sender.node != self.paired.node or \
                 sender.gid in self._retired:
             return False
         silent = time.monotonic() - self._heard >= self.takeover_after
         if self.paired.gid in graph and not silent:
-            return False  # the paired node talks: this one is a second publisher, no restart
-        self._newcomers.setdefault(sender.gid, time.monotonic())  # its handshake's grace
-        why = self._handshake.introduces(sender.gid, sender.node, self.agreed())
-        if why is not None:
-            self._why[sender.gid] = why
-        return why is None
+            return False
+        self._newcomers.setdefault(sender.gid, time.monotonic())
+        return True
 
-    def _introducing(self, sender: Sender) -> bool:
-        """A same-name newcomer within INTRODUCTION_S of its handshake (a restart, perhaps).
-
-        Only one first seen while the paired node was silent or gone: beside a paired node
-        that talks, a same-name publisher is a second publisher at once.
-        """
-        first = self._newcomers.get(sender.gid)
-        return first is not None and time.monotonic() - first < INTRODUCTION_S
+    def _introducing(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
+        """A possible restart still within INTRODUCTION_S of its handshake: not named yet."""
+        if not self._may_be_restart(sender, graph):
+            return False
+        return time.monotonic() - self._newcomers[sender.gid] < INTRODUCTION_S
 
     def others(self) -> list[Sender]:
         """Publishers on the topic besides the paired one (each is named once in the log)."""
@@ -413,9 +416,9 @@ class SenderPairing:
         if self.paired is None:  # one publisher is the one to pair with; more are ambiguous
             return list(graph.values()) if len(graph) > 1 else []
         found = [s for gid, s in graph.items() if gid not in self._retired
-                 and gid != self.paired.gid and not self._introducing(s)]
+                 and gid != self.paired.gid and not self._introducing(s, graph)]
         for sender in found:
-            self._name_once(sender)
+            self._name_once(sender, graph)
         return found
 
     def errors(self) -> list[str]:
@@ -423,19 +426,27 @@ class SenderPairing:
         others = self.others()
         if not others:
             return []
-        paired = self.paired.node if self.paired is not None else None
-        named = ', '.join(f'{s}' + (f' [same name as the paired node: '
-                                    f'{self._why.get(s.gid, "the paired publisher is alive")}]'
-                                    if s.node == paired else '') for s in others)
+        named = ', '.join(f'{s}' + (f' [same name as the paired node: {why}]'
+                                    if (why := self._why_refused(s, self._graph)) else '')
+                          for s in others)
         return [f'{len(others)} other publisher(s) on {self.topic}: {named}; their '
                 f'{self.what} are refused']
 
-    def _name_once(self, sender: Sender) -> None:
+    def _why_refused(self, sender: Sender, graph: dict[bytes, Sender]) -> str:
+        """Why a publisher under the paired node's name is not its restart ('' otherwise)."""
+        if self.paired is None or sender.node != self.paired.node:
+            return ''
+        if not self._may_be_restart(sender, graph):
+            return 'the paired publisher is alive'
+        why = self._handshake.introduces(sender.gid, sender.node, self.agreed())
+        return why or 'its restart is pending its first message'
+
+    def _name_once(self, sender: Sender, graph: dict[bytes, Sender]) -> None:
         if sender.gid in self._named or not sender.node:  # named once the graph knows it
             return
         self._named.add(sender.gid)
         paired = self.paired or self.expected or 'nobody yet'
-        why = self._why.get(sender.gid)
+        why = self._why_refused(sender, graph)
         self._node.get_logger().error(
             f'a second publisher on {self.topic}: {sender}; its {self.what} are refused '
             f'(paired with {paired})' + (f'; under the paired name but {why}' if why else '')
