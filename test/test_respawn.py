@@ -64,3 +64,48 @@ def test_a_bad_respawn_flag_is_one_line_exit_2(value: str, tmp_path: Path,
     assert launcher.main(['--respawn', value, '--timeout', '1', '--no-progress']) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f'zeus launch: --respawn {value}:') and len(err.splitlines()) == 1, err
+
+
+def _group(tmp_path: Path, **argv: str) -> list[launcher.NodeProcess]:
+    """Stand-in nodes: plain processes running the given Python code (no ROS needed here)."""
+    import sys
+
+    return [launcher.NodeProcess(name, [sys.executable, '-c', code]) for name, code in
+            argv.items()]
+
+
+def test_a_crashing_policy_is_restarted_up_to_its_limit_then_the_group_stops(
+        tmp_path: Path) -> None:
+    import os
+    import sys
+
+    nodes = _group(tmp_path, sim_bridge='import time; time.sleep(30)',
+                   policy='import sys; sys.exit(1)')
+    supervisor = launcher.Supervisor(nodes, dict(os.environ), out=sys.stdout, policies={
+        'policy': RespawnPolicy(limit=2, window_s=60.0, backoff_s=0.1)})
+    supervisor.start()
+    try:
+        assert supervisor.wait(timeout=20) == ('policy', 1)
+    finally:
+        supervisor.stop(grace=2)
+    assert len(supervisor.restarts) == 2
+
+
+def test_a_restarted_recorder_that_refuses_to_start_does_not_stop_the_loop(
+        tmp_path: Path) -> None:
+    """First a crash (exit 1: restarted), then exit 2 at the restart: given up, loop runs on."""
+    import os
+    import sys
+
+    marker = tmp_path / 'crashed_once'
+    nodes = _group(tmp_path, sim_bridge='import time; time.sleep(30)', recorder=(
+        f'import pathlib, sys; m = pathlib.Path({str(marker)!r})\n'
+        'if m.exists(): sys.exit(2)\nm.touch(); sys.exit(1)'))
+    supervisor = launcher.Supervisor(nodes, dict(os.environ), out=sys.stdout)
+    supervisor.start()
+    try:
+        assert supervisor.wait(timeout=3) == (None, 0)  # the time limit, not a node's exit
+    finally:
+        supervisor.stop(grace=2)
+    assert [n.name for n in supervisor.nodes] == ['sim_bridge']
+    assert 'refused to restart' in supervisor.gaps[-1]

@@ -117,6 +117,7 @@ class Supervisor:
         self.started = time.monotonic()
         self.gaps: list[str] = []  # one line per recorder death: when, why, which bag
         self.restarts: list[str] = []  # one line per restart of a node of the loop
+        self._restarted: set[str] = set()  # recorders restarted at least once
         self.respawns = {name: RespawnState(policy) for name, policy in
                          (DEFAULT_POLICIES if policies is None else policies).items()}
 
@@ -160,6 +161,11 @@ class Supervisor:
                 # Exit 2 is a refused configuration, not a crash: a restart would refuse it too.
                 if node.name in RECORDS_OTHERS and others and code != BAD_PARAMETERS:
                     self._respawn(node, code)
+                    continue
+                if node.name in RECORDS_OTHERS and others and node.name in self._restarted:
+                    # A restarted recorder that refuses to start (its new output) must not
+                    # stop the loop either: the rest of the run goes unrecorded, named.
+                    self._give_up_recorder(node, code)
                     continue
                 if code not in (0, BAD_PARAMETERS) and self._restart_loop_node(node, code):
                     continue
@@ -227,6 +233,16 @@ class Supervisor:
         node.argv = [*node.argv, '-p', f'output:={new_output}'] if new_output else node.argv
         node.lines = []
         node.restart_at = time.monotonic() + (delay or 0.0)
+        self._restarted.add(node.name)
+
+    def _give_up_recorder(self, node: NodeProcess, code: int) -> None:
+        when = time.monotonic() - self.started
+        self.gaps.append(f'{node.name} refused to restart at {when:.1f} s (exit code {code}); '
+                         'the rest of the run is not recorded')
+        print(f'[zeus launch] {node.name} exited with code {code} after a restart (it refused '
+              'its parameters: see its error line); the control loop keeps running, the rest '
+              'of the run is not recorded', file=sys.stderr, flush=True)
+        self.nodes.remove(node)
 
     def _policy_text(self, node: NodeProcess) -> str:
         state = self.respawns.get(node.name)
