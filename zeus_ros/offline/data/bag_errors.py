@@ -19,6 +19,10 @@ class BagError(Exception):
         self.reason = reason
         super().__init__(f'{self.path}: {reason}')
 
+    def __reduce__(self) -> tuple[type, tuple[Path, str]]:
+        """Picklable as raised (a collect worker's error reaches its parent whole)."""
+        return type(self), (self.path, self.reason)
+
 
 class IngestError(Exception):
     """Bags were readable but their content is inconsistent (raised in strict mode)."""

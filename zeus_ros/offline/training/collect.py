@@ -116,6 +116,10 @@ def parse_schedule(text: str) -> dict[str, Any]:
     return config
 
 
+class CollectDiskFull(Exception):  # noqa: N818 - named as what the user reads
+    """A full disk in a collect worker, as its one line (picklable: it crosses processes)."""
+
+
 def disk_full_line(error: BaseException, bag: Path, writer: StepBagWriter | None,
                    steps: int) -> str | None:
     """A full disk as one line (None for any other error); the half-written bag is removed.
@@ -447,7 +451,14 @@ def main(argv: list[str] | None = None) -> int:
         task.close()
         from zeus_ros.offline.training.collect_workers import main_workers
 
-        return main_workers(args, schedule_config, bag)
+        before = set(args.out.glob('bag_*'))
+        try:
+            return main_workers(args, schedule_config, bag)
+        except CollectDiskFull as full:  # every bag of this run goes: none is whole
+            for new in set(args.out.glob('bag_*')) - before:
+                shutil.rmtree(new, ignore_errors=True)
+            print(f'zeus collect: {full}; so is every other bag of this run', file=sys.stderr)
+            return 2
     # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     writer: StepBagWriter | None = None

@@ -73,7 +73,13 @@ def collect_bag(job: CollectJob) -> CollectStats:
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
     from zeus_ros.offline.data.bag_writer import StepBagWriter
-    from zeus_ros.offline.training.collect import AgentPolicy, collect, random_policy
+    from zeus_ros.offline.training.collect import (
+        AgentPolicy,
+        CollectDiskFull,
+        collect,
+        disk_full_line,
+        random_policy,
+    )
 
     task = make_task(job.task, seed=job.seed)
     try:
@@ -89,8 +95,15 @@ def collect_bag(job: CollectJob) -> CollectStats:
                                  seed=job.seed, stochastic=job.stochastic,
                                  context_lag=job.context_lag)
         job.bag.parent.mkdir(parents=True, exist_ok=True)
-        with StepBagWriter(job.bag, storage=job.storage, pixels=job.pixels) as writer:
-            return collect(env, task, policy, writer, job.steps, progress=job.progress)
+        writer: StepBagWriter | None = None
+        try:
+            with StepBagWriter(job.bag, storage=job.storage, pixels=job.pixels) as writer:
+                return collect(env, task, policy, writer, job.steps, progress=job.progress)
+        except Exception as error:  # a full disk: one line for the parent, not a traceback
+            line = disk_full_line(error, job.bag, writer, job.steps)
+            if line is None:
+                raise
+            raise CollectDiskFull(line) from None
     finally:
         task.close()
 
