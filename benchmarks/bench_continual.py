@@ -51,7 +51,7 @@ def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
                                                       'output': str(folder / 'rec')})
     params['/**/continual_trainer'] = {'ros__parameters': {
         'new_steps': args.new_steps, 'warmup_updates': args.warmup, 'updates': args.updates,
-        'bc_weight': args.bc_weight, 'max_train_values': 4, 'poll_s': 1.0,
+        'bc_weight': args.bc_weight, 'tolerance': args.tolerance, 'poll_s': 1.0,
         **({'corrupt_rounds': [1], 'force_rounds': [1]} if mode == 'drill' else {})}}
     path = folder / 'params.yaml'
     path.write_text(yaml.safe_dump(params))
@@ -197,6 +197,8 @@ def main() -> int:
     parser.add_argument('--warmup', type=int, default=2000)
     parser.add_argument('--updates', type=int, default=2000)
     parser.add_argument('--bc-weight', type=float, default=1.0)
+    parser.add_argument('--tolerance', type=float, default=0.1,
+                        help="the gate's allowed loss at any value, as a fraction (default 0.1)")
     parser.add_argument('--modes', default='fixed,continual,drill')
     parser.add_argument('--reuse', action='store_true',
                         help='analyse the runs already in --out (info.json) instead of rerunning')

@@ -23,6 +23,7 @@ import yaml
 from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
 
 TRAINER = {'new_steps': 300, 'updates': 400, 'actor_lr_scale': 1.0, 'bc_weight': 0.0,
+           'rehearsal_steps': 0,
            'episodes': 1, 'max_seen_values': 2, 'max_train_values': 1, 'corrupt_rounds': [2],
            'check_segments': 2, 'poll_s': 0.5}
 

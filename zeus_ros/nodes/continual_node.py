@@ -211,9 +211,11 @@ class Trainer:
                                      'new_splits': len(new)})
         folder = n.out / f'round_{number:03d}'
         try:
+            rehearsal = c.rehearsal_bag(Path(n.p['checkpoint']), n.out / 'rehearsal',
+                                        n.settings, self.log.info)
             result = c.continual_round(n.deployed, new, splits, folder, n.history, n.settings,
                                        corrupt_rewards=corrupt, log=self.log.info,
-                                       stop=self.stop.is_set)
+                                       stop=self.stop.is_set, rehearsal=rehearsal)
         except c.RoundStopped:
             self.log.info(f'continual: round {number} stopped: shutting down')
             return
