@@ -5,12 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 import subprocess
 
+import pytest
+
 from zeus_ros.demo import DEFAULT_TASK, default_checkpoint
 from zeus_ros.offline.evaluation.metrics import read_csv
 
 from ros_harness import fresh_domain_id, python_module, require_ros, ros_environment
 
 
+@pytest.mark.ros
 def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path: Path) -> None:
     """Both runs log the same schedule, the second with a frozen policy; the table sums both.
 
@@ -72,7 +75,8 @@ def test_sim_bridge_waits_for_the_demo_viewer_which_waits_for_the_answers() -> N
 
     from zeus_ros.demo import VIEWER, build_nodes, viewer_expects
 
-    args = argparse.Namespace(task=DEFAULT_TASK, steps=60, seed=0, every=20, record=False)
+    args = argparse.Namespace(task=DEFAULT_TASK, steps=60, seed=0, every=20, record=False,
+                              pixels=False)
     nodes = {node.name: node.argv for node in build_nodes(args, default_checkpoint(DEFAULT_TASK))}
     bridge = ' '.join(nodes['sim_bridge'])
     assert f"observers:=['context_estimator','policy','{VIEWER}']" in bridge
