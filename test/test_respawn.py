@@ -74,6 +74,7 @@ def _group(tmp_path: Path, **argv: str) -> list[launcher.NodeProcess]:
             argv.items()]
 
 
+@pytest.mark.slow  # stand-in processes, a few seconds
 def test_a_crashing_policy_is_restarted_up_to_its_limit_then_the_group_stops(
         tmp_path: Path) -> None:
     import os
@@ -91,6 +92,7 @@ def test_a_crashing_policy_is_restarted_up_to_its_limit_then_the_group_stops(
     assert len(supervisor.restarts) == 2
 
 
+@pytest.mark.slow  # stand-in processes, a few seconds
 def test_a_restarted_recorder_that_refuses_to_start_does_not_stop_the_loop(
         tmp_path: Path) -> None:
     """First a crash (exit 1: restarted), then exit 2 at the restart: given up, loop runs on."""

@@ -24,6 +24,8 @@ from tiny_config import MINIMAL, write_config
 
 TASK = 'Cheetah-Run-v0'
 
+pytestmark = pytest.mark.slow  # MuJoCo episodes and training
+
 
 @pytest.fixture
 def small_disk(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[SmallDisk]:
