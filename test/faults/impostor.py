@@ -2,7 +2,8 @@
 
 `python impostor.py NODE_NAME KIND SECONDS [SHA256]` starts a node named NODE_NAME (e.g.
 `policy`, taking the real policy's name) that follows zeus/step and publishes, every 5 ms,
-what KIND says, each value MARK so a use of it is recognisable:
+what KIND says (once a subscriber has matched), each value MARK so a use of it is
+recognisable:
 action (for the awaited step), context (for the current step, stamped with SHA256: a copy
 of the real pair's hash), observation (state vectors and step feedback for steps far ahead,
 INJECTED_STEP + n, so any action answering one is recognisable). It prints `posing` once
@@ -50,6 +51,10 @@ def main(name: str, kind: str, seconds: float, sha256: str = '') -> int:
                        lambda step: StateVector(step=INJECTED_STEP + step, data=data))]
     executor = SingleThreadedExecutor()
     executor.add_node(node)
+    matched = time.monotonic() + 20  # the victims hear it first (a loaded machine is slow)
+    while time.monotonic() < matched and min(
+            publisher.get_subscription_count() for publisher, _build in publishers) == 0:
+        executor.spin_once(timeout_sec=0.05)
     print('posing', flush=True)
     published = 0
     end = time.monotonic() + seconds
