@@ -41,14 +41,18 @@ def test_two_namespaced_sim_time_systems_each_keep_their_own_clock(tmp_path: Pat
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     params = tmp_path / 'params.yaml'
+    out = tmp_path / 'bag'
     params.write_text(f'/**/sim_bridge:\n  ros__parameters:\n    task: {TASK}\n' + ''.join(
         f'/**/{name}:\n  ros__parameters:\n    checkpoint: {checkpoint}\n    task: {TASK}\n'
-        for name in ('context_estimator', 'policy')))
+        for name in ('context_estimator', 'policy'))
+        + f'/**/recorder:\n  ros__parameters:\n    output: {out}\n')
     domain = fresh_domain_id()
+    # /r1 as in the issue's run: one process for the loop, recording; /r2 as processes.
+    flags = {'r1': ['--single-process', '--record'], 'r2': []}
     launches = {ns: subprocess.Popen(
         [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params),
          '--namespace', ns, '--sim-time', '--clock', 'namespace', '--no-progress',
-         '--domain-id', str(domain)],
+         '--domain-id', str(domain), *flags[ns]],
         cwd=REPO, env=ros_environment(domain), stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL, start_new_session=True) for ns in ('r1', 'r2')}
     clocks: dict[str, list[float]] = {'r1': [], 'r2': [], '': []}
@@ -82,6 +86,28 @@ def test_two_namespaced_sim_time_systems_each_keep_their_own_clock(tmp_path: Pat
     clash = [s.message for array in diagnostics for s in array.status
              if s.level == DiagnosticStatus.ERROR and 'clock' in s.message]
     assert not clash, clash
+    bagged = _bag_clock_and_steps(out)
+    assert len(bagged['/clock']) == len(bagged['/zeus/step']) > 300, \
+        {topic: len(v) for topic, v in bagged.items()}
+    assert bagged['/clock'] == sorted(bagged['/clock']) == bagged['/zeus/step'], \
+        "/r1's bag holds another clock than its own steps'"
     print(f'two systems: {len(steps["r1"])} and {len(steps["r2"])} steps, clocks '
           f'{clocks["r1"][-1]:.1f} s and {clocks["r2"][-1]:.1f} s of simulation time '
-          f'({both:.1f} s watched together)')
+          f'({both:.1f} s watched together); /r1 bag: {len(bagged["/clock"])} clock messages '
+          f'for {len(bagged["/zeus/step"])} steps, in order')
+
+
+def _bag_clock_and_steps(out: Path) -> dict[str, list[int]]:
+    """Nanosecond stamps of /clock and /zeus/step in the bag(s) under `out`."""
+    from rosbags.highlevel import AnyReader
+
+    found: dict[str, list[int]] = {'/clock': [], '/zeus/step': []}
+    bags = sorted(path.parent for path in out.rglob('metadata.yaml'))
+    assert bags, f'no bag under {out}'
+    with AnyReader(bags) as reader:
+        for connection, _t, raw in reader.messages():
+            if connection.topic in found:
+                msg = reader.deserialize(raw, connection.msgtype)
+                stamp = msg.clock if connection.topic == '/clock' else msg.header.stamp
+                found[connection.topic].append(stamp.sec * 10**9 + stamp.nanosec)
+    return found
