@@ -99,14 +99,15 @@ class StepInputs:
         self.subscribed = False
         self.pairings: list[SenderPairing] = []
         self._subscriptions: list[SenderSubscription] = []
-        self._steps = self.pairing(TOPICS.STEP, 'steps', source)
+        self._source = source
+        self._steps = self.pairing(TOPICS.STEP, 'steps')
         if subscribe:
             self.subscribe()
 
-    def pairing(self, topic: str, what: str, source: str = '') -> SenderPairing:
-        """A pairing on `topic` with the step source (the first one made decides who it is)."""
+    def pairing(self, topic: str, what: str) -> SenderPairing:
+        """A pairing on `topic` with the step source (unnamed: the steps' pairing decides)."""
         first = self.pairings[0] if self.pairings else None
-        pairing = SenderPairing(self.node, self.node.resolve_topic_name(topic), source,
+        pairing = SenderPairing(self.node, self.node.resolve_topic_name(topic), self._source,
                                 what=what, setting='step_source', follow=first)
         self.pairings.append(pairing)
         return pairing
