@@ -3,11 +3,12 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := source scripts/env.sh
 
-.PHONY: help setup demo test test-continual lint bench faults soak
+.PHONY: help setup demo test test-fast test-continual lint bench faults soak
 
 help:
 	@echo 'make demo   set up, then run the live demo'
 	@echo 'make test   set up, then run the test suite'
+	@echo 'make test-fast  set up, then only the pure tests (no ROS, no episodes, no training; under a minute)'
 	@echo 'make lint   ruff over the project'
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
 	@echo 'make faults set up, then run the whole fault matrix (test/faults; make test skips its long rows)'
@@ -22,6 +23,11 @@ demo: setup
 
 test: setup
 	@$(ENV) && ruff check . && python -m pytest -q -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
+
+# The fast lane: pytest --fast (test/conftest.py) leaves out the ros, slow, faults_only and
+# continual_live tests and names any test of the lane that took over 2 s.
+test-fast: setup
+	@$(ENV) && python -m pytest -q --fast $(PYTEST_ARGS)
 
 lint: setup
 	@$(ENV) && ruff check .

@@ -1,9 +1,18 @@
-"""Shared fixtures: ROS process groups that are always cleaned up."""
+"""Shared fixtures: ROS process groups that are always cleaned up; the fast lane (`--fast`).
+
+`pytest --fast` (`make test-fast`) runs the pure tests only: it deselects every test marked
+`ros` (real ROS 2 processes or rclpy in process; a test using the `ros_processes` fixture is
+marked so here), `slow` (MuJoCo episodes, agent training, Ray, subprocess commands),
+`faults_only` and `continual_live`. It lists at the end every test of the lane that took longer
+than FAST_TEST_LIMIT_S: mark such a test `slow` so that the lane stays under FAST_LANE_BUDGET_S.
+"""
 
 from __future__ import annotations
 
+from collections import defaultdict
 from collections.abc import Iterator
 import os
+import time
 
 import pytest
 
@@ -11,6 +20,60 @@ from ros_harness import ProcessGroup, fresh_domain_id, require_ros
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+FAST_LANE_EXCLUDES = ('ros', 'slow', 'faults_only', 'continual_live')
+"""Markers whose tests the fast lane leaves out."""
+FAST_TEST_LIMIT_S = 2.0
+"""A test of the fast lane taking longer (setup + call + teardown) is named at the end."""
+FAST_LANE_BUDGET_S = 60.0
+"""`make test-fast` on the 2-core development machine, collection included."""
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption('--fast', action='store_true', default=False,
+                     help='the fast lane: only tests not marked '
+                          + ', '.join(FAST_LANE_EXCLUDES) + ' (make test-fast)')
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the users of `ros_processes` as `ros`; with --fast, deselect the lane's excludes."""
+    for item in items:
+        if 'ros_processes' in getattr(item, 'fixturenames', ()):
+            item.add_marker(pytest.mark.ros)
+    if not config.getoption('--fast'):
+        return
+    kept, dropped = [], []
+    for item in items:
+        excluded = any(item.get_closest_marker(name) for name in FAST_LANE_EXCLUDES)
+        (dropped if excluded else kept).append(item)
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
+
+
+_durations: defaultdict[str, float] = defaultdict(float)
+_started = time.monotonic()
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    _durations[report.nodeid] += report.duration
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, exitstatus: int,
+                            config: pytest.Config) -> None:
+    """With --fast: the lane's wall time against its budget and every test over the limit."""
+    if not config.getoption('--fast') or not _durations:
+        return
+    wall = time.monotonic() - _started
+    over = sorted(((d, n) for n, d in _durations.items() if d > FAST_TEST_LIMIT_S), reverse=True)
+    write = terminalreporter.write_line
+    write(f'fast lane: {wall:.1f} s (budget {FAST_LANE_BUDGET_S:.0f} s), '
+          f'{len(_durations)} tests')
+    if over:
+        write(f'fast lane: {len(over)} test(s) took more than {FAST_TEST_LIMIT_S:.0f} s; '
+              'mark them @pytest.mark.slow (or ros):', yellow=True)
+        for duration, nodeid in over:
+            write(f'  {duration:6.1f} s  {nodeid}', yellow=True)
 
 
 @pytest.fixture

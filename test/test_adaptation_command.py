@@ -11,6 +11,7 @@ from zeus_ros.offline.evaluation.adaptation import format_reports, main, measure
 ZOO = Path(__file__).resolve().parents[1] / 'checkpoints'
 
 
+@pytest.mark.slow
 def test_the_zoo_policy_adapts_and_plain_sac_has_nothing_to_freeze() -> None:
     """Live beats frozen beyond the range for the zoo's ZeUS; no_context gets returns only."""
     zeus = measure_adaptation(ZOO / 'cheetah_bias_v0' / 'zeus.pt', episodes=1, progress=False)

@@ -401,6 +401,7 @@ def test_collect_ingest_round_trip(tmp_path: Path, storage: str) -> None:
     assert logs[9] - logs[0] == ds.episodes[0].stamps_ns[9] - ds.episodes[0].stamps_ns[0]
 
 
+@pytest.mark.slow
 def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:
     """With pixels, every 84x84 frame comes back channel-first and bit-exact."""
     env, actions, frames = _run_collect(tmp_path / 'bag', storage='mcap', pixels=True, steps=12)
@@ -409,6 +410,7 @@ def test_collect_ingest_round_trip_pixels(tmp_path: Path) -> None:
     _check_against_env(ds, env, actions, frames, 12)
 
 
+@pytest.mark.slow
 def test_batched_ingest_equals_one_by_one_decoding(tmp_path: Path, monkeypatch: Any) -> None:
     """Batches give the episodes and issues of one-by-one decoding: faulty, state, pixel bags.
 

@@ -19,6 +19,7 @@ def test_bound_is_the_in_process_period_over_the_period_with_the_handovers() -> 
     assert loop_bound(0.6e-3, 0.1e-3) == pytest.approx(0.6 / (0.6 + LOOP_HANDOVERS * 0.1))
 
 
+@pytest.mark.slow
 def test_pipe_ring_members_work_in_turn() -> None:
     work = [0.4e-3, 0.3e-3, 0.3e-3]  # 200 rounds: 0.2 s of CPU, /proc counts 10 ms ticks
     idle = ring_round('pipe', 200, 64, [0.0] * 3)
@@ -28,6 +29,7 @@ def test_pipe_ring_members_work_in_turn() -> None:
     assert busy.cpu >= 0.7 * sum(work)  # their CPU, read from /proc, holds the busy loops
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('ring', ['rclpy-events+sender', 'one-process-dds', 'one-process-bus'])
 def test_ros_rings_carry_every_round(ring: str, monkeypatch: pytest.MonkeyPatch) -> None:
     require_ros()
@@ -43,6 +45,7 @@ def test_unknown_ring_is_named() -> None:
         ring_round('pipe-dream', 10, 0, [0.0] * 3)
 
 
+@pytest.mark.ros
 def test_publish_cost_waits_for_its_readers(monkeypatch: pytest.MonkeyPatch) -> None:
     require_ros()
     monkeypatch.setenv('ROS_DOMAIN_ID', str(fresh_domain_id()))

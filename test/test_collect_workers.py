@@ -10,6 +10,7 @@ from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from zeus_ros.offline.data.ingest import ingest_bags
 from zeus_ros.offline.training import collect
@@ -47,6 +48,7 @@ def test_seeds_and_steps_are_derived_from_the_run() -> None:
     assert split_steps(10, 3) == [4, 3, 3]
 
 
+@pytest.mark.slow
 def test_worker_processes_equal_sequential_collections(tmp_path: Path) -> None:
     out = tmp_path / 'parallel'
     assert collect.main([*COMMON, '--steps', str(STEPS), '--seed', str(SEED), '--out',

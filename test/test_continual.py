@@ -33,6 +33,7 @@ def bias_recording(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
                   steps=240, every=40)
 
 
+@pytest.mark.slow
 def test_closed_splits_skip_the_bag_being_written(bias_recording: list[Path],
                                                   tmp_path: Path) -> None:
     folder = tmp_path / 'run1'
@@ -52,6 +53,7 @@ def test_closed_splits_skip_the_bag_being_written(bias_recording: list[Path],
     assert c.closed_splits(tmp_path / 'nothing_yet') == []
 
 
+@pytest.mark.slow
 def test_replay_mix_is_bounded(bias_recording: list[Path]) -> None:
     new = bias_recording[2:]
     (old,) = c.replay_mix(bias_recording, new, c.ContinualSettings())  # 240 old for 240 new
@@ -62,6 +64,7 @@ def test_replay_mix_is_bounded(bias_recording: list[Path]) -> None:
     assert len(c.replay_mix(bias_recording, bias_recording[2:], capped)) == 1
 
 
+@pytest.mark.slow
 def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
         bias_recording: list[Path], tmp_path: Path) -> None:
     zoo = zoo_checkpoint(BIAS)
@@ -83,6 +86,7 @@ def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
     assert '"corrupt_rewards": true' in card
 
 
+@pytest.mark.slow
 def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path) -> None:
     weak = weak_checkpoint(tmp_path / 'weak.pt')
     bags = record(tmp_path / 'run2', WEAK_TASK, [0.75, 1.25], weak, splits=2, steps=400)
@@ -121,6 +125,7 @@ def test_live_check_pairs_segments_by_context_and_rolls_back_a_loss() -> None:
     assert LiveCheck(2, 0, 0, 0.1, 2.0, 40, segments=3).verdict(returns) is None  # 6 running
 
 
+@pytest.mark.slow
 def test_retention_deletes_the_oldest_splits_but_never_the_protected(
         bias_recording: list[Path], tmp_path: Path) -> None:
     from zeus_ros.offline.training.continual_watch import folder_bytes, prune_recording

@@ -39,6 +39,7 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_tiny_run_writes_a_student_that_acts_from_frames(tiny: Path, tmp_path: Path) -> None:
     """Round 0 (teacher acts) + round 1 (student acts): a deployable pixel checkpoint."""
     out = tmp_path / 'run'
@@ -76,6 +77,7 @@ class _Spy(InferenceAgent):
         return action
 
 
+@pytest.mark.slow
 def test_in_a_dagger_round_the_student_acts_and_the_teacher_labels(tiny: Path) -> None:
     """The env applies the student's actions; every step carries the teacher's own action/psi."""
     teacher = _Spy(InferenceAgent.from_checkpoint(TEACHER))

@@ -40,6 +40,7 @@ def test_every_family_passes_the_env_checker(task: str) -> None:
     _checked(f'zeus_ros/{task}', schedule='switch:train:every=10', obs='state', seed=0)
 
 
+@pytest.mark.slow
 def test_a_task_file_and_pixels_pass_the_env_checker() -> None:
     """A YAML task registered by file, with frames and rendering."""
     env_id = zeus_gym.register_task_file(str(PAYLOAD))

@@ -87,6 +87,7 @@ def test_batch_with_wrong_k_is_rejected() -> None:
         agent.update(system.sample(8), system.sample(8), 0)
 
 
+@pytest.mark.slow
 def test_model_losses_fall_on_synthetic_system() -> None:
     """Dynamics and reward losses drop over a short ZeUS training on the synthetic system."""
     system = SyntheticSystem(k=3, seed=1)
@@ -101,6 +102,7 @@ def test_model_losses_fall_on_synthetic_system() -> None:
     assert last['loss/reward'] < 0.5 * first['loss/reward']
 
 
+@pytest.mark.slow
 def test_up_osi_regression_loss_falls() -> None:
     """UP-OSI's psi learns to regress the true context."""
     system = SyntheticSystem(k=3, seed=2, partial_fraction=0.0)

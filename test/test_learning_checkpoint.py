@@ -35,7 +35,7 @@ def _trained(tmp_path: Path, method: str = 'zeus', pixels: bool = False):
     return system, agent, path
 
 
-@pytest.mark.parametrize('pixels', [False, True])
+@pytest.mark.parametrize('pixels', [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_round_trip_gives_same_contexts_and_actions(tmp_path: Path, pixels: bool) -> None:
     """A reloaded agent computes the same contexts and actions."""
     system, agent, path = _trained(tmp_path, pixels=pixels)

@@ -71,6 +71,7 @@ def _speed_target_histories(generator: torch.Generator, n: int, k: int = 8
                            torch.ones(n, k, dtype=torch.bool)), target
 
 
+@pytest.mark.slow
 def test_mlp_head_combines_transitions_a_linear_head_can_only_average() -> None:
     """A nonlinear head after the mean finds the target every transition allows.
 

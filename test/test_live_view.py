@@ -61,6 +61,7 @@ def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
     assert loaded.extra['purpose'] == 'test' and loaded.agent.context_dim == context_dim
 
 
+@pytest.mark.ros
 def test_inspect_with_nothing_running_hints_once_and_exits_1(tmp_path: Path) -> None:
     """No system: one waiting hint naming the domain, no empty table, one error line, exit 1."""
     result = subprocess.run(
@@ -250,6 +251,7 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     assert status and 'steps/s' in status[-1] and 'return' in status[-1], launch_out[-3000:]
 
 
+@pytest.mark.slow
 def test_novelty_warns_on_an_extrapolation_context_and_clears_back_on_a_training_one() -> None:
     """The demo's shipped Cheetah-Run-v1 checkpoint, its monitor calibrated on train contexts.
 

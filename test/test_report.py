@@ -106,6 +106,7 @@ def test_an_unreadable_state_file_is_one_clear_error(tmp_path: Path,
     assert len(err.splitlines()) == 1 and 'zeus_s0/state.json: unreadable run state' in err
 
 
+@pytest.mark.slow
 def test_the_scripts_state_command_line_reads_old_markers_and_continued_runs(
         tmp_path: Path) -> None:
     """`python -m ...run_state` as experiments/run_one.sh and run_queue.sh call it."""

@@ -124,6 +124,7 @@ def test_command_messages_follow_the_controllers_order() -> None:
     assert hold_positions({'a': 1.0, 'b': 2.0, 'c': 3.0}, ['c', 'a']).tolist() == [3.0, 1.0]
 
 
+@pytest.mark.ros
 def test_the_node_refuses_a_bad_params_file_in_one_line() -> None:
     """Exit code 2 and one line naming the parameter, no traceback."""
     argv = [*python_module('zeus_ros.nodes.robot_bridge_node'), '--ros-args', '--params-file',

@@ -95,6 +95,7 @@ def test_state_is_joints_velocities_and_tip_without_the_goal(task: SawyerPegTask
     np.testing.assert_allclose(a, b, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_render_is_84x84_rgb_and_shows_the_box_move(task: SawyerPegTask) -> None:
     """The fixed camera sees the box: moving it changes the frame."""
     before = task.render()

@@ -14,6 +14,7 @@ CHECKPOINT = Path(__file__).resolve().parents[1] / 'checkpoints' / 'cheetah_run_
 VALUES = [{'torso_length': 0.75}, {'torso_length': 1.0}, {'torso_length': 1.15}]
 
 
+@pytest.mark.slow
 def test_shipped_checkpoint_scores_well_above_random_on_train_contexts() -> None:
     """One deterministic episode per train value: at least 10x the uniform random policy."""
     import torch
@@ -33,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COMPARISON = ROOT / 'checkpoints' / 'comparison'
 
 
+@pytest.mark.slow
 def test_every_comparison_checkpoint_matches_its_card() -> None:
     """Each shipped comparison checkpoint is a deployment export whose card names its hash."""
     import hashlib
@@ -50,6 +52,7 @@ def test_every_comparison_checkpoint_matches_its_card() -> None:
         assert loaded.deploy and loaded.spec.task in card and f'`{method}`' in card
 
 
+@pytest.mark.slow
 def test_zeus_eval_reproduces_the_results_table_from_a_shipped_checkpoint(tmp_path: Path) -> None:
     """`zeus eval` on a comparison checkpoint gives the return recorded in docs/results."""
     import csv
@@ -70,6 +73,7 @@ def test_zeus_eval_reproduces_the_results_table_from_a_shipped_checkpoint(tmp_pa
     assert measured == pytest.approx(float(recorded['mean_return']), rel=0.05)
 
 
+@pytest.mark.slow
 def test_an_issue10_checkpoint_reproduces_its_card(tmp_path: Path) -> None:
     """`zeus eval` on a shipped issue-10 export gives the train numbers of its card."""
     import re

@@ -120,6 +120,7 @@ def test_grid_parsing() -> None:
             parse_sets(bad)
 
 
+@pytest.mark.slow
 def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(
         ray_session: None, tiny_config: Path, tmp_path: Path,
         capsys: pytest.CaptureFixture) -> None:
@@ -153,6 +154,7 @@ def test_a_2x2_sweep_equals_the_sequential_trials_and_a_rerun_skips_it(
     assert 'was run with other settings (updates: 30 -> 31)' in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(
         ray_session: None, tmp_path: Path) -> None:
     """The device=cpu trial is killed once and retried; device=cuda:99 fails twice (no device).
@@ -188,6 +190,7 @@ def test_a_killed_trial_is_retried_and_a_failing_one_reported_with_its_log(
     assert lines[-1].startswith('sweep: 1/2 done, 0 running, 1 failed')
 
 
+@pytest.mark.slow
 def test_collect_workers_as_ray_tasks_equal_sequential_collections(ray_session: None,
                                                                    tmp_path: Path) -> None:
     from test_collect_workers import COMMON, SEED, STEPS, assert_same_data, sequential_bags

@@ -172,6 +172,7 @@ def test_bigger_finger_grows_the_fingertip_and_the_distal_mass(build: Build) -> 
     assert masses[0] < masses[1] < masses[2]
 
 
+@pytest.mark.slow
 def test_bigger_finger_changes_the_rendered_image(build: Build) -> None:
     """The same state renders differently once the finger is bigger (it is visible)."""
     task = build('Finger-Spin-v0')
@@ -183,6 +184,7 @@ def test_bigger_finger_changes_the_rendered_image(build: Build) -> None:
     assert changed > 100, changed
 
 
+@pytest.mark.slow
 def test_switched_context_renders_like_a_task_built_for_it(build: Build) -> None:
     """After a switch the frame is exactly that of a fresh task of the new size, same state."""
     switched = build('Finger-Spin-v0')
@@ -427,6 +429,7 @@ def test_every_preset_value_builds_a_valid_model(name: str, split: str) -> None:
         assert result.context == context
 
 
+@pytest.mark.slow
 def test_render_is_an_84x84_rgb_uint8_frame(build: Build) -> None:
     """The default frame is what the pixel encoder expects: 84x84x3 uint8, not blank."""
     task = build('Walker-Walk-v0')

@@ -19,6 +19,7 @@ WALKER = TASKS / 'walker_friction.yaml'
 PAYLOAD = TASKS / 'payload_point_mass.yaml'
 
 
+@pytest.mark.slow
 def test_walker_friction_as_a_task_file_matches_the_class_step_for_step() -> None:
     """Same seed, same actions, a mid-episode friction switch: identical states and rewards."""
     from sim_bridge.walker import WalkerFrictionTask
@@ -45,6 +46,7 @@ def test_walker_friction_as_a_task_file_matches_the_class_step_for_step() -> Non
         assert load_preset(from_file.name, split) == load_preset('Walker-Walk-v0', split)
 
 
+@pytest.mark.slow
 def test_the_example_task_collects_trains_and_evaluates(tmp_path: Path) -> None:
     """`zeus collect` / `train` / `eval` with --task-file on the shipped payload point mass."""
     from zeus_ros.offline.data.ingest import ingest_bags

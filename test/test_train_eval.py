@@ -53,6 +53,7 @@ def _mean(rows: list[dict[str, Any]], key: str) -> float:
     return float(np.mean([row[key] for row in rows]))
 
 
+@pytest.mark.slow
 def test_model_losses_fall_and_the_run_writes_its_files(trained: Any) -> None:
     """Dynamics and reward losses drop; checkpoints, CSV and PNGs are written."""
     rows = trained.log
@@ -70,6 +71,7 @@ def test_model_losses_fall_and_the_run_writes_its_files(trained: Any) -> None:
     assert len({row['context/torso_length'] for row in evals}) == 2
 
 
+@pytest.mark.slow
 def test_checkpoint_carries_data_normalisation_and_task_bounds(trained: Any) -> None:
     """The checkpoint rebuilds the agent with the bag's obs statistics and the task's bounds."""
     from sim_bridge.registry import make_task
@@ -87,6 +89,7 @@ def test_checkpoint_carries_data_normalisation_and_task_bounds(trained: Any) -> 
     assert loaded.spec.context_names == ('torso_length',)
 
 
+@pytest.mark.slow
 def test_resume_continues_step_count_and_optimizer(trained: Any, bags: Path,
                                                   tiny_config: Path, tmp_path: Path) -> None:
     """--resume goes on from the checkpoint's step with its optimizer state."""
@@ -108,6 +111,7 @@ def test_resume_continues_step_count_and_optimizer(trained: Any, bags: Path,
     assert min(resumed) == min(adam_steps) + 40
 
 
+@pytest.mark.slow
 def test_resume_with_another_config_fails_clearly(trained: Any, bags: Path,
                                                   tmp_path: Path) -> None:
     """A resumed run whose network config differs names the differing field."""
@@ -138,6 +142,7 @@ def test_a_method_without_the_context_loss_resumes_whatever_its_weight() -> None
         assert 'k: checkpoint 5, now 3' in _config_differences(stored, wider, 240)
 
 
+@pytest.mark.slow
 def test_resume_may_set_a_freeze_it_has_not_reached(trained: Any, bags: Path,
                                                      tmp_path: Path) -> None:
     """A resume at update 240 may set representation_frozen_from to 240 or later, not earlier.
@@ -168,6 +173,7 @@ def load_config_from(data: dict[str, Any]) -> Any:
     return config_from_dict(data)
 
 
+@pytest.mark.slow
 def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_path: Path,
                                                             capsys: pytest.CaptureFixture
                                                             ) -> None:
@@ -213,6 +219,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
     assert 'spearman' in printed
 
 
+@pytest.mark.slow
 def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture
                                                                 ) -> None:
@@ -275,6 +282,7 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
     assert 'could not convert' in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_probe_beats_predicting_the_mean() -> None:
     """On random-policy Cheetah data the probe's held-out MSE is below the mean predictor's."""
     from zeus_ros.offline.evaluation.evaluate import random_rollout, split_values
@@ -286,6 +294,7 @@ def test_probe_beats_predicting_the_mean() -> None:
     assert result.num_test > 0 and result.mse < result.baseline_mse
 
 
+@pytest.mark.slow
 def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) -> None:
     """Two rounds: random bag + fresh training, then an agent bag + resumed training."""
     from zeus_ros.offline.training.collect import parse_schedule
@@ -309,6 +318,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
     assert seen == sorted(round(v, 4) for v in values[3:5]), seen
 
 
+@pytest.mark.slow
 def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,
                                                   tmp_path: Path) -> None:
     """`zeus export` writes a small checkpoint + card; training refuses to resume from it."""
@@ -336,6 +346,7 @@ def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny
     assert export_main(['--checkpoint', str(target), '--out', str(target)]) == 2
 
 
+@pytest.mark.slow
 def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_path: Path,
                                                              capsys: pytest.CaptureFixture
                                                              ) -> None:
@@ -371,6 +382,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_
                  '--out', str(out)]) == 2
 
 
+@pytest.mark.slow
 def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) -> None:
     """--resume adds rounds to a finished loop without recollecting or retraining old ones."""
     from zeus_ros.offline.training.loop import main as loop_main
@@ -387,6 +399,7 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
     assert len(list((tmp_path / 'bags').iterdir())) == 2
 
 
+@pytest.mark.slow
 def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path,
                                                    tmp_path: Path) -> None:
     """`zeus train --set k=3 batch_size=32`: the run is trained with (and records) those values."""
@@ -402,6 +415,7 @@ def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path
     assert load_checkpoint(out / 'final.pt').config.k == 3
 
 
+@pytest.mark.slow
 def test_loop_resume_reads_its_stored_flags_and_time_continues(
         tiny_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
@@ -470,6 +484,7 @@ def _experiment(name: str) -> Any:
     return module
 
 
+@pytest.mark.slow
 def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
     """experiments/context_scale.py: per-value psi spread, within-episode noise and norm."""
     row = _experiment('context_scale').context_scale(trained.out / 'final.pt', 'interpolation')
@@ -478,6 +493,7 @@ def test_context_scale_measures_the_psi_the_policy_sees(trained: Any) -> None:
     assert np.isfinite([row['spread'], row['noise'], row['norm']]).all()
 
 
+@pytest.mark.slow
 def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """experiments/collection_curves.py: only trained runs (state.json or old marker).
@@ -515,6 +531,7 @@ def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: P
     assert (tmp_path / 'out' / 'collection.png').stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any) -> None:
     """blind_steps d: the frozen context in the first d steps of every episode, live after.
 
@@ -554,6 +571,7 @@ def test_blind_steps_freeze_the_context_only_at_each_episode_start(trained: Any)
                           blind_steps=2, live_steps=2)
 
 
+@pytest.mark.slow
 def test_context_transform_maps_the_live_context_before_the_policy_acts(trained: Any) -> None:
     """A transform sees every live psi; the identity changes nothing, a constant is a freeze."""
     from zeus_ros.learning.inference import InferenceAgent
@@ -579,6 +597,7 @@ def test_context_transform_maps_the_live_context_before_the_policy_acts(trained:
     assert [r['return'] for r in mapped] == [r['return'] for r in frozen]
 
 
+@pytest.mark.slow
 def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
         trained: Any) -> None:
     """context_lag L: step k acts on the live estimate of step max(k - L, episode start)."""
@@ -611,6 +630,7 @@ def test_context_lag_acts_on_the_estimate_of_l_steps_before_within_the_episode(
                               context_lag=refused)
 
 
+@pytest.mark.slow
 def test_readme_order_train_eval_export_report_finds_the_evaluations(
         trained: Any, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """Train -> eval -> export / report, each with its defaults: they meet.
@@ -661,6 +681,7 @@ def test_readme_order_train_eval_export_report_finds_the_evaluations(
     assert 'Not evaluated yet' in card_path.with_suffix('.md').read_text()
 
 
+@pytest.mark.slow
 def test_losses_png_of_a_short_run_has_no_empty_panels(trained: Any, bags: Path,
                                                        tiny_config: Path,
                                                        tmp_path: Path) -> None:

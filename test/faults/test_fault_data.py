@@ -136,6 +136,7 @@ def test_bags_of_another_state_length_are_refused_by_name(clean_bag: Path,
         ingest_bags([clean_bag, short])
 
 
+@pytest.mark.slow
 def test_train_on_the_poisoned_bag_writes_finite_checkpoints(poisoned_bag: Path,
                                                              tiny_config: Path, tmp_path: Path,
                                                              capsys: Any) -> None:
@@ -154,6 +155,7 @@ def test_train_on_the_poisoned_bag_writes_finite_checkpoints(poisoned_bag: Path,
     assert not (tmp_path / 'strict').exists()
 
 
+@pytest.mark.slow
 def test_a_nan_gradient_stops_training_naming_the_update_and_last_good_checkpoint(
         clean_bag: Path, tiny_config: Path, tmp_path: Path, capsys: Any,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -193,6 +195,7 @@ def test_a_nan_gradient_stops_training_naming_the_update_and_last_good_checkpoin
     assert not (out / 'final.pt').exists()
 
 
+@pytest.mark.slow
 def test_a_diverging_learning_rate_stops_at_update_one(clean_bag: Path, tiny_config: Path,
                                                        tmp_path: Path) -> None:
     """A real divergence (critic_lr 1e30) through the CLI: one line, exit 1, no checkpoint."""
@@ -227,6 +230,7 @@ def nan_checkpoint(clean_bag: Path, tiny_config: Path,
     return result.checkpoint, bad
 
 
+@pytest.mark.slow
 def test_every_offline_load_refuses_a_nan_checkpoint_in_one_line(
         nan_checkpoint: tuple[Path, Path], tmp_path: Path, capsys: Any) -> None:
     """load_checkpoint, zeus export, zeus eval and zeus collect: one line naming the tensor."""
@@ -249,6 +253,7 @@ def test_every_offline_load_refuses_a_nan_checkpoint_in_one_line(
     assert not (tmp_path / 'x.pt').exists() and not (tmp_path / 'bags').exists()
 
 
+@pytest.mark.slow
 def test_saving_nan_weights_is_refused_and_writes_nothing(nan_checkpoint: tuple[Path, Path],
                                                           tmp_path: Path) -> None:
     """save_checkpoint never writes a non-finite state (no file, no temp file)."""

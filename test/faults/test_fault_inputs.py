@@ -69,6 +69,7 @@ def test_malicious_pickle_is_refused_without_running_it_or_advising_weights_only
     assert not (files['evil.pt'].parent / 'pwned').exists()
 
 
+@pytest.mark.slow
 def test_collect_bad_checkpoint_is_one_line_through_the_cli(files: dict[str, Path],
                                                             tmp_path: Path) -> None:
     """`zeus collect --checkpoint <pickle>` as a process: exit 2, one line, no bag folder."""
