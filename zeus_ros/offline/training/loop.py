@@ -353,6 +353,17 @@ def main(argv: list[str] | None = None) -> int:
         print('zeus loop: interrupted; bags and the latest checkpoint are kept in '
               f'{args.out}', file=sys.stderr)
         return 130
+    except Exception as error:  # a full disk is one line (torch wraps ENOSPC); else a bug
+        from zeus_ros.atomic_file import disk_full_message
+        from zeus_ros.offline.training.collect import CollectDiskFull
+
+        full = str(error) if isinstance(error, CollectDiskFull) else \
+            disk_full_message(error, args.out)
+        if full is None:
+            raise
+        print(f'zeus loop: {full}; `zeus loop --resume` goes on once there is space',
+              file=sys.stderr)
+        return 2
     return 0
 
 
