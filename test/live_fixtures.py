@@ -11,7 +11,7 @@ TASK = 'Cheetah-Run-v0'
 
 
 def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus',
-                    seed: int = 0) -> Path:
+                    seed: int = 0, task_name: str = TASK) -> Path:
     """A real (untrained, small) checkpoint for the task: enough to exercise the nodes.
 
     The same arguments give the same bytes; another `seed` gives other weights.
@@ -24,11 +24,11 @@ def tiny_checkpoint(path: Path, obs_kind: str = 'state', method: str = 'zeus',
     from zeus_ros.learning.config import ZeusConfig
     from zeus_ros.learning.spec import AgentSpec
 
-    task = make_task(TASK)
+    task = make_task(task_name)
     low, high = task.action_bounds
     obs_shape = (task.state_dim,) if obs_kind == 'state' else (9, 84, 84)
     spec = AgentSpec(
-        task=TASK, context_names=task.context_names, obs_kind=obs_kind, obs_shape=obs_shape,
+        task=task_name, context_names=task.context_names, obs_kind=obs_kind, obs_shape=obs_shape,
         action_dim=task.action_dim, action_low=low, action_high=high,
         obs_mean=np.zeros(obs_shape, np.float32) if obs_kind == 'state' else None,
         obs_std=np.ones(obs_shape, np.float32) if obs_kind == 'state' else None)

@@ -1,7 +1,12 @@
-"""Training, evaluation, probe and loop on real collected Cheetah-Run-v0 bags (CPU, short)."""
+"""Training, evaluation, probe and loop on real collected Cheetah-Run-v0 bags (CPU, short).
+
+Cheetah-Run-v0's episodes are cut from 500 to EPISODE steps in this module (its evaluations roll
+out every policy on every value: the step count is what these tests cost, not what they check).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 import itertools
 import json
 from pathlib import Path
@@ -26,7 +31,22 @@ TASK = 'Cheetah-Run-v0'
 CONFIG = TINY | {'batch_size': 64, 'num_updates': 240, 'eval_interval': 240, 'eval_episodes': 2,
                  'checkpoint_interval': 100, 'log_interval': 20}
 
+EPISODE = 100
+"""Steps per Cheetah-Run-v0 episode in this module (the task's own: 500)."""
+EVERY = 22
+"""--switch-every of the evaluations: 4 mid-episode switches, the last 12 steps from the end."""
+
 torch.set_num_threads(1)
+
+
+@pytest.fixture(scope='module', autouse=True)
+def short_episodes() -> Iterator[None]:
+    """Cheetah-Run-v0 episodes of EPISODE steps for every test of this module, in process."""
+    from sim_bridge.registry import task_class
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(task_class(TASK), 'episode_length', EPISODE)
+        yield
 
 
 @pytest.fixture(scope='module')
@@ -182,7 +202,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--task', TASK,
-                 '--split', 'interpolation', '--switch-every', '120', '--probe-steps', '0',
+                 '--split', 'interpolation', '--switch-every', str(EVERY), '--probe-steps', '0',
                  '--episodes', '1', '--out', str(out), '--no-progress'])
     assert code == 0
     for name in ('contexts.csv', 'summary.csv', 'switches.csv', 'returns.png',
@@ -190,11 +210,11 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
         assert (out / name).is_file(), name
     summary = {row['policy']: row for row in read_csv(out / 'summary.csv')}
     assert -1.0 <= summary['agent']['spearman'] <= 1.0
-    # 500 steps switching every 120: 4 mid-episode switches, all in switches.csv (a row per
+    # EPISODE steps switching every EVERY: 4 mid-episode switches, all in switches.csv (a row per
     # switch, as switching.png marks them); those to contexts where this tiny agent earns
     # nothing have no latency and say why. The printed summary counts the same rows.
     switches = read_csv(out / 'switches.csv')
-    assert [row['step'] for row in switches] == [120, 240, 360, 480]
+    assert [row['step'] for row in switches] == [EVERY, 2 * EVERY, 3 * EVERY, 4 * EVERY]
     judged = [row for row in switches if row['judged'] == 'yes']
     assert all('latency' not in row and row['judged'].startswith('no: ') for row in switches
                if row not in judged)
@@ -347,27 +367,33 @@ def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny
 
 
 @pytest.mark.slow
-def test_eval_of_several_checkpoints_writes_tables_over_seeds(trained: Any, tmp_path: Path,
+def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
                                                              capsys: pytest.CaptureFixture
                                                              ) -> None:
-    """Two seeds of a method -> per-run evals, a resumable batch, mean ± s.e. tables."""
+    """Two seeds of a method -> per-run evals, a resumable batch, mean ± s.e. tables.
+
+    A tiny Cheetah-Run-v1 checkpoint (40-step episodes): the batch evaluates each checkpoint
+    in a process of its own, where this module's short Cheetah-Run-v0 episodes do not apply.
+    """
     from zeus_ros.learning.checkpoint import save_checkpoint
     from zeus_ros.offline.evaluation.evaluate import main
     from zeus_ros.offline.evaluation.report import per_method
 
-    first = load_checkpoint(trained.out / 'final.pt')
+    from live_fixtures import tiny_checkpoint
+
+    first = load_checkpoint(tiny_checkpoint(tmp_path / 'tiny.pt', task_name='Cheetah-Run-v1'))
     ships = tmp_path / 'ship'
     paths = []
     for seed in (0, 1):
         first.agent.config = first.config.replace(seed=seed)
-        paths.append(save_checkpoint(ships / f'zeus_s{seed}.pt', first.agent, step=first.step,
+        paths.append(save_checkpoint(ships / f'zeus_s{seed}.pt', first.agent, step=240,
                                      extra=first.extra))
     out = tmp_path / 'tables'
-    argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '150',
+    argv = ['--checkpoint', str(ships), '--split', 'interpolation', '--switch-every', '10',
             '--probe-steps', '0', '--episodes', '1', '--out', str(out), '--no-progress',
             '--jobs', '2']  # one process per checkpoint
     assert main(argv) == 0
-    runs = out / f'cheetah_run_v0_{first.step}'
+    runs = out / 'cheetah_run_v1_240'
     for seed in (0, 1):
         assert 'interpolation' in read_state(runs / f'zeus_s{seed}').evaluated
     rows = per_method(runs)
@@ -645,7 +671,7 @@ def test_readme_order_train_eval_export_report_finds_the_evaluations(
     run = tmp_path / 'runs' / 'cheetah'
     run.mkdir(parents=True)
     shutil.copy(trained.out / 'final.pt', run / 'final.pt')
-    protocol = ['--episodes', '1', '--probe-steps', '0', '--switch-every', '120',
+    protocol = ['--episodes', '1', '--probe-steps', '0', '--switch-every', str(EVERY),
                 '--no-progress']
     assert zeus(['eval', '--checkpoint', str(run / 'final.pt'), '--task', TASK,
                  '--split', 'interpolation', *protocol]) == 0
