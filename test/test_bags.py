@@ -659,6 +659,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
         'kind': 'switch', 'values': 'train', 'every': 100}
 
 
+@pytest.mark.slow
 def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
     """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
     from zeus_ros.offline.training.collect import main as collect

@@ -94,6 +94,7 @@ def test_in_a_dagger_round_the_student_acts_and_the_teacher_labels(tiny: Path) -
     assert ep.teacher_psi.shape == (n, 10) and np.isfinite(ep.teacher_psi).all()
 
 
+@pytest.mark.slow
 def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
     """Action + psi regression through conv phi and psi learns (random frames, fixed labels)."""
     teacher = InferenceAgent.from_checkpoint(TEACHER)
