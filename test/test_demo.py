@@ -50,6 +50,28 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     assert all(r['psi'] for r in live) and all(r['psi'] for r in frozen)
 
 
+@pytest.mark.ros
+def test_the_pixel_demo_runs_the_zoo_pixel_checkpoint_on_rendered_frames(tmp_path: Path) -> None:
+    """`zeus demo --obs pixels`: sim_bridge renders, the zoo's pixel pair acts, live and frozen.
+
+    The zoo pixel checkpoint carries its read-out and train-mean psi: nothing is calibrated.
+    """
+    require_ros()
+    out = tmp_path / 'demo'
+    done = subprocess.run(python_module('zeus_ros.demo', '--obs', 'pixels', '--steps', '40',
+                                        '--seeds', '1', '--out', str(out)),
+                          env=ros_environment(fresh_domain_id()), capture_output=True,
+                          text=True, timeout=300, check=False)
+    text = done.stdout + done.stderr
+    assert done.returncode == 0, text[-3000:]
+    assert 'pixels_student.pt' in text and 'pixels=True' in text
+    assert 'calibrating' not in text and 'measuring the training-mean' not in text
+    live, frozen = read_csv(out / 'steps.csv'), read_csv(out / 'frozen' / 'steps.csv')
+    assert len(live) >= 35 and len(frozen) >= 35
+    assert all(r['psi'] for r in live) and 'context FROZEN' in text
+    assert (out / 'value_of_adaptation.csv').is_file()
+
+
 def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> None:
     """The demo's schedule follows the task's episode length (no per-task special case)."""
     from zeus_ros.demo import schedule_lengths
