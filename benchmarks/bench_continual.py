@@ -253,7 +253,7 @@ def main() -> int:
         from zeus_ros.offline.training.continual import read_history
 
         events = read_history(folder / 'rec_continual' / 'history.jsonl')
-        third = [s['return'] for s in segs if s['t_s'] >= 2 * args.wall / 3 - 10]
+        third = [s['return'] for s in segs if s['t_s'] >= 2 * info['wall_s'] / 3 - 10]
         info.update({
             'segments': len(segs), 'swaps': sum(e['event'] == 'swap' for e in events),
             'refusals': sum(e.get('decision') == 'refuse' for e in events),
