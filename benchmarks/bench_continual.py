@@ -38,6 +38,8 @@ BEYOND = [0.6, 0.7, 0.75, 0.8, 0.85, 0.9]
 """Far beyond the train range (which ends at 0.3): there the zoo checkpoint loses most
 (-98 per episode against the oracle's -40, measured at evaluation seed 300)."""
 EPISODE = 40
+SMOOTH = 30
+"""Segments in the picture's running mean (one segment alone swings from -50 to -200)."""
 
 
 def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
@@ -265,7 +267,8 @@ def main() -> int:
             'p99_idle_ms': float(np.percentile(outside, 99)) if outside else float('nan'),
             'p99_busy_ms': float(np.percentile(inside, 99)) if inside else float('nan'),
             'swap_s': _marks(events, 'swap', lat, args.rate),
-            'rollback_s': _marks(events, 'rollback', lat, args.rate)})
+            'rollback_s': _marks(events, 'rollback', lat, args.rate),
+            'refusal_s': _marks(events, 'refuse', lat, args.rate)})
         summary.append(info)
         rows += [{'mode': mode, **s} for s in segs]
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in info.items()},
@@ -292,15 +295,23 @@ def _plot(out: Path, rows: list[dict[str, Any]], summary: list[dict[str, Any]]) 
     for index, mode in enumerate(dict.fromkeys(r['mode'] for r in rows)):
         mine = [r for r in rows if r['mode'] == mode]
         color = f'C{index}'
-        ax.plot([r['t_s'] for r in mine], [r['return'] for r in mine], '.-', label=mode,
-                color=color)
+        t, returns = [r['t_s'] for r in mine], np.array([r['return'] for r in mine])
+        ax.plot(t, returns, '.', color=color, alpha=0.25, markersize=3)
+        width = min(SMOOTH, len(returns))
+        if width:
+            smooth = np.convolve(returns, np.ones(width) / width, mode='valid')
+            ax.plot(t[width - 1:], smooth, '-', color=color,
+                    label=f'{mode} (mean of the last {width} segments)')
         info = next(i for i in summary if i['mode'] == mode)
+        for t_refused in info.get('refusal_s', []):
+            ax.axvline(t_refused, color=color, linestyle='-', linewidth=0.6, alpha=0.4)
         for t in info['swap_s']:
             ax.axvline(t, color=color, linestyle='--', linewidth=1)
         for t in info['rollback_s']:
             ax.axvline(t, color=color, linestyle=':', linewidth=1.5)
     ax.plot([], [], 'k--', linewidth=1, label='swap')
     ax.plot([], [], 'k:', linewidth=1.5, label='rollback')
+    ax.plot([], [], 'k-', linewidth=0.6, alpha=0.4, label='refused candidate')
     ax.set_xlabel('time [s]')
     ax.set_ylabel('return per segment (per 40 steps)')
     ax.set_title('Cheetah-Bias-v0, bias beyond every preset: fixed vs --continual')
