@@ -131,13 +131,18 @@ class ClockWatch:
                 'clock:=namespace, docs/security.md)']
 
 
-def latency_specs(warn_ms: float, error_ms: float, what: str) -> dict[str, Any]:
-    """The two latency threshold parameters of a node (params.Spec), live."""
+def latency_specs(warn_ms: float, error_ms: float, what: str, zero_warn: str = 'never',
+                  zero_error: str = 'never') -> dict[str, Any]:
+    """The two latency threshold parameters of a node (params.Spec), live.
+
+    `zero_warn` / `zero_error` say what 0 means (the bridges: a number of control periods).
+    """
     from zeus_ros.nodes.params import Spec
 
     return {
         'latency_warn_ms': Spec(warn_ms, f'/diagnostics: WARN when the {what} p99 of the last '
-                                'second exceeds it (0: never)', live=True, low=0.0),
+                                f'second exceeds it (0: {zero_warn})', live=True, low=0.0),
         'latency_error_ms': Spec(error_ms, f'/diagnostics: ERROR when the {what} p99 of the '
-                                 'last second exceeds it (0: never)', live=True, low=0.0),
+                                 f'last second exceeds it (0: {zero_error})', live=True,
+                                 low=0.0),
     }

@@ -42,7 +42,13 @@ from zeus_ros.nodes.common import (
     step_qos,
 )
 from zeus_ros.nodes.handshake import handshake_of
-from zeus_ros.nodes.health import ClockWatch, WindowCounts, latency_problems, rate_problems
+from zeus_ros.nodes.health import (
+    ClockWatch,
+    WindowCounts,
+    latency_problems,
+    latency_specs,
+    rate_problems,
+)
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.robot_io import (
@@ -102,10 +108,8 @@ SPECS: dict[str, Spec] = {
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
     'rate_tolerance': Spec(0.1, '/diagnostics: fraction the step rate may miss control_rate by '
                            'before it WARNs', live=True, low=0.0, high=1.0),
-    'latency_warn_ms': Spec(0.0, '/diagnostics: WARN when observation -> action p99 exceeds it '
-                            '(0: one control period)', live=True, low=0.0),
-    'latency_error_ms': Spec(0.0, '/diagnostics: ERROR when observation -> action p99 exceeds '
-                             'it (0: five control periods)', live=True, low=0.0),
+    **latency_specs(0.0, 0.0, 'observation -> action', 'one control period',
+                    'five control periods'),
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',
           'rejected_inputs', 'bad_rewards', 'foreign')

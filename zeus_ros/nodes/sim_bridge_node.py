@@ -40,7 +40,13 @@ from zeus_ros.nodes.common import (
     step_qos,
 )
 from zeus_ros.nodes.handshake import handshake_of
-from zeus_ros.nodes.health import ClockWatch, WindowCounts, latency_problems, rate_problems
+from zeus_ros.nodes.health import (
+    ClockWatch,
+    WindowCounts,
+    latency_problems,
+    latency_specs,
+    rate_problems,
+)
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
@@ -78,10 +84,8 @@ SPECS: dict[str, Spec] = {
                           'WARN', live=True, low=0.0),
     'rate_tolerance': Spec(0.1, '/diagnostics: fraction the rate may fall short of (realtime: '
                            'also exceed) expected_rate', live=True, low=0.0, high=1.0),
-    'latency_warn_ms': Spec(0.0, '/diagnostics: WARN when observation -> action p99 exceeds it '
-                            '(0: one control period)', live=True, low=0.0),
-    'latency_error_ms': Spec(0.0, '/diagnostics: ERROR when observation -> action p99 exceeds '
-                             'it (0: five control periods)', live=True, low=0.0),
+    **latency_specs(0.0, 0.0, 'observation -> action', 'one control period',
+                    'five control periods'),
 }
 WARN_COUNTS = ('timeouts', 'rejected', 'stale', 'unexpected', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
