@@ -149,11 +149,11 @@ def own_splits(folder: Path) -> list[Path]:
     return kept
 
 
-def segments(folder: Path, rate: float) -> list[dict[str, Any]]:
+def segments(splits: list[Path], rate: float) -> list[dict[str, Any]]:
     """Return per segment (reward per step x EPISODE) with its start time in seconds."""
     from zeus_ros.offline.data.ingest import ingest_bags
 
-    data = ingest_bags(own_splits(folder))
+    data = ingest_bags(splits)
     start = min(int(ep.steps[0]) for ep in data.episodes)
     sums: dict[int, list[float]] = {}
     for ep in data.episodes:
@@ -167,7 +167,7 @@ def segments(folder: Path, rate: float) -> list[dict[str, Any]]:
              'return': v[0] / v[1] * EPISODE} for s, v in sorted(sums.items()) if v[1] >= 20]
 
 
-def latencies(folder: Path) -> list[tuple[float, float, int]]:
+def latencies(splits: list[Path]) -> list[tuple[float, float, int]]:
     """(state receive time [s, epoch], action - state receive time [ms], step) per step."""
     from rosbags.rosbag2 import Reader
 
@@ -176,7 +176,7 @@ def latencies(folder: Path) -> list[tuple[float, float, int]]:
 
     seen: dict[str, dict[int, int]] = {TOPIC_STATE: {}, TOPIC_ACTION: {}}
 
-    for bag in own_splits(folder):
+    for bag in splits:
         reader = Reader(bag)
         reader.open()
         try:
@@ -247,8 +247,9 @@ def main() -> int:
 
                 shutil.rmtree(folder)
             info = run_mode(mode, folder, args)
-        segs = segments(folder, args.rate)
-        lat = latencies(folder)
+        splits = own_splits(folder)  # read once: both figures come from the same splits
+        segs = segments(splits, args.rate)
+        lat = latencies(splits)
         busy = busy_intervals(folder / 'rec_continual' / 'history.jsonl')
         inside = [ms for t, ms, _ in lat if any(a <= t <= b for a, b in busy)]
         outside = [ms for t, ms, _ in lat if not any(a <= t <= b for a, b in busy)]
