@@ -84,6 +84,31 @@ def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
     assert line['sha256'] == result.candidate.sha256 and line['reason']
     card = (tmp_path / 'bad' / 'card.json').read_text()
     assert '"corrupt_rewards": true' in card
+    assert c.resume_from(result, settings, corrupt_rewards=True) is None  # never continued
+    # a later round continuing a refused candidate: its critics, no warm-up; gated against
+    # the deployed checkpoint all the same
+    again = c.continual_round(zoo, bias_recording[1:], bias_recording, tmp_path / 'next',
+                              history, settings, start=result.candidate.path)
+    assert again.candidate.warmup_updates == 0
+    line = c.read_history(history)[-1]
+    assert line['started_from'] == str(result.candidate.path) and line['deployed'] == str(zoo)
+
+
+def _round(deploy: bool, gain: float) -> c.RoundResult:
+    gate = c.GateResult(deploy, '', gain, 1.0, 2.0, -50.0, -50.0 + gain)
+    candidate = c.Candidate(Path('/runs/round_002/candidate.pt'), 'ab' * 32, [], [], 0, 0, 0,
+                            0.0)
+    return c.RoundResult(candidate, gate, {})
+
+
+def test_only_a_refused_candidate_that_gained_is_continued() -> None:
+    settings = c.ContinualSettings()
+    assert c.resume_from(_round(False, 8.0), settings) == Path('/runs/round_002/candidate.pt')
+    assert c.resume_from(_round(False, -3.0), settings) is None  # no progress: start afresh
+    assert c.resume_from(_round(True, 30.0), settings) is None  # deployed: it is the start
+    assert c.resume_from(_round(False, 8.0), settings, corrupt_rewards=True) is None
+    off = c.ContinualSettings(resume_refused=False)
+    assert c.resume_from(_round(False, 8.0), off) is None
 
 
 @pytest.mark.slow

@@ -160,6 +160,8 @@ class Trainer:
         self.since_segment = 0
         """First segment of the deployed checkpoint: its live baseline starts there."""
         self.episode_length = 0
+        self.resume: Path | None = None
+        """A refused candidate the next round continues (continual.resume_from)."""
 
     def run(self) -> None:
         """Until stopped: one poll every poll_s seconds."""
@@ -213,9 +215,10 @@ class Trainer:
         try:
             rehearsal = c.rehearsal_bag(Path(n.p['checkpoint']), n.out / 'rehearsal',
                                         n.settings, self.log.info)
+            start = self.resume if self.resume is not None and self.resume.is_file() else None
             result = c.continual_round(n.deployed, new, splits, folder, n.history, n.settings,
                                        corrupt_rewards=corrupt, log=self.log.info,
-                                       stop=self.stop.is_set, rehearsal=rehearsal)
+                                       stop=self.stop.is_set, rehearsal=rehearsal, start=start)
         except c.RoundStopped:
             self.log.info(f'continual: round {number} stopped: shutting down')
             return
@@ -230,6 +233,7 @@ class Trainer:
             return
         n.state = 'waiting'
         forced = number in n.p['force_rounds']
+        self.resume = None if forced else c.resume_from(result, n.settings, corrupt)
         if not result.gate.deploy and not forced:
             n.counts['refusals'] += 1
             n.report('refuse', f'round {number}: refused {result.candidate.sha256[:12]}: '
@@ -300,6 +304,7 @@ class Trainer:
         if why is None:
             n.counts['rollbacks'] += 1
             bad, n.deployed, n.previous = n.deployed, n.previous, None
+            self.resume = None  # nothing trained from the rolled-back one continues
             self.since_segment = watch.since_segment  # the restored one's segments count again
             line = f'continual: ROLLED BACK {bad.name} -> {n.deployed.name}: {figures}'
         else:
@@ -334,6 +339,8 @@ class Trainer:
         """Keep the newest `keep_candidates` round folders (deployed copies are all kept)."""
         rounds = sorted(self.node.out.glob('round_*'))
         for folder in rounds[:-int(self.node.p['keep_candidates'])]:
+            if self.resume is not None and folder in self.resume.parents:
+                continue  # the next round continues this candidate
             shutil.rmtree(folder, ignore_errors=True)
 
 
