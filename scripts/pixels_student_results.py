@@ -70,7 +70,10 @@ def _pixel_sensitivity(path: Path, episodes: int) -> float:
 
 
 def _measure(path: Path, episodes: int) -> dict:
-    """measure_adaptation's numbers for `path`, cached (+ a pixel agent's sensitivity)."""
+    """measure_adaptation's numbers for `path`, cached (+ a pixel agent's sensitivity).
+
+    The cache key is the file's sha256: students of two families never share an entry.
+    """
     digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
     cache = CACHE / f'{path.parent.name}_{path.stem}_{digest}_e{episodes}.json'
     if cache.is_file():
@@ -163,7 +166,10 @@ def main() -> None:
     parser.add_argument('--episodes', type=int, default=1, help='episodes per context value')
     parser.add_argument('--students', type=Path, nargs='+', required=True)
     parser.add_argument('--no-context', type=Path, nargs='*', default=[])
+    parser.add_argument('--out', type=Path, default=OUT,
+                        help=f'folder for table.md and the figure (default {OUT})')
     args = parser.parse_args()
+    out = args.out
     teacher = _measure(args.teacher, args.episodes)
     random = _random_returns(args.teacher_task, args.episodes)
     groups = {'state teacher': [teacher],
@@ -171,7 +177,7 @@ def main() -> None:
     if args.no_context:
         groups['pixel no_context student'] = [_measure(p, args.episodes)
                                               for p in args.no_context]
-    OUT.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     header = ('| checkpoint | seeds | return train | share of teacher | return beyond range '
               '| share of teacher | adaptation train (per seed) '
               '| adaptation beyond range (per seed) | sensitivity |')
@@ -179,11 +185,11 @@ def main() -> None:
     lines += [_row(label, reports, teacher, random) for label, reports in groups.items()]
     lines.append(f'| uniform random policy | - | {random["train"]:.1f} | 0 | '
                  f'{random["extrapolation"]:.1f} | 0 | - | - | - |')
-    (OUT / 'table.md').write_text('\n'.join(lines) + '\n')
+    (out / 'table.md').write_text('\n'.join(lines) + '\n')
     rounds = {'student': [p.parent / 'rounds.csv' for p in args.students]}
     if args.no_context:
         rounds['no_context student'] = [p.parent / 'rounds.csv' for p in args.no_context]
-    _figure(groups, rounds, OUT / 'returns_and_losses.png')
+    _figure(groups, rounds, out / 'returns_and_losses.png')
     print('\n'.join(lines))
 
 

@@ -43,8 +43,11 @@ __all__ = ['INTRODUCTION_S', 'PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'Sen
            'publisher_gid']
 
 _GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
-PAIRING_SETTLE_S = 0.5
-"""Seconds the action publishers must stay the same before a bridge pairs with the only one."""
+PAIRING_SETTLE_S = 2.0
+"""Seconds the action publishers must stay the same before a bridge with no `action_sender`
+pairs with the only one. Discovery names endpoints one participant at a time: with 0.5 s a
+bridge started beside two action publishers paired with the first in 4 of 10 runs (the second
+was discovered 0.5-1 s later). Launches set `action_sender` and never wait for this."""
 INTRODUCTION_S = 3.0
 """Seconds a newcomer under the paired node's name has to complete the handshake (its hello
 may come after its first messages) before it is named as an impostor."""
