@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from sim_bridge.presets import load_preset
+from sim_bridge.families import load_preset
 from sim_bridge.registry import make_task
 
 from ros_harness import REPO

@@ -329,7 +329,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 60
     # Round 2 continues the schedule where round 1 stopped (step 300: its 4th and 5th train
     # values), instead of starting over at the first one.
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
     from zeus_ros.offline.data.ingest import ingest_bags
 
     values = [v['torso_length'] for v in load_preset(TASK, 'train')]

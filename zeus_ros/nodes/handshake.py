@@ -120,7 +120,7 @@ class Handshake:
 
     def announce(self) -> None:
         """Send this start's hello if it changed, or if it was last sent RESEND_S ago."""
-        from zeus_ros.nodes.senders import publisher_gid
+        from zeus_ros.nodes.rcl_bindings import publisher_gid
 
         publishers = list(self._node.publishers)
         sha256 = self.sha256()

@@ -40,7 +40,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from zeus_ros.nodes.senders import SenderSubscription, publisher_gid
+from zeus_ros.nodes.rcl_bindings import publisher_gid
+from zeus_ros.nodes.senders import SenderSubscription
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -71,7 +71,7 @@ def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
          force: bool = False, expect_task: str | None = None
          ) -> tuple[list[EvalJob], list[str]]:
     """Jobs still to run, and the group folders they belong to (in order of appearance)."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     owners: dict[Path, Path] = {}
     jobs, tasks = [], []

@@ -56,7 +56,7 @@ own oscillation is not read as a disturbance) before the recovery test; latencie
 # ---------------------------------------------------------------------- environment side
 def split_values(task: str, split: str) -> list[dict[str, float]]:
     """The context values of a split of the paper's tables, as one mapping per value."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     if split not in SPLITS:
         raise ValueError(f'split must be one of {", ".join(SPLITS)}, got {split!r}')

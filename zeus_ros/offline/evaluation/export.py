@@ -91,7 +91,7 @@ def _eval_rows(summaries: dict[str, Path]) -> list[tuple[str, dict[str, str], di
 def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str | None,
               commit: str | None, source: Path | None = None) -> str:
     """The markdown card of an exported checkpoint; `summaries`: split -> eval summary.csv."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     config, spec, extra = loaded.config, loaded.spec, loaded.extra
     train_values = ', '.join(f'{v:g}' for value in load_preset(spec.task, 'train')

@@ -91,7 +91,7 @@ def group_name(task: str, overrides: dict[str, Any]) -> str:
 
 
 def _task_splits(task: str, wanted: Sequence[str] | None) -> tuple[str, ...]:
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
     from sim_bridge.registry import task_class
 
     try:
