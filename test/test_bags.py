@@ -328,7 +328,7 @@ def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.training.collect import collect, random_policy
+    from zeus_ros.offline.rollout import collect, random_policy
 
     task = make_task(ROUND_TRIP_TASK, seed=3)
     env = RecordingEnv(ScheduledEnv(task, schedule_from_config({'kind': 'constant'}, task, 3)))
@@ -647,7 +647,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
     """The documented inline forms of --schedule give configs the schedule code accepts."""
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
 
     task = make_task('Cheetah-Run-v0')
     for text in ('constant', 'constant:value=0.8', 'switch:train:every=100',

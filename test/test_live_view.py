@@ -266,9 +266,9 @@ def test_novelty_warns_on_an_extrapolation_context_and_clears_back_on_a_training
     import torch
 
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.evaluate import _make_env, _switch_schedule, run_steps
+    from zeus_ros.offline.evaluation.evaluate import _make_env, _switch_schedule
     from zeus_ros.offline.evaluation.readout import NoveltyTracker, calibrate_readout
-    from zeus_ros.offline.training.collect import AgentPolicy
+    from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     torch.set_num_threads(1)
     agent = InferenceAgent.from_checkpoint(

@@ -21,8 +21,8 @@ import yaml
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.config import load_config
 from zeus_ros.offline.evaluation.metrics import read_csv
+from zeus_ros.offline.runs import read_state
 from zeus_ros.offline.training import collect
-from zeus_ros.offline.training.run_state import read_state
 from zeus_ros.offline.training.train import TrainError, train
 
 from tiny_config import TINY, config_fixture
@@ -198,7 +198,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
                                                             capsys: pytest.CaptureFixture
                                                             ) -> None:
     """The eval command writes CSV/PNG, prints a table, reports Spearman rho in [-1, 1]."""
-    from zeus_ros.offline.evaluation.evaluate import main
+    from zeus_ros.cli.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--task', TASK,
@@ -244,7 +244,7 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                                                                 capsys: pytest.CaptureFixture
                                                                 ) -> None:
     """--values: any torso lengths, several episodes each; live vs frozen on the same seeds."""
-    from zeus_ros.offline.evaluation.evaluate import main
+    from zeus_ros.cli.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.65,1.4',
@@ -317,7 +317,7 @@ def test_probe_beats_predicting_the_mean() -> None:
 @pytest.mark.slow
 def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) -> None:
     """Two rounds: random bag + fresh training, then an agent bag + resumed training."""
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
     from zeus_ros.offline.training.loop import run_loop
 
     results = run_loop(TASK, load_config(tiny_config), tmp_path, rounds=2, random_steps=300,
@@ -375,8 +375,8 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
     A tiny Cheetah-Run-v1 checkpoint (40-step episodes): the batch evaluates each checkpoint
     in a process of its own, where this module's short Cheetah-Run-v0 episodes do not apply.
     """
+    from zeus_ros.cli.evaluate import main
     from zeus_ros.learning.checkpoint import save_checkpoint
-    from zeus_ros.offline.evaluation.evaluate import main
     from zeus_ros.offline.evaluation.report import per_method
 
     from live_fixtures import tiny_checkpoint
@@ -471,7 +471,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
 
 
 def _trace(reward: list[float], context: list[float], segment: list[int]) -> Any:
-    from zeus_ros.offline.evaluation.evaluate import Trace
+    from zeus_ros.offline.rollout import Trace
 
     n = len(reward)
     first = np.zeros(n, bool)
@@ -530,7 +530,7 @@ def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: P
 
     from matplotlib.figure import Figure
 
-    from zeus_ros.offline.training.run_state import mark_trained
+    from zeus_ros.offline.runs import mark_trained
 
     folder = tmp_path / 'task'
     bag = next(bags.glob('bag_*'))

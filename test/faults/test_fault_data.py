@@ -239,7 +239,7 @@ def test_every_offline_load_refuses_a_nan_checkpoint_in_one_line(
     with pytest.raises(CheckpointError, match=r'refused: 1 of \d+ tensors hold NaN/Inf '
                        r'\(first: modules\.actor\.'):
         load_checkpoint(bad)
-    from zeus_ros.offline.evaluation import evaluate
+    from zeus_ros.cli import evaluate
 
     for main, argv in (
             (export.main, ['--checkpoint', str(bad), '--out', str(tmp_path / 'x.pt')]),

@@ -262,11 +262,10 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
         _make_env,
         _switch_schedule,
         default_switch_every,
-        run_steps,
         split_values,
         switching_order,
     )
-    from zeus_ros.offline.training.collect import AgentPolicy
+    from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     values = switching_order(split_values(agent.task, 'train'), seed)
     # Short enough that every value comes back at least twice (one of them can be held back),

@@ -6,7 +6,7 @@ Reads every finished evaluation below the folder: any folder with the eval.json 
 writes last (method, seed and split from it: `zeus eval --checkpoint runs/x/final.pt` writes
 runs/x/eval_<split>/, so `zeus report runs/x` finds it), and the layout of
 `experiments/run_one.sh` and sweeps, <method>_s<seed>/eval_<split>/summary.csv, finished
-where <method>_s<seed>/state.json (or an old .done marker) says so (training/run_state.py).
+where <method>_s<seed>/state.json (or an old .done marker) says so (offline/runs.py).
 Writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md
 into --out (default FOLDER/report) and prints the markdown table (as in docs/results.md).
 """
@@ -29,7 +29,7 @@ from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
 from zeus_ros.offline.evaluation.records import find_records
-from zeus_ros.offline.training.run_state import RunState, RunStateError, read_state
+from zeus_ros.offline.runs import RunState, RunStateError, read_state
 
 __all__ = [
     'METRICS',

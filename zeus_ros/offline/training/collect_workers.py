@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.training.collect import CollectStats
+from zeus_ros.offline.rollout import CollectStats
 
 __all__ = ['CollectJob', 'collect_bag', 'main_workers', 'portable_task', 'run_workers',
            'split_steps', 'worker_seeds']
@@ -73,7 +73,7 @@ def collect_bag(job: CollectJob) -> CollectStats:
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
     from zeus_ros.offline.data.bag_writer import StepBagWriter
-    from zeus_ros.offline.training.collect import (
+    from zeus_ros.offline.rollout import (
         AgentPolicy,
         CollectDiskFull,
         collect,

@@ -253,7 +253,7 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
     from sim_bridge.schedules import schedule_from_config
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.data.bag_writer import StepBagWriter
-    from zeus_ros.offline.training.collect import AgentPolicy, collect
+    from zeus_ros.offline.rollout import AgentPolicy, collect
 
     begin = time.perf_counter()
     agent = InferenceAgent.from_checkpoint(deployed, reuse_features=True)

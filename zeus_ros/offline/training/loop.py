@@ -1,7 +1,7 @@
 """`zeus loop`: record -> retrain -> redeploy as one command (in-process, no ROS).
 
 Round 0 collects uniform-random steps and trains from scratch; every later round collects with
-the newest checkpoint plus exploration noise (the policy as deployed, via collect.AgentPolicy),
+the newest checkpoint plus exploration noise (the policy as deployed, via rollout.AgentPolicy),
 appends that bag and resumes training on all bags. `--resume` continues a stopped or finished
 loop up to --rounds: rounds whose bag exists are not collected again, rounds whose updates are
 in the checkpoint are not trained again (round i always collects with seed + i, so a loop
@@ -30,12 +30,8 @@ from typing import Any
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.training.collect import (
-    DEFAULT_SCHEDULE,
-    SCHEDULE_HELP,
-    next_bag_path,
-    parse_schedule,
-)
+from zeus_ros.offline.rollout import next_bag_path, parse_schedule
+from zeus_ros.offline.training.collect import DEFAULT_SCHEDULE, SCHEDULE_HELP
 from zeus_ros.offline.training.collect_workers import CollectJob, collect_bag
 from zeus_ros.offline.training.train import (
     CHECKPOINT,
@@ -355,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except Exception as error:  # a full disk is one line (torch wraps ENOSPC); else a bug
         from zeus_ros.atomic_file import disk_full_message
-        from zeus_ros.offline.training.collect import CollectDiskFull
+        from zeus_ros.offline.rollout import CollectDiskFull
 
         full = str(error) if isinstance(error, CollectDiskFull) else \
             disk_full_message(error, args.out)

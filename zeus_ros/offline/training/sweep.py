@@ -27,8 +27,8 @@ import time
 from typing import Any
 
 from sim_bridge.presets import SPLITS
+from zeus_ros.offline.runs import RunStateError
 from zeus_ros.offline.training.collect_workers import portable_task
-from zeus_ros.offline.training.run_state import RunStateError
 from zeus_ros.offline.training.trial import (
     LoopProtocol,
     Trial,

@@ -1,7 +1,8 @@
 """The `zeus` command: one entry point for the record -> retrain -> redeploy loop.
 
-Each subcommand lives in its own module with a `main(argv) -> int`; this file only dispatches,
-so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
+Each subcommand lives in its own module with a `main(argv) -> int` (the command line of a
+library function: zeus_ros/cli/<command>.py where it has moved here already); this file only
+dispatches, so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'ingest': ('zeus_ros.offline.data.ingest',
                'read bags as training does; report what they hold'),
     'train': ('zeus_ros.offline.training.train', 'train a checkpoint from bags'),
-    'eval': ('zeus_ros.offline.evaluation.evaluate', 'evaluate checkpoints in-process (+ tables)'),
+    'eval': ('zeus_ros.cli.evaluate', 'evaluate checkpoints in-process (+ tables)'),
     'adaptation': ('zeus_ros.offline.evaluation.adaptation',
                    "a checkpoint's value of adaptation next to the zoo's"),
     'report': ('zeus_ros.offline.evaluation.report', 'mean ± s.e. over seeds of evaluations'),
@@ -52,6 +53,3 @@ def main(argv: list[str] | None = None) -> int:
     module = importlib.import_module(SUBCOMMANDS[name][0])
     return int(module.main(rest) or 0)
 
-
-if __name__ == '__main__':
-    raise SystemExit(main())
