@@ -131,13 +131,13 @@ def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str
         f'| file | {pt.stat().st_size / 1e6:.2f} MB, sha256 `{digest}` |',
     ]
     if 'context_readout' in extra:
-        from zeus_ros.offline.evaluation.readout import ContextReadout
+        from zeus_ros.learning.readout import ContextReadout
 
         readout = ContextReadout.from_dict(extra['context_readout']).describe()
         readout = readout.removeprefix('context read-out (').removesuffix(')')
         lines.insert(-1, f'| context read-out | {readout} |')
     if 'context_novelty' in extra:
-        from zeus_ros.offline.evaluation.readout import NoveltyMonitor
+        from zeus_ros.learning.readout import NoveltyMonitor
 
         novelty = NoveltyMonitor.from_dict(extra['context_novelty']).describe()
         novelty = novelty.removeprefix('context novelty monitor (').split('; fitted on')[0]
@@ -190,7 +190,8 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
             method_spec(loaded.config.method).context_source == 'psi':
         from zeus_ros.learning.inference import InferenceAgent
-        from zeus_ros.offline.evaluation.readout import calibrate_readout, store_readout
+        from zeus_ros.learning.readout import store_readout
+        from zeus_ros.offline.evaluation.calibrate import calibrate_readout
 
         try:
             readout, novelty = calibrate_readout(InferenceAgent(loaded.agent),
