@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING, Any
 import pytest
 from rosbags.highlevel import AnyReader
 
-from zeus_ros.offline.data import recover
+from zeus_ros.bags.recover import STEP_TOPICS
+from zeus_ros.cli import recover
 from zeus_ros.offline.data.ingest import ingest_bags
-from zeus_ros.offline.data.recover import STEP_TOPICS
 
 from ros_harness import driver_node as ros_node
 from ros_harness import python_module, spin_until

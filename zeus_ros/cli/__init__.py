@@ -27,7 +27,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'sweep': ('zeus_ros.offline.training.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
     'inspect': ('zeus_ros.inspector', 'live view of the context topics (subscribe only)'),
-    'recover': ('zeus_ros.offline.data.recover', 'restore a bag cut off by a crash'),
+    'recover': ('zeus_ros.cli.recover', 'restore a bag cut off by a crash'),
     'demo': ('zeus_ros.demo', 'the live demo of the README'),
 }
 

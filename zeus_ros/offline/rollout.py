@@ -23,8 +23,8 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
-from zeus_ros.offline.data.bag_writer import SimStep, StepBagWriter
-from zeus_ros.offline.data.schema import StepFeedbackFields, ns_from_sim_time
+from zeus_ros.bags.schema import StepFeedbackFields, ns_from_sim_time
+from zeus_ros.bags.writer import SimStep, StepBagWriter
 
 if TYPE_CHECKING:
     from zeus_ros.learning.inference import InferenceAgent
@@ -114,7 +114,7 @@ def disk_full_line(error: BaseException, bag: Path, writer: StepBagWriter | None
     The space needed is what the steps written so far took, scaled to all `steps`.
     """
     from zeus_ros.atomic_file import disk_full, free_space, size_text
-    from zeus_ros.offline.data.schema import TOPIC_STEP
+    from zeus_ros.bags.schema import TOPIC_STEP
 
     if disk_full(error) is None:
         return None

@@ -38,12 +38,10 @@ import warnings
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.data.bag_errors import BagError, IngestError
-from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
-from zeus_ros.offline.data.frames import FrameStore
-from zeus_ros.offline.data.mcap_file import channel_qos, closed_by_writer, qos_text
-from zeus_ros.offline.data.schema import (
+from zeus_ros.bags.cdr_columns import decode_messages, stack_field
+from zeus_ros.bags.errors import BagError, IngestError
+from zeus_ros.bags.mcap_file import channel_qos, closed_by_writer, qos_text
+from zeus_ros.bags.schema import (
     MSGTYPES,
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
@@ -52,6 +50,8 @@ from zeus_ros.offline.data.schema import (
     TOPIC_STEP,
     codec,
 )
+from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
+from zeus_ros.offline.data.frames import FrameStore
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence

@@ -11,8 +11,8 @@ import shutil
 import signal
 import sys
 
+from zeus_ros.bags.writer import StepBagWriter
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
-from zeus_ros.offline.data.bag_writer import StepBagWriter
 from zeus_ros.offline.rollout import (
     AgentPolicy,
     CollectDiskFull,

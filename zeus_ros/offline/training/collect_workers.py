@@ -72,7 +72,7 @@ def collect_bag(job: CollectJob) -> CollectStats:
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.data.bag_writer import StepBagWriter
+    from zeus_ros.bags.writer import StepBagWriter
     from zeus_ros.offline.rollout import (
         AgentPolicy,
         CollectDiskFull,

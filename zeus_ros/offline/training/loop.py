@@ -60,7 +60,7 @@ def _bag_steps(bag: Path) -> int:
     """Control steps in a closed bag: the /zeus/step messages its metadata counts."""
     from rosbags.rosbag2 import Reader
 
-    from zeus_ros.offline.data.schema import TOPIC_STEP
+    from zeus_ros.bags.schema import TOPIC_STEP
 
     reader = Reader(bag)
     reader.open()
@@ -78,7 +78,7 @@ def _schedule_position(bags: Sequence[Path]) -> tuple[int, int]:
     """
     from rosbags.rosbag2 import Reader
 
-    from zeus_ros.offline.data.schema import MSGTYPES, TOPIC_STEP, codec
+    from zeus_ros.bags.schema import MSGTYPES, TOPIC_STEP, codec
 
     steps = episodes = 0
     decode = codec().deserialize
@@ -110,8 +110,8 @@ def _recover_unfinished(out: Path, bags: Path) -> None:
     Without this, training would stop on the unfinished bag (or, after a manual recover,
     silently train on a cut round).
     """
-    from zeus_ros.offline.data.bag_errors import BagError
-    from zeus_ros.offline.data.recover import needs_recovery, recover_bag
+    from zeus_ros.bags.errors import BagError
+    from zeus_ros.bags.recover import needs_recovery, recover_bag
 
     for bag in sorted(p for p in bags.glob('bag_*') if p.is_dir()):
         if not needs_recovery(bag):
@@ -303,8 +303,8 @@ def _store_flags(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus loop`; returns the process exit code."""
+    from zeus_ros.bags.errors import BagError, IngestError
     from zeus_ros.learning.errors import CheckpointError, ConfigError
-    from zeus_ros.offline.data.bag_errors import BagError, IngestError
 
     args = _build_parser().parse_args(argv)
     try:

@@ -212,7 +212,7 @@ def build_spec(dataset: Any, replay: Any, config: ZeusConfig) -> AgentSpec:
 
 def _report_cut_bags(bags: Sequence[str], log: Callable[[str], None]) -> None:
     """Say which bags a crash cut short: their round may hold fewer steps than it asked for."""
-    from zeus_ros.offline.data.recover import bag_state
+    from zeus_ros.bags.recover import bag_state
 
     cut = [f'{bag} ({state})' for bag in bags
            if (state := bag_state(Path(bag))) in ('recovered', 'unfinished', 'provisional')
@@ -545,7 +545,7 @@ def _print_ingest_warnings() -> Callable[..., None]:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus train`; returns the process exit code."""
     args = _build_parser().parse_args(argv)
-    from zeus_ros.offline.data.bag_errors import BagError, IngestError
+    from zeus_ros.bags.errors import BagError, IngestError
 
     try:
         sets = parse_sets(args.set)

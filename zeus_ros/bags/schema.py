@@ -25,7 +25,7 @@ from rosbags.interfaces import (
 )
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from zeus_ros.offline.data.bag_errors import SchemaError
+from zeus_ros.bags.errors import SchemaError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
