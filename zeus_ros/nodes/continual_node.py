@@ -26,6 +26,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+# The one node that imports offline/: it is the ROS front end of the training library's
+# continual round (test/test_import_contract.py, CONTINUAL_NODE_IMPORTS).
 from zeus_ros.offline.training import continual as c
 from zeus_ros.offline.training.continual_watch import (
     LiveCheck,
