@@ -97,7 +97,7 @@ def _publish_steps(stop: threading.Event) -> None:
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
     from zeus_ros.processes import ros_context
 
     with ros_context(DOMAIN_CTRL_C) as context:

@@ -35,7 +35,7 @@ class StepPublisher:
         from rosgraph_msgs.msg import Clock
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StateVector, StepFeedback
 
-        from zeus_ros.nodes.common import TOPICS
+        from zeus_ros.nodes.topics import TOPICS
 
         self.node = node
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -59,7 +59,8 @@ class StepPublisher:
 
     def publish(self, step: int, last: bool = False) -> None:
         """Publish step `step` of one episode, every message with the same stamp."""
-        from zeus_ros.nodes.common import TOPICS, stamp_from_seconds
+        from zeus_ros.nodes.messages import stamp_from_seconds
+        from zeus_ros.nodes.topics import TOPICS
 
         stamp = stamp_from_seconds(step * 0.05)
         msgs = {t: cls() for t, cls in self.types.items()}

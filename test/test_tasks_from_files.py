@@ -173,7 +173,7 @@ def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> Non
     """The same file for the node: steps carry the declared name and context."""
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     from live_fixtures import node
     from ros_harness import ProcessGroup, driver_node, fresh_domain_id, require_ros, spin_until

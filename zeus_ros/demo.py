@@ -87,7 +87,7 @@ def demo_group(args: argparse.Namespace, checkpoint: Path | None) -> list[str]:
 
 def viewer_expects(group: Sequence[str]) -> list[str]:
     """The topics whose publishers the viewer must hear before it takes the steps."""
-    from zeus_ros.nodes.common import TOPICS
+    from zeus_ros.nodes.topics import TOPICS
 
     answers = [topic.lstrip('/') for node, topic in RECORDED_ANSWERS.items() if node in group]
     return [*answers, TOPICS.CONTEXT_TRUTH]

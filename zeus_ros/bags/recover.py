@@ -1,6 +1,7 @@
 """Recovery: turn what a killed recorder left on disk back into a bag every reader opens.
 
-`zeus recover` (zeus_ros/cli/recover.py) runs it on folders of bags. The writer side of crash durability (periodic flush, provisional metadata.yaml) is
+`zeus recover` (zeus_ros/cli/recover.py) runs it on folders of bags. The writer side of crash
+durability (periodic flush, provisional metadata.yaml) is
 `zeus_ros.bags.durable.DurableBagWriter`; this module reads what it leaves behind.
 """
 

@@ -23,14 +23,6 @@ from zeus_msgs.msg import ContextEstimate, ContextTruth, StepFeedback
 from zeus_ros.learning.readout import NoveltyTracker
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
-from zeus_ros.nodes.common import (
-    TOPICS,
-    diagnostics_message,
-    publisher_qos,
-    run_node,
-    steady_timer,
-    step_qos,
-)
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -39,9 +31,13 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.peers import steady_timer
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, publisher_qos, step_qos
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint holding phi and psi; a live change loads it (same task, '

@@ -103,7 +103,7 @@ class Handshake:
     """
 
     def __init__(self, node: Node, period: float = 0.25) -> None:
-        from zeus_ros.nodes.common import steady_timer
+        from zeus_ros.nodes.peers import steady_timer
 
         self._node = node
         self.name = node.get_fully_qualified_name()

@@ -23,9 +23,9 @@ sim_bridge -> estimator -> policy -> sim_bridge would otherwise recurse without 
 delivers for up to `budget` seconds (messages that callbacks publish meanwhile included), then
 hands the executor back, so timers, parameter services and DDS get their turn. A task, not a
 guard condition, so that rclpy's events executor (which serves no guard conditions) runs the
-container too. The bus assumes one executor thread over its nodes (common.run_nodes) and
+container too. The bus assumes one executor thread over its nodes (spin.run_nodes) and
 delivers on the executor of the first node attached; messages published before that node is
-on an executor wait for `wake()` (common.make_executor calls it).
+on an executor wait for `wake()` (spin.make_executor calls it).
 """
 
 from __future__ import annotations
