@@ -631,7 +631,7 @@ def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:
     """A second `zeus collect` into the same --out needs --append and adds bag_001."""
-    from zeus_ros.offline.training.collect import main
+    from zeus_ros.cli.collect import main
 
     argv = ['--task', ROUND_TRIP_TASK, '--steps', '30', '--out', str(tmp_path),
             '--no-progress']
@@ -662,7 +662,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
 @pytest.mark.slow
 def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
     """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
-    from zeus_ros.offline.training.collect import main as collect
+    from zeus_ros.cli.collect import main as collect
     from zeus_ros.offline.training.train import main as train
 
     assert collect(['--task', ROUND_TRIP_TASK, '--steps', '200', '--out', str(tmp_path / 'c'),

@@ -183,8 +183,8 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     the policy's context_lag 1 (acting on context k - 1, the estimator off the critical path)
     the live actions equal `zeus collect --context-lag 1`'s.
     """
+    from zeus_ros.cli import collect
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training import collect
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'live'

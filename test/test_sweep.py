@@ -195,7 +195,7 @@ def test_collect_workers_as_ray_tasks_equal_sequential_collections(ray_session: 
                                                                    tmp_path: Path) -> None:
     from test_collect_workers import COMMON, SEED, STEPS, assert_same_data, sequential_bags
 
-    from zeus_ros.offline.training import collect
+    from zeus_ros.cli import collect
 
     out = tmp_path / 'ray'
     assert collect.main([*COMMON, '--steps', str(STEPS), '--seed', str(SEED), '--out', str(out),

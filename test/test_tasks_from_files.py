@@ -49,9 +49,9 @@ def test_walker_friction_as_a_task_file_matches_the_class_step_for_step() -> Non
 @pytest.mark.slow
 def test_the_example_task_collects_trains_and_evaluates(tmp_path: Path) -> None:
     """`zeus collect` / `train` / `eval` with --task-file on the shipped payload point mass."""
+    from zeus_ros.cli.collect import main as collect
     from zeus_ros.cli.evaluate import main as evaluate
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training.collect import main as collect
     from zeus_ros.offline.training.train import main as train
 
     bags = tmp_path / 'bags'

@@ -18,11 +18,11 @@ import pytest
 import torch
 import yaml
 
+from zeus_ros.cli import collect
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.config import load_config
 from zeus_ros.offline.evaluation.metrics import read_csv
 from zeus_ros.offline.runs import read_state
-from zeus_ros.offline.training import collect
 from zeus_ros.offline.training.train import TrainError, train
 
 from tiny_config import TINY, config_fixture

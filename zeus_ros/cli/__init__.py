@@ -11,7 +11,7 @@ import importlib
 import sys
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    'collect': ('zeus_ros.offline.training.collect',
+    'collect': ('zeus_ros.cli.collect',
                 'run a task in-process and write bags (no ROS)'),
     'ingest': ('zeus_ros.offline.data.ingest',
                'read bags as training does; report what they hold'),

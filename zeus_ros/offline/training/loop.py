@@ -30,8 +30,12 @@ from typing import Any
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, input_path, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.rollout import next_bag_path, parse_schedule
-from zeus_ros.offline.training.collect import DEFAULT_SCHEDULE, SCHEDULE_HELP
+from zeus_ros.offline.rollout import (
+    DEFAULT_SCHEDULE,
+    SCHEDULE_HELP,
+    next_bag_path,
+    parse_schedule,
+)
 from zeus_ros.offline.training.collect_workers import CollectJob, collect_bag
 from zeus_ros.offline.training.train import (
     CHECKPOINT,

@@ -89,7 +89,7 @@ def default_schedule(task: str) -> str:
 
     `task` stays in the signature so a task-specific default can return without changing callers.
     """
-    from zeus_ros.offline.training.collect import DEFAULT_SCHEDULE
+    from zeus_ros.offline.rollout import DEFAULT_SCHEDULE
 
     del task
     return DEFAULT_SCHEDULE

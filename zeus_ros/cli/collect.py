@@ -1,6 +1,7 @@
 """`zeus collect`: run a scheduled task in-process (no ROS) and write bags like the recorder.
 
-The rollout itself is zeus_ros/offline/rollout.py; this module reads the command line.
+The rollout itself is zeus_ros/offline/rollout.py (`collect`, the policies) and, with
+--workers, zeus_ros/offline/training/collect_workers.py; this module reads the command line.
 """
 
 from __future__ import annotations
@@ -10,10 +11,13 @@ from pathlib import Path
 import shutil
 import signal
 import sys
+import time
+from typing import Any
 
 from zeus_ros.bags.writer import StepBagWriter
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
 from zeus_ros.offline.rollout import (
+    SCHEDULE_HELP,
     AgentPolicy,
     CollectDiskFull,
     collect,
@@ -22,25 +26,9 @@ from zeus_ros.offline.rollout import (
     parse_schedule,
     random_policy,
 )
+from zeus_ros.offline.training.collect_workers import CollectJob, run_workers
 
-__all__ = ['DEFAULT_SCHEDULE', 'SCHEDULE_HELP', 'main']
-
-DEFAULT_SCHEDULE = 'switch:train:every_episodes=1'
-"""What `zeus loop` and `zeus sweep` collect with unless told: one train value per episode, in
-turn (docs/results.md, session 7: the critic can value a context that holds for the episode)."""
-SCHEDULE_HELP = """\
-context schedule: a YAML file (as accepted by sim_bridge.schedules.schedule_from_config), or
-the inline form KIND[:PRESET][:KEY=VALUE[,KEY=VALUE...]] where KIND is a schedule kind
-(constant, switch, drift, random_walk), PRESET names a preset split of the family (train,
-interpolation, extrapolation; it becomes `values`) and KEY=VALUE are the kind's options, e.g.
-  constant                                the task's default context, never changing
-  constant:value=0.8                      one fixed value
-  switch:train:every=100                  cycle through the train preset every 100 steps
-  switch:train:every_episodes=1,order=sample   a sampled train value per episode
-  drift:shape=sinusoid,low=0.6,high=1.2,period=500
-  random_walk:low=0.4,high=1.4,step_size=0.02
-Numbers in VALUE are parsed as YAML scalars (100 -> int, 0.5 -> float)."""
-
+__all__ = ['main']
 
 def _build_parser() -> argparse.ArgumentParser:
     parser = ZeusArgumentParser(
@@ -142,8 +130,6 @@ def main(argv: list[str] | None = None) -> int:
                              context_lag=args.context_lag)
     if args.workers > 1 or args.ray:  # checked above, collected by the workers
         task.close()
-        from zeus_ros.offline.training.collect_workers import main_workers
-
         before = set(args.out.glob('bag_*'))
         try:
             return main_workers(args, schedule_config, bag)
@@ -173,6 +159,29 @@ def main(argv: list[str] | None = None) -> int:
         task.close()
     print(f'wrote {stats.steps} steps ({stats.episodes} episode starts) to {stats.bag} in '
           f'{stats.seconds:.1f} s ({stats.steps_per_s:.0f} steps/s)')
+    return 0
+
+
+
+def main_workers(args: Any, schedule: dict[str, Any], bag: Path) -> int:
+    """`zeus collect --workers N` after main checked every flag; the exit code."""
+    template = CollectJob(args.task, schedule, bag, args.steps, args.seed,
+                          checkpoint=args.checkpoint, noise=args.noise, pixels=args.pixels,
+                          storage=args.storage, context_lag=args.context_lag)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    args.out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    try:
+        stats = run_workers(template, args.workers, use_ray=args.ray)
+    except KeyboardInterrupt:
+        print(f'zeus collect: interrupted; the steps written so far are in {args.out}',
+              file=sys.stderr)
+        return 130
+    seconds = time.perf_counter() - start  # with the workers' start-up: what a user waits
+    total = sum(s.steps for s in stats)
+    print(f'wrote {total} steps ({sum(s.episodes for s in stats)} episode starts) to '
+          f'{len(stats)} bags {stats[0].bag.name}..{stats[-1].bag.name} in {args.out} in '
+          f'{seconds:.1f} s ({total / max(seconds, 1e-9):.0f} steps/s)')
     return 0
 
 
