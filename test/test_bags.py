@@ -225,7 +225,7 @@ def test_namespaced_bag_needs_its_namespace(tmp_path: Path, capsys: Any) -> None
 
     Without it: 'no zeus topics (found these: ...)', never 'corrupt'.
     """
-    from zeus_ros.offline.data.ingest import main
+    from zeus_ros.cli.ingest import main
 
     plain = _write_synthetic(tmp_path / 'plain', 12)
     spaced = _renamed(plain, tmp_path / 'spaced', 'r1')
@@ -685,9 +685,9 @@ def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
     whole, hidden folders are skipped; ingest, train and recover share this one search. A
     folder without bags is one error naming where it searched and what a bag is.
     """
+    from zeus_ros.cli.ingest import main as ingest_main
     from zeus_ros.cli.recover import main as recover_main
     from zeus_ros.offline.data.ingest import find_bags
-    from zeus_ros.offline.data.ingest import main as ingest_main
     from zeus_ros.offline.training.train import main as train_main
 
     bags = tmp_path / 'bags'

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from zeus_ros.cli.report import main
 from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
-from zeus_ros.offline.evaluation.report import main, per_method, per_run, wall_time_table
+from zeus_ros.offline.evaluation.report import per_method, per_run, wall_time_table
 from zeus_ros.offline.runs import mark_evaluated, mark_trained, read_state
 
 

@@ -342,7 +342,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
 def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,
                                                   tmp_path: Path) -> None:
     """`zeus export` writes a small checkpoint + card; training refuses to resume from it."""
-    from zeus_ros.offline.evaluation.export import main as export_main
+    from zeus_ros.cli.export import main as export_main
 
     target = tmp_path / 'ship' / 'zeus_s0.pt'
     assert export_main(['--checkpoint', str(trained.out / 'final.pt'), '--out',

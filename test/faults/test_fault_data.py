@@ -21,11 +21,10 @@ import torch
 from zeus_ros.bags.errors import IngestError
 from zeus_ros.bags.schema import TOPIC_ACTION, TOPIC_STATE, TOPIC_STEP, codec
 from zeus_ros.bags.writer import StepBagWriter
-from zeus_ros.cli import collect
+from zeus_ros.cli import collect, export
 from zeus_ros.learning.checkpoint import load_checkpoint, nonfinite_tensors, save_checkpoint
 from zeus_ros.learning.errors import CheckpointError
 from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
-from zeus_ros.offline.evaluation import export
 from zeus_ros.offline.training import train
 
 from ros_harness import REPO, fresh_domain_id, ros_environment
