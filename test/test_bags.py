@@ -663,7 +663,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
 def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
     """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
     from zeus_ros.cli.collect import main as collect
-    from zeus_ros.offline.training.train import main as train
+    from zeus_ros.cli.train import main as train
 
     assert collect(['--task', ROUND_TRIP_TASK, '--steps', '200', '--out', str(tmp_path / 'c'),
                     '--no-progress']) == 0
@@ -687,8 +687,8 @@ def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
     """
     from zeus_ros.cli.ingest import main as ingest_main
     from zeus_ros.cli.recover import main as recover_main
+    from zeus_ros.cli.train import main as train_main
     from zeus_ros.offline.data.ingest import find_bags
-    from zeus_ros.offline.training.train import main as train_main
 
     bags = tmp_path / 'bags'
     run = bags / 'zeus_20260101_120000'

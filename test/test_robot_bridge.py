@@ -99,7 +99,7 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
 
 def zeus_train(bags: list[Path], out: Path, tmp: Path) -> Path:
     """A tiny `zeus train` run on the bags (the robot's task from its params file)."""
-    from zeus_ros.offline.training.train import main as train
+    from zeus_ros.cli.train import main as train
 
     config = tmp / 'tiny.yaml'
     config.write_text(yaml.safe_dump(TINY))

@@ -22,9 +22,9 @@ import pytest
 import torch
 
 from zeus_ros.cli import main as zeus_main
+from zeus_ros.cli.sweep import main as sweep_main
 from zeus_ros.learning.config import config_from_dict
 from zeus_ros.offline.runs import read_state
-from zeus_ros.offline.training.sweep import main as sweep_main
 from zeus_ros.offline.training.sweep import parse_seeds, parse_sets, plan, run_sweep
 from zeus_ros.offline.training.trial import LoopProtocol, trial_steps
 

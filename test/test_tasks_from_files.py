@@ -51,8 +51,8 @@ def test_the_example_task_collects_trains_and_evaluates(tmp_path: Path) -> None:
     """`zeus collect` / `train` / `eval` with --task-file on the shipped payload point mass."""
     from zeus_ros.cli.collect import main as collect
     from zeus_ros.cli.evaluate import main as evaluate
+    from zeus_ros.cli.train import main as train
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training.train import main as train
 
     bags = tmp_path / 'bags'
     assert collect(['--task-file', str(PAYLOAD), '--steps', '300', '--schedule',

@@ -113,7 +113,7 @@ def test_checkpoint_carries_data_normalisation_and_task_bounds(trained: Any) -> 
 def test_resume_continues_step_count_and_optimizer(trained: Any, bags: Path,
                                                   tiny_config: Path, tmp_path: Path) -> None:
     """--resume goes on from the checkpoint's step with its optimizer state."""
-    from zeus_ros.offline.training.train import main
+    from zeus_ros.cli.train import main
 
     run = tmp_path / 'run'
     shutil.copytree(trained.out, run)
@@ -411,7 +411,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
 @pytest.mark.slow
 def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) -> None:
     """--resume adds rounds to a finished loop without recollecting or retraining old ones."""
-    from zeus_ros.offline.training.loop import main as loop_main
+    from zeus_ros.cli.loop import main as loop_main
 
     argv = ['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
             '--random-steps', '300', '--steps', '200', '--updates', '20', '--no-eval',
@@ -429,7 +429,7 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
 def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path,
                                                    tmp_path: Path) -> None:
     """`zeus train --set k=3 batch_size=32`: the run is trained with (and records) those values."""
-    from zeus_ros.offline.training.train import main
+    from zeus_ros.cli.train import main
 
     out = tmp_path / 'run'
     assert main(['--bags', str(bags), '--config', str(tiny_config), '--out', str(out),
@@ -446,7 +446,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
         tiny_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
     """--resume needs only --out and --rounds (flags from OUT/loop.json); time_s adds up."""
-    from zeus_ros.offline.training.loop import main as loop_main
+    from zeus_ros.cli.loop import main as loop_main
 
     assert loop_main(['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
                       '--rounds', '1', '--random-steps', '300', '--steps', '200',

@@ -15,10 +15,9 @@ import pytest
 import torch
 
 from zeus_ros import demo, launcher
-from zeus_ros.cli import collect
+from zeus_ros.cli import collect, loop, train
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.errors import CheckpointError
-from zeus_ros.offline.training import loop, train
 
 from ros_harness import REPO
 
