@@ -131,7 +131,7 @@ def own_splits(folder: Path) -> list[Path]:
     (the loop itself refused them: they were not its paired publishers). Such a split is left
     out and named.
     """
-    from zeus_ros.offline.data.bag_errors import IngestError
+    from zeus_ros.bags.errors import IngestError
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.training.continual import closed_splits
 
@@ -171,8 +171,8 @@ def latencies(splits: list[Path]) -> list[tuple[float, float, int]]:
     """(state receive time [s, epoch], action - state receive time [ms], step) per step."""
     from rosbags.rosbag2 import Reader
 
-    from zeus_ros.offline.data.recover import step_from_cdr
-    from zeus_ros.offline.data.schema import TOPIC_ACTION, TOPIC_STATE
+    from zeus_ros.bags.recover import step_from_cdr
+    from zeus_ros.bags.schema import TOPIC_ACTION, TOPIC_STATE
 
     seen: dict[str, dict[int, int]] = {TOPIC_STATE: {}, TOPIC_ACTION: {}}
 

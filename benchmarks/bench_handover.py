@@ -126,7 +126,7 @@ class _Ring:
                  work: float = 0.0, sender: bool = False) -> None:
         from zeus_msgs.msg import Action
 
-        from zeus_ros.nodes.common import step_qos
+        from zeus_ros.nodes.topics import step_qos
 
         self.rounds, self.work = rounds, work
         self.message = _message(payload_bytes)
@@ -168,8 +168,8 @@ def subscribe(node: Any, topic: str, callback: Any, sender: bool) -> None:
     """
     from zeus_msgs.msg import Action
 
-    from zeus_ros.nodes.common import step_qos
     from zeus_ros.nodes.senders import SenderSubscription
+    from zeus_ros.nodes.topics import step_qos
 
     if sender:
         SenderSubscription(node, Action, topic, step_qos(), callback, admit=lambda _gid: True)
@@ -185,7 +185,7 @@ def _relay(node: Any, index: int, members: int, work: float = 0.0, sender: bool 
     """
     from zeus_msgs.msg import Action
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     publisher = node.create_publisher(Action, link_topic(index), step_qos())
 
@@ -229,7 +229,7 @@ def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_
     """A round of a ring of len(work) processes, one rclpy node each."""
     import rclpy
 
-    from zeus_ros.nodes.common import EXECUTOR_ENV, make_executor
+    from zeus_ros.nodes.spin import EXECUTOR_ENV, make_executor
     from zeus_ros.processes import ros_context, ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
@@ -253,8 +253,8 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
     """A round of a ring of len(work) nodes of one process on one executor."""
     from rclpy.node import Node
 
-    from zeus_ros.nodes.common import make_executor
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
+    from zeus_ros.nodes.spin import make_executor
     from zeus_ros.processes import ros_context, ros_env
 
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
@@ -276,7 +276,7 @@ def relay_main(index: int, members: int, work: float, sender: bool) -> None:
     """A ring member in its own process (the --relay entry point), until stopped."""
     import rclpy
 
-    from zeus_ros.nodes.common import make_executor
+    from zeus_ros.nodes.spin import make_executor
 
     rclpy.init()
     node = rclpy.create_node(f'handover_{index}_{os.getpid()}')  # publish_cost runs several
@@ -300,7 +300,7 @@ def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-
     import rclpy
     from zeus_msgs.msg import Action
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
     from zeus_ros.processes import ros_context, ros_env
 
     env = ros_env()

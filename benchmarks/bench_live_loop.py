@@ -22,7 +22,7 @@ with no outside subscriber on the loop's topics (the rate comes from sim_bridge'
 sized from the round's in-process rate to last about QUIET_SECONDS, long enough for several
 counts). `--executors
 single,events` runs every mode once per executor the nodes spin on ($ZEUS_EXECUTOR,
-nodes/common.py), alternately in each round, so a loaded machine weighs on both alike.
+nodes/spin.py), alternately in each round, so a loaded machine weighs on both alike.
 `--context-lags 0,1` likewise runs every mode once per policy `context_lag` (shown as
 `multi/lag1`): with a lag the policy acts on the context of an earlier step instead of waiting
 for the estimator's answer to this one. `--split` also subscribes the probe to the context
@@ -198,7 +198,8 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
     from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
-    from zeus_ros.nodes.common import EXECUTOR_ENV, TOPICS, step_qos
+    from zeus_ros.nodes.spin import EXECUTOR_ENV
+    from zeus_ros.nodes.topics import TOPICS, step_qos
     from zeus_ros.processes import ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
@@ -395,7 +396,7 @@ def main() -> None:
                         "sim_bridge's segments (publishers' timestamps; one more reader of the "
                         'context topic)')
     args = parser.parse_args()
-    from zeus_ros.nodes.common import EXECUTORS, executor_kind
+    from zeus_ros.nodes.spin import EXECUTORS, executor_kind
 
     modes = [m.strip() for m in args.modes.split(',') if m.strip()]
     kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]

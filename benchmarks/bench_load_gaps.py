@@ -99,7 +99,7 @@ def main() -> int:
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
     from zeus_ros.processes import ros_env
 
     with tempfile.TemporaryDirectory() as tmp:

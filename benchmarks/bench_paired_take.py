@@ -20,8 +20,9 @@ def cost_us(kind: str, messages: int, domain: int) -> float:
     import rclpy
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import make_executor, step_qos
     from zeus_ros.nodes.senders import SenderSubscription
+    from zeus_ros.nodes.spin import make_executor
+    from zeus_ros.nodes.topics import step_qos
     from zeus_ros.processes import ros_context
 
     with ros_context(domain) as context:

@@ -121,7 +121,7 @@ def main() -> int:
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')

@@ -20,7 +20,7 @@ import numpy as np
 from zeus_ros.offline.data.ingest import ingest_bags
 from zeus_ros.offline.evaluation.metrics import overlap_style, write_csv
 from zeus_ros.offline.evaluation.report import RUN_NAME, mean_se, method_order_key
-from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.runs import read_state
 
 
 def main() -> None:

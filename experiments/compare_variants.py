@@ -42,7 +42,7 @@ from zeus_ros.offline.evaluation.report import (
     per_run,
     wall_time_table,
 )
-from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.runs import read_state
 
 REFERENCE_VARIANT = 'default'
 """The variant whose no_context and oracle runs define the headroom."""

@@ -34,12 +34,12 @@ from zeus_ros.offline.evaluation.evaluate import (
     _switch_schedule,
     default_switch_every,
     evaluate_contexts,
-    run_steps,
     split_values,
     switching_order,
 )
 from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
 from zeus_ros.offline.evaluation.report import mean_se
+from zeus_ros.offline.rollout import run_steps
 
 _NAME = re.compile(r'(?P<method>.+)_s(?P<seed>\d+)$')
 SEED = 100
@@ -50,7 +50,7 @@ def lag_returns(path: Path, lags: list[int], split: str, episodes: int,
                 switch_episodes: int) -> list[dict[str, Any]]:
     """Mean episode return of one checkpoint per protocol and lag (lag 0 only without psi)."""
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.training.collect import AgentPolicy
+    from zeus_ros.offline.rollout import AgentPolicy
 
     match = _NAME.match(path.stem)
     if match is None:

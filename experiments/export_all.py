@@ -18,7 +18,7 @@ from tqdm import tqdm
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.offline.evaluation.eval_batch import group_name
 from zeus_ros.offline.evaluation.export import export
-from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.runs import read_state
 
 LEGACY_COMMIT = 'a70cad4'
 

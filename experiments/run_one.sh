@@ -7,7 +7,7 @@
 # of the same (task, method, seed) and continues it with `zeus loop --resume`, which is the same
 # as running all rounds at once (a 30k run continues the 20k one, which continued the 10k one).
 # Finished parts are skipped, so rerunning resumes; a lock folder stops two copies of a run.
-# What is finished is recorded in <run>/state.json (zeus_ros/offline/training/run_state.py);
+# What is finished is recorded in <run>/state.json (zeus_ros/offline/runs.py);
 # runs finished before it, marked by .done_train / eval_<split>/.done files, count as finished.
 # CONFIG (default params/train/state_cpu.yaml) picks the training config (a variant goes in its
 # own OUT_ROOT); EVAL=0 skips the evaluation (run `zeus eval` over the checkpoints later).
@@ -23,7 +23,7 @@ BASE="$ROOT/$(echo "$TASK" | tr 'A-Z-' 'a-z_')"
 OUT=$BASE
 if [ "$ROUNDS" != 5 ]; then OUT="${BASE}_$((ROUNDS * 2))k"; fi
 run="$OUT/${METHOD}_s${SEED}"
-state() { python -m zeus_ros.offline.training.run_state "$@"; }
+state() { python -m zeus_ros.cli.run_state "$@"; }
 # finished RUN [SPLIT...]: 0 finished, 1 not yet; an unreadable state.json ends the script (its
 # one-line error says what to do)
 finished() { local rc=0; state done "$@" || rc=$?; [ "$rc" -le 1 ] || exit "$rc"; return "$rc"; }

@@ -18,7 +18,7 @@ next_line() {
     if [ "$rounds" != 5 ]; then folder="${folder}_$((rounds * 2))k"; fi
     run="$folder/${method}_s${seed}"
     [ -d "$run.lock" ] && continue
-    python -m zeus_ros.offline.training.run_state done "$run" < /dev/null
+    python -m zeus_ros.cli.run_state done "$run" < /dev/null
     case $? in
       0) ;;  # trained
       1) echo "$config $task $method $seed $root $rounds $schedule"; break ;;

@@ -103,12 +103,9 @@ def learned_context(path: Path) -> bool:
 def prepare(target: Path) -> None:
     """Give a learned-context checkpoint its read-out, novelty monitor and train-mean psi."""
     from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.learning.readout import store_readout, store_train_mean
+    from zeus_ros.offline.evaluation.calibrate import calibrate_readout
     from zeus_ros.offline.evaluation.evaluate import train_mean_context
-    from zeus_ros.offline.evaluation.readout import (
-        calibrate_readout,
-        store_readout,
-        store_train_mean,
-    )
 
     agent = InferenceAgent.from_checkpoint(target)
     readout, novelty = calibrate_readout(agent, steps=2000, progress=True)

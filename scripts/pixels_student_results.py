@@ -36,8 +36,8 @@ def _pixel_sensitivity(path: Path, episodes: int) -> float:
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.adaptation import EVAL_SEED
     from zeus_ros.offline.evaluation.diagnostics import extreme_indices
-    from zeus_ros.offline.evaluation.evaluate import _make_env, run_steps, split_values
-    from zeus_ros.offline.training.collect import AgentPolicy
+    from zeus_ros.offline.evaluation.evaluate import _make_env, split_values
+    from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     class Recording(AgentPolicy):
         def _observation(self, es: object, rec: object) -> np.ndarray:

@@ -21,7 +21,7 @@ from sim_bridge.core import ContextSpec
 from sim_bridge.presets import SPLITS, find_params_dir
 
 __all__ = ['DEFAULT_TRAINING', 'DeclaredSpecs', 'TaskFamily', 'builtin_family_file',
-           'family', 'parse_presets']
+           'family', 'load_preset', 'parse_presets']
 
 DEFAULT_TRAINING: Mapping[str, float] = {'alpha_psi': 1.0, 'adam_beta1': 0.9}
 """Training defaults of a family that declares none: the paper's most common values."""
@@ -114,6 +114,11 @@ def family(task: str) -> TaskFamily:
         data = read_yaml(declared.source)
         return _family(declared.name, declared.source, data, declared.factory.specs)
     return _builtin_family(task)
+
+
+def load_preset(task: str, split: str) -> list[dict[str, float]]:
+    """Context values of one split, each as {parameter: value} (from the task's family)."""
+    return family(task).preset(split)
 
 
 @cache

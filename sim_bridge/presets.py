@@ -1,7 +1,9 @@
 """The preset splits of every task family, and where the families' files live.
 
 The value lists themselves are part of each family's declaration (sim_bridge/families.py):
-`params/tasks/<Task>.yaml` for the built-in families, `presets:` in a user's task file.
+`params/tasks/<Task>.yaml` for the built-in families, `presets:` in a user's task file; read
+one with `sim_bridge.families.load_preset`. This module imports no other sim_bridge module, so
+the task modules and the families can both read the split names without an import circle.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ['SPLITS', 'find_params_dir', 'load_preset']
+__all__ = ['SPLITS', 'find_params_dir']
 
 SPLITS = ('train', 'interpolation', 'extrapolation')
 """The preset splits, in order: the one definition every tool uses."""
@@ -27,9 +29,3 @@ def find_params_dir() -> Path:
     raise FileNotFoundError(
         'no params/tasks directory found; looked in ' + ', '.join(map(str, candidates)))
 
-
-def load_preset(task: str, split: str) -> list[dict[str, float]]:
-    """Context values of one split, each as {parameter: value} (from the task's family)."""
-    from sim_bridge.families import family
-
-    return family(task).preset(split)

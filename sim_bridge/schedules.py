@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sim_bridge.presets import SPLITS, load_preset
+from sim_bridge.families import load_preset
+from sim_bridge.presets import SPLITS
 
 if TYPE_CHECKING:
     from sim_bridge.core import ContextualTask

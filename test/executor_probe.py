@@ -1,4 +1,4 @@
-"""sim_bridge as its process runs it (common.run_node), saying once which executor spins it.
+"""sim_bridge as its process runs it (spin.run_node), saying once which executor spins it.
 
     python test/executor_probe.py --ros-args -p task:=Cheetah-Run-v0
 
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from zeus_ros.nodes.common import run_node
 from zeus_ros.nodes.sim_bridge_node import SimBridgeNode
+from zeus_ros.nodes.spin import run_node
 
 SAYS = 'spinning on '
 """The log line's prefix; the executor's class name follows."""

@@ -135,7 +135,8 @@ def assert_ingests_as_one_by_one(paths: list[Path], monkeypatch: Any) -> None:
 
     import numpy as np
 
-    from zeus_ros.offline.data import cdr_columns, ingest
+    from zeus_ros.bags import cdr_columns
+    from zeus_ros.offline.data import ingest
 
     def one_by_one(raws: list[bytes], _msgtype: str, one: Any) -> list[Any]:
         out = []

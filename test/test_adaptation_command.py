@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from zeus_ros.offline.evaluation.adaptation import format_reports, main, measure_adaptation
+from zeus_ros.cli.adaptation import main
+from zeus_ros.offline.evaluation.adaptation import format_reports, measure_adaptation
 
 ZOO = Path(__file__).resolve().parents[1] / 'checkpoints'
 

@@ -14,10 +14,10 @@ import pytest
 from test_bags import _write_synthetic
 
 from zeus_ros.atomic_file import WRITE_FAULT_ENV
-from zeus_ros.offline.data import recover
-from zeus_ros.offline.data.durable import DurableBagWriter
-from zeus_ros.offline.data.recover import step_from_cdr
-from zeus_ros.offline.data.schema import TOPIC_STATE, TOPIC_STEP
+from zeus_ros.bags.durable import DurableBagWriter
+from zeus_ros.bags.recover import step_from_cdr
+from zeus_ros.bags.schema import TOPIC_STATE, TOPIC_STEP
+from zeus_ros.cli import recover
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])

@@ -12,10 +12,8 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from zeus_ros.offline.data.bag_errors import BagError, IngestError
-from zeus_ros.offline.data.bag_writer import StepBagWriter
-from zeus_ros.offline.data.ingest import IngestWarning, Issue, ingest_bags
-from zeus_ros.offline.data.schema import (
+from zeus_ros.bags.errors import BagError, IngestError
+from zeus_ros.bags.schema import (
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
     TOPIC_IMAGE,
@@ -24,6 +22,8 @@ from zeus_ros.offline.data.schema import (
     StepFeedbackFields,
     codec,
 )
+from zeus_ros.bags.writer import StepBagWriter
+from zeus_ros.offline.data.ingest import IngestWarning, Issue, ingest_bags
 
 EP_LEN = 5
 
@@ -167,7 +167,7 @@ def test_unclosed_bag_named(tmp_path: Path) -> None:
     """
     from test_ingest_foreign import cut_like_a_kill
 
-    from zeus_ros.offline.data import recover
+    from zeus_ros.cli import recover
 
     bag = _write_synthetic(tmp_path / 'killed', 12)
     (bag / 'metadata.yaml').unlink()
@@ -185,7 +185,7 @@ def test_bag_metadata_is_what_jazzy_writes(tmp_path: Path) -> None:
     """Version 9, ros_distro jazzy (also inside the mcap), offered QoS and RIHS01 per topic."""
     from ruamel.yaml import YAML
 
-    from zeus_ros.offline.data.schema import MSGTYPES, typestore
+    from zeus_ros.bags.schema import MSGTYPES, typestore
 
     for storage in ('mcap', 'sqlite3'):
         bag = _write_synthetic(tmp_path / storage, 3, storage=storage)
@@ -225,7 +225,7 @@ def test_namespaced_bag_needs_its_namespace(tmp_path: Path, capsys: Any) -> None
 
     Without it: 'no zeus topics (found these: ...)', never 'corrupt'.
     """
-    from zeus_ros.offline.data.ingest import main
+    from zeus_ros.cli.ingest import main
 
     plain = _write_synthetic(tmp_path / 'plain', 12)
     spaced = _renamed(plain, tmp_path / 'spaced', 'r1')
@@ -328,7 +328,7 @@ def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.training.collect import collect, random_policy
+    from zeus_ros.offline.rollout import collect, random_policy
 
     task = make_task(ROUND_TRIP_TASK, seed=3)
     env = RecordingEnv(ScheduledEnv(task, schedule_from_config({'kind': 'constant'}, task, 3)))
@@ -354,7 +354,7 @@ def _run_collect(out: Path, *, storage: str, pixels: bool, steps: int) -> tuple[
 def _check_against_env(ds: Any, env: RecordingEnv, actions: dict, frames: dict,
                        steps: int) -> None:
     """Every ingested field equals what the env produced for that step."""
-    from zeus_ros.offline.data.schema import ns_from_sim_time
+    from zeus_ros.bags.schema import ns_from_sim_time
 
     covered = sorted(int(s) for ep in ds.episodes for s in ep.steps)
     assert covered == list(range(steps))
@@ -438,7 +438,7 @@ def _frame(k: int, shape: tuple[int, int] = (8, 6)) -> np.ndarray:
 
 def test_image_batches_decode_as_rosbags_does() -> None:
     """Images decode in batches to rosbags' fields; pixels stay views of the raw bytes."""
-    from zeus_ros.offline.data.cdr_columns import decode_messages
+    from zeus_ros.bags.cdr_columns import decode_messages
 
     cdc, msgtype = codec(), 'sensor_msgs/msg/Image'
     msgs = [cdc.image(1_000_000_000 * k + 7 * k, _frame(k, (8, 6) if k % 5 else (6, 8)))
@@ -507,7 +507,7 @@ def test_frame_store_grows_past_what_the_metadata_lists() -> None:
 
 def test_frame_store_grows_from_raw_bytes_too() -> None:
     """add_raw, past what the metadata lists, grows the store too; other stamps come out right."""
-    from zeus_ros.offline.data.cdr_columns import decode_messages
+    from zeus_ros.bags.cdr_columns import decode_messages
     from zeus_ros.offline.data.frames import FrameStore
 
     cdc, msgtype = codec(), 'sensor_msgs/msg/Image'
@@ -631,7 +631,7 @@ def test_corrupt_image_names_the_bag(tmp_path: Path) -> None:
 
 def test_collect_cli_appends_only_when_asked(tmp_path: Path) -> None:
     """A second `zeus collect` into the same --out needs --append and adds bag_001."""
-    from zeus_ros.offline.training.collect import main
+    from zeus_ros.cli.collect import main
 
     argv = ['--task', ROUND_TRIP_TASK, '--steps', '30', '--out', str(tmp_path),
             '--no-progress']
@@ -647,7 +647,7 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
     """The documented inline forms of --schedule give configs the schedule code accepts."""
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
 
     task = make_task('Cheetah-Run-v0')
     for text in ('constant', 'constant:value=0.8', 'switch:train:every=100',
@@ -662,8 +662,8 @@ def test_inline_schedule_form_builds_a_valid_schedule() -> None:
 @pytest.mark.slow
 def test_zeus_train_reads_a_namespaced_bag_with_namespace(tmp_path: Path, capsys: Any) -> None:
     """`zeus train --namespace r1` trains on /r1/zeus/... topics; without it, the error says so."""
-    from zeus_ros.offline.training.collect import main as collect
-    from zeus_ros.offline.training.train import main as train
+    from zeus_ros.cli.collect import main as collect
+    from zeus_ros.cli.train import main as train
 
     assert collect(['--task', ROUND_TRIP_TASK, '--steps', '200', '--out', str(tmp_path / 'c'),
                     '--no-progress']) == 0
@@ -685,10 +685,10 @@ def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
     whole, hidden folders are skipped; ingest, train and recover share this one search. A
     folder without bags is one error naming where it searched and what a bag is.
     """
+    from zeus_ros.cli.ingest import main as ingest_main
+    from zeus_ros.cli.recover import main as recover_main
+    from zeus_ros.cli.train import main as train_main
     from zeus_ros.offline.data.ingest import find_bags
-    from zeus_ros.offline.data.ingest import main as ingest_main
-    from zeus_ros.offline.data.recover import main as recover_main
-    from zeus_ros.offline.training.train import main as train_main
 
     bags = tmp_path / 'bags'
     run = bags / 'zeus_20260101_120000'

@@ -7,8 +7,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from zeus_ros.offline.data.cdr_columns import FIELDS, decode_messages
-from zeus_ros.offline.data.schema import StepFeedbackFields, codec
+from zeus_ros.bags.cdr_columns import FIELDS, decode_messages
+from zeus_ros.bags.schema import StepFeedbackFields, codec
 
 
 def _messages(kind: str, count: int) -> list[Any]:

@@ -85,7 +85,7 @@ def test_help_lists_the_task_names(command: str, capsys: pytest.CaptureFixture) 
 
 def test_schedule_is_spelled_one_way_in_every_help(capsys: pytest.CaptureFixture) -> None:
     """`zeus collect` and `zeus loop` show the same grammar; loop's default is written in it."""
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
 
     _run('loop', ['--help'])
     text = capsys.readouterr().out

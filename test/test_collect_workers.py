@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from zeus_ros.cli import collect
 from zeus_ros.offline.data.ingest import ingest_bags
-from zeus_ros.offline.training import collect
 from zeus_ros.offline.training.collect_workers import split_steps, worker_seeds
 
 TASK = 'Cheetah-Run-v0'

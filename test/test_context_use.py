@@ -23,8 +23,9 @@ from zeus_ros.offline.evaluation.diagnostics import (
     farthest_extreme,
     spread_over_noise,
 )
-from zeus_ros.offline.evaluation.evaluate import Trace, parse_values, switching_order
+from zeus_ros.offline.evaluation.evaluate import parse_values, switching_order
 from zeus_ros.offline.evaluation.report import headroom_rows
+from zeus_ros.offline.rollout import Trace
 
 torch.set_num_threads(1)
 

@@ -12,7 +12,7 @@ import yaml
 from zeus_ros.learning.config import load_config
 from zeus_ros.learning.frames import FrameStack
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.training.collect import parse_schedule
+from zeus_ros.offline.rollout import parse_schedule
 from zeus_ros.offline.training.distill import (
     SCHEDULE,
     distill_loss,

@@ -1,4 +1,4 @@
-"""The executor every node process spins on ($ZEUS_EXECUTOR, nodes/common.make_executor).
+"""The executor every node process spins on ($ZEUS_EXECUTOR, nodes/spin.make_executor).
 
 Real node processes, one fresh domain per test, loopback only, always cleaned up.
 """
@@ -36,7 +36,7 @@ def call(node: Any, future: Any, timeout: float = 20.0) -> Any:
 
 def test_the_executor_is_chosen_by_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     """Unset or empty: the default (the first of EXECUTORS); a wrong name: one clear error."""
-    from zeus_ros.nodes.common import EXECUTOR_ENV, EXECUTORS, executor_kind
+    from zeus_ros.nodes.spin import EXECUTOR_ENV, EXECUTORS, executor_kind
 
     monkeypatch.delenv(EXECUTOR_ENV, raising=False)
     assert executor_kind() == EXECUTORS[0]
@@ -59,7 +59,7 @@ def test_a_guard_condition_keeps_the_single_threaded_executor() -> None:
     require_ros()
     from rclpy.executors import SingleThreadedExecutor
 
-    from zeus_ros.nodes.common import make_executor
+    from zeus_ros.nodes.spin import make_executor
 
     with driver_node(fresh_domain_id(), 'guarded') as node:
         node.create_guard_condition(lambda: None)

@@ -66,8 +66,8 @@ def test_info_carries_the_true_context_and_the_observation_never_does() -> None:
 
 def test_gymnasium_and_zeus_collect_give_identical_trajectories(tmp_path: Path) -> None:
     """The actions of a `zeus collect` bag, replayed in the env with the same seed and schedule."""
+    from zeus_ros.cli.collect import main as collect
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training.collect import main as collect
 
     schedule, seed = 'switch:train:every=30', 4
     assert collect(['--task-file', str(PAYLOAD), '--steps', '250', '--seed', str(seed),

@@ -15,11 +15,11 @@ import pytest
 from ruamel.yaml import YAML
 from test_bags import _write_synthetic
 
-from zeus_ros.offline.data.bag_errors import BagError, IngestError
+from zeus_ros.bags.errors import BagError, IngestError
+from zeus_ros.bags.mcap_file import MAGIC, closed_by_writer
+from zeus_ros.bags.recover import bag_state
+from zeus_ros.bags.schema import TOPIC_STATE, TOPIC_STEP
 from zeus_ros.offline.data.ingest import ingest_bags
-from zeus_ros.offline.data.mcap_file import MAGIC, closed_by_writer
-from zeus_ros.offline.data.recover import bag_state
-from zeus_ros.offline.data.schema import TOPIC_STATE, TOPIC_STEP
 
 
 def _records(data: bytes) -> list[tuple[int, int, int]]:

@@ -27,14 +27,14 @@ def two_contexts(bus: bool = True, executor: str = 'single'
     """(make a container node, make an outside node, spin both until a predicate or timeout).
 
     `executor`: what the container's context spins on ('single' or 'events', as
-    common.make_executor builds them; outside: single-threaded).
+    spin.make_executor builds them; outside: single-threaded).
     """
     require_ros()
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from zeus_ros.nodes.common import make_executor
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
+    from zeus_ros.nodes.spin import make_executor
 
     domain = fresh_domain_id()
     opened = contextlib.ExitStack()
@@ -106,7 +106,7 @@ def test_co_located_subscriber_gets_each_message_once_as_the_published_object(
     """
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts(executor=executor) as (inside, outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
@@ -127,7 +127,7 @@ def test_without_the_bus_messages_between_nodes_of_a_process_go_through_dds() ->
     """The switch off (--no-intra-process): copies from DDS, still once each."""
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts(bus=False) as (inside, _outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
@@ -145,7 +145,7 @@ def test_keep_last_depth_drops_the_oldest_for_a_subscriber_that_lags(executor: s
     """20 messages before the executor runs: depth 5 keeps the newest 5, depth 50 all 20."""
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts(executor=executor) as (inside, _outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC, step_qos(50))
@@ -168,7 +168,7 @@ def test_namespaces_and_remaps_decide_who_is_connected() -> None:
     """Same resolved name after remapping: delivered; another namespace: not."""
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts() as (inside, _outside, spin):
         talker = inside('sim_bridge', namespace='/r1').create_publisher(
@@ -191,7 +191,7 @@ def test_outside_publishers_still_reach_co_located_subscribers() -> None:
     """Only the bus's own publishers' DDS copies are dropped."""
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts() as (inside, outside, spin):
         local: list[int] = []
@@ -211,7 +211,7 @@ def test_best_effort_publisher_does_not_reach_a_reliable_subscriber() -> None:
     from rclpy.qos import qos_profile_sensor_data
     from zeus_msgs.msg import StateVector
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     with two_contexts() as (inside, _outside, spin):
         talker = inside('sim_bridge').create_publisher(StateVector, TOPIC,
@@ -235,7 +235,8 @@ def test_sim_time_nodes_follow_clock_in_process_and_can_turn_it_off() -> None:
     from rclpy.parameter import Parameter
     from rosgraph_msgs.msg import Clock
 
-    from zeus_ros.nodes.common import TOPICS, stamp_from_seconds, step_qos
+    from zeus_ros.nodes.messages import stamp_from_seconds
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     with two_contexts() as (inside, _outside, spin):
         clock = inside('sim_bridge').create_publisher(Clock, TOPICS.CLOCK, step_qos())

@@ -100,7 +100,7 @@ def test_policy_survives_estimator_loss_and_resumes(
     from diagnostic_msgs.msg import DiagnosticArray
     from zeus_msgs.msg import Action, ContextEstimate
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     estimator_argv = node('context_estimator', f'checkpoint:={checkpoint}')
@@ -145,7 +145,8 @@ def test_estimator_rejects_a_malformed_frame_and_keeps_going(
     from sensor_msgs.msg import Image
     from zeus_msgs.msg import ContextEstimate, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, image_from_array, step_qos
+    from zeus_ros.nodes.messages import image_from_array
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'pixels.pt', obs_kind='pixels')
     ros_processes.start('estimator', node('context_estimator', f'checkpoint:={checkpoint}'))
@@ -182,8 +183,8 @@ def test_live_recording_and_zeus_collect_ingest_to_identical_arrays(
     the policy's context_lag 1 (acting on context k - 1, the estimator off the critical path)
     the live actions equal `zeus collect --context-lag 1`'s.
     """
+    from zeus_ros.cli import collect
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training import collect
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     bag_dir = tmp_path / 'live'
@@ -229,7 +230,7 @@ def test_the_loop_waits_until_a_late_reader_hears_context_and_action(
     """
     from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     got: dict[str, list[int]] = {'step': [], 'context': [], 'action': []}

@@ -28,7 +28,7 @@ def test_readout_is_scored_on_held_back_segments_and_stored_in_the_checkpoint(
         tmp_path: Path) -> None:
     """fit_readout scores on segments it did not fit; the checkpoint keeps it and its weights."""
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.evaluation.readout import (
+    from zeus_ros.learning.readout import (
         ContextReadout,
         fit_readout,
         readout_from_checkpoint_bytes,
@@ -97,7 +97,7 @@ def _publish_steps(stop: threading.Event) -> None:
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
     from zeus_ros.processes import ros_context
 
     with ros_context(DOMAIN_CTRL_C) as context:
@@ -203,7 +203,7 @@ def test_live_readout_reaches_inspect_and_launch_shows_progress(tmp_path: Path) 
     estimate next to the truth, equal to the stored read-out applied to the published psi.
     """
     from zeus_ros.learning.checkpoint import load_checkpoint
-    from zeus_ros.offline.evaluation.readout import ContextReadout, NoveltyMonitor, store_readout
+    from zeus_ros.learning.readout import ContextReadout, NoveltyMonitor, store_readout
 
     ckpt = tiny_checkpoint(tmp_path / 'tiny.pt')
     dim = load_checkpoint(ckpt).agent.context_dim
@@ -266,9 +266,10 @@ def test_novelty_warns_on_an_extrapolation_context_and_clears_back_on_a_training
     import torch
 
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.evaluate import _make_env, _switch_schedule, run_steps
-    from zeus_ros.offline.evaluation.readout import NoveltyTracker, calibrate_readout
-    from zeus_ros.offline.training.collect import AgentPolicy
+    from zeus_ros.learning.readout import NoveltyTracker
+    from zeus_ros.offline.evaluation.calibrate import calibrate_readout
+    from zeus_ros.offline.evaluation.evaluate import _make_env, _switch_schedule
+    from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     torch.set_num_threads(1)
     agent = InferenceAgent.from_checkpoint(

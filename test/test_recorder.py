@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING, Any
 import pytest
 from rosbags.highlevel import AnyReader
 
-from zeus_ros.offline.data import recover
+from zeus_ros.bags.recover import STEP_TOPICS
+from zeus_ros.cli import recover
 from zeus_ros.offline.data.ingest import ingest_bags
-from zeus_ros.offline.data.recover import STEP_TOPICS
 
 from ros_harness import driver_node as ros_node
 from ros_harness import python_module, spin_until
@@ -35,7 +35,7 @@ class StepPublisher:
         from rosgraph_msgs.msg import Clock
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StateVector, StepFeedback
 
-        from zeus_ros.nodes.common import TOPICS
+        from zeus_ros.nodes.topics import TOPICS
 
         self.node = node
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -59,7 +59,8 @@ class StepPublisher:
 
     def publish(self, step: int, last: bool = False) -> None:
         """Publish step `step` of one episode, every message with the same stamp."""
-        from zeus_ros.nodes.common import TOPICS, stamp_from_seconds
+        from zeus_ros.nodes.messages import stamp_from_seconds
+        from zeus_ros.nodes.topics import TOPICS
 
         stamp = stamp_from_seconds(step * 0.05)
         msgs = {t: cls() for t, cls in self.types.items()}

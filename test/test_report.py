@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
+from zeus_ros.cli.report import main
 from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
-from zeus_ros.offline.evaluation.report import main, per_method, per_run, wall_time_table
-from zeus_ros.offline.training.run_state import mark_evaluated, mark_trained, read_state
+from zeus_ros.offline.evaluation.report import per_method, per_run, wall_time_table
+from zeus_ros.offline.runs import mark_evaluated, mark_trained, read_state
 
 
 def _run(folder: Path, name: str, returns: dict[str, float], *, train: int,
@@ -109,12 +110,12 @@ def test_an_unreadable_state_file_is_one_clear_error(tmp_path: Path,
 @pytest.mark.slow
 def test_the_scripts_state_command_line_reads_old_markers_and_continued_runs(
         tmp_path: Path) -> None:
-    """`python -m ...run_state` as experiments/run_one.sh and run_queue.sh call it."""
+    """`python -m zeus_ros.cli.run_state` as experiments/run_one.sh and run_queue.sh call it."""
     import subprocess
     import sys
 
     def state(*args: object) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, '-m', 'zeus_ros.offline.training.run_state',
+        return subprocess.run([sys.executable, '-m', 'zeus_ros.cli.run_state',
                                *map(str, args)], capture_output=True, text=True, check=False,
                               timeout=60)
 

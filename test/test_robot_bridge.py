@@ -99,7 +99,7 @@ def run_live(group: ProcessGroup, tmp: Path, tag: str, steps: int,
 
 def zeus_train(bags: list[Path], out: Path, tmp: Path) -> Path:
     """A tiny `zeus train` run on the bags (the robot's task from its params file)."""
-    from zeus_ros.offline.training.train import main as train
+    from zeus_ros.cli.train import main as train
 
     config = tmp / 'tiny.yaml'
     config.write_text(yaml.safe_dump(TINY))
@@ -184,7 +184,8 @@ def test_safety_layer_rejects_clips_and_falls_back_to_the_safe_command(
     from std_msgs.msg import Float64MultiArray
     from zeus_msgs.msg import Action, StateVector, StepFeedback
 
-    from zeus_ros.nodes.common import array_from_image, image_qos, stamp_ns, step_qos
+    from zeus_ros.nodes.messages import array_from_image, stamp_ns
+    from zeus_ros.nodes.topics import image_qos, step_qos
 
     robot_processes.start('fake_robot_safety', [sys.executable, str(REPO / 'test' /
                                                                     'fake_robot.py'),

@@ -88,7 +88,7 @@ def test_two_namespaced_systems_in_one_domain_run_without_crosstalk(
     truths: dict[str, dict[int, float]] = {ns: {} for ns in values}
     diagnostics: list[Any] = []
     with driver_node(ros_processes.domain_id) as probe:
-        from zeus_ros.nodes.common import step_qos
+        from zeus_ros.nodes.topics import step_qos
 
         for ns in values:
             probe.create_subscription(
@@ -139,7 +139,7 @@ def test_the_loop_waits_for_its_named_observers_not_for_any_subscriber(
     """
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     bridge = ros_processes.start('observers-sim_bridge', ros_node(
         'sim_bridge', '-p', f'task:={TASK}', '-p', 'max_steps:=50', '-p', 'min_observers:=2',
@@ -187,7 +187,7 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
     from zeus_msgs.msg import Action, StateVector
 
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt', method='no_context')
     params = {'sim_bridge': (f'task:={TASK}', 'action_timeout:=5.0'),
@@ -379,7 +379,7 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
     """
     from rosbags.highlevel import AnyReader
 
-    from zeus_ros.nodes.common import STACKS_SIGNAL
+    from zeus_ros.nodes.spin import STACKS_SIGNAL
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     out = tmp_path / 'bag'
@@ -421,7 +421,7 @@ def test_two_sigints_to_every_node_like_ros2_launch_leave_a_closed_bag(
 def test_sigusr1_prints_every_thread_s_stack_and_the_node_runs_on(
         ros_processes: ProcessGroup) -> None:
     """`kill -USR1 <pid>`: the node's threads' Python stacks in its log; SIGINT still stops it."""
-    from zeus_ros.nodes.common import STACKS_SIGNAL
+    from zeus_ros.nodes.spin import STACKS_SIGNAL
 
     policy = ros_processes.start('usr1-policy', ros_node('policy', '-p', f'task:={TASK}'))
     ros_processes.wait_for_log('usr1-policy', 'random policy', timeout=60)
@@ -452,7 +452,7 @@ def test_live_checkpoint_redeploy_swaps_the_pair_and_never_mixes_it(
     from zeus_msgs.msg import Action, ContextEstimate, StateVector
 
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     old, new = tiny_checkpoint(tmp_path / 'old.pt'), tiny_checkpoint(tmp_path / 'new.pt', seed=1)
     sha = {path: hashlib.sha256(path.read_bytes()).hexdigest() for path in (old, new)}

@@ -7,7 +7,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from sim_bridge.presets import SPLITS, load_preset
+from sim_bridge.families import load_preset
+from sim_bridge.presets import SPLITS
 from sim_bridge.registry import make_task
 from sim_bridge.sawyer import ACTION_SCALE, SawyerPegTask, peg_reward
 

@@ -56,7 +56,7 @@ def test_sampled_switch_is_reproducible_with_its_seed(cheetah: object) -> None:
 
 def test_preset_splits_are_the_paper_tables_and_disjoint(cheetah: object) -> None:
     """The train preset holds no extrapolation value (the paper's lists overlap)."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     train = {v['torso_length'] for v in load_preset('Cheetah-Run-v0', 'train')}
     extrapolation = {v['torso_length'] for v in load_preset('Cheetah-Run-v0', 'extrapolation')}

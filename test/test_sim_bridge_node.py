@@ -44,7 +44,7 @@ def drive(group: ProcessGroup, answer: object) -> Seen:
     from rosgraph_msgs.msg import Clock
     from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     seen = Seen()
     process = start_bridge(group)
@@ -166,7 +166,7 @@ def test_realtime_mode_keeps_stepping_and_marks_stale_actions(
     """Realtime: the clock drives the steps; once actions stop, the safe action is STALE."""
     from zeus_msgs.msg import Action, StateVector, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, action_qos, step_qos
+    from zeus_ros.nodes.topics import TOPICS, action_qos, step_qos
 
     process = ros_processes.start('sim_bridge', python_module(
         'zeus_ros.nodes.sim_bridge_node', '--ros-args', '-p', 'task:=Cheetah-Run-v0',

@@ -22,9 +22,9 @@ import pytest
 import torch
 
 from zeus_ros.cli import main as zeus_main
+from zeus_ros.cli.sweep import main as sweep_main
 from zeus_ros.learning.config import config_from_dict
-from zeus_ros.offline.training.run_state import read_state
-from zeus_ros.offline.training.sweep import main as sweep_main
+from zeus_ros.offline.runs import read_state
 from zeus_ros.offline.training.sweep import parse_seeds, parse_sets, plan, run_sweep
 from zeus_ros.offline.training.trial import LoopProtocol, trial_steps
 
@@ -195,7 +195,7 @@ def test_collect_workers_as_ray_tasks_equal_sequential_collections(ray_session: 
                                                                    tmp_path: Path) -> None:
     from test_collect_workers import COMMON, SEED, STEPS, assert_same_data, sequential_bags
 
-    from zeus_ros.offline.training import collect
+    from zeus_ros.cli import collect
 
     out = tmp_path / 'ray'
     assert collect.main([*COMMON, '--steps', str(STEPS), '--seed', str(SEED), '--out', str(out),

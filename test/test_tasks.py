@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from sim_bridge.dmc_base import DmcTask
+from sim_bridge.families import load_preset
 from sim_bridge.finger import fingertip_radius
-from sim_bridge.presets import SPLITS, load_preset
+from sim_bridge.presets import SPLITS
 from sim_bridge.registry import TASK_NAMES, make_task
 
 os.environ.setdefault('MUJOCO_GL', 'egl')

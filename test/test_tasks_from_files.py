@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from sim_bridge.presets import load_preset
+from sim_bridge.families import load_preset
 from sim_bridge.registry import make_task
 
 from ros_harness import REPO
@@ -49,10 +49,10 @@ def test_walker_friction_as_a_task_file_matches_the_class_step_for_step() -> Non
 @pytest.mark.slow
 def test_the_example_task_collects_trains_and_evaluates(tmp_path: Path) -> None:
     """`zeus collect` / `train` / `eval` with --task-file on the shipped payload point mass."""
+    from zeus_ros.cli.collect import main as collect
+    from zeus_ros.cli.evaluate import main as evaluate
+    from zeus_ros.cli.train import main as train
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.evaluation.evaluate import main as evaluate
-    from zeus_ros.offline.training.collect import main as collect
-    from zeus_ros.offline.training.train import main as train
 
     bags = tmp_path / 'bags'
     assert collect(['--task-file', str(PAYLOAD), '--steps', '300', '--schedule',
@@ -173,7 +173,7 @@ def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> Non
     """The same file for the node: steps carry the declared name and context."""
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
-    from zeus_ros.nodes.common import step_qos
+    from zeus_ros.nodes.topics import step_qos
 
     from live_fixtures import node
     from ros_harness import ProcessGroup, driver_node, fresh_domain_id, require_ros, spin_until

@@ -18,11 +18,11 @@ import pytest
 import torch
 import yaml
 
+from zeus_ros.cli import collect
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.config import load_config
 from zeus_ros.offline.evaluation.metrics import read_csv
-from zeus_ros.offline.training import collect
-from zeus_ros.offline.training.run_state import read_state
+from zeus_ros.offline.runs import read_state
 from zeus_ros.offline.training.train import TrainError, train
 
 from tiny_config import TINY, config_fixture
@@ -113,7 +113,7 @@ def test_checkpoint_carries_data_normalisation_and_task_bounds(trained: Any) -> 
 def test_resume_continues_step_count_and_optimizer(trained: Any, bags: Path,
                                                   tiny_config: Path, tmp_path: Path) -> None:
     """--resume goes on from the checkpoint's step with its optimizer state."""
-    from zeus_ros.offline.training.train import main
+    from zeus_ros.cli.train import main
 
     run = tmp_path / 'run'
     shutil.copytree(trained.out, run)
@@ -198,7 +198,7 @@ def test_eval_writes_tables_and_plots_with_a_valid_spearman(trained: Any, tmp_pa
                                                             capsys: pytest.CaptureFixture
                                                             ) -> None:
     """The eval command writes CSV/PNG, prints a table, reports Spearman rho in [-1, 1]."""
-    from zeus_ros.offline.evaluation.evaluate import main
+    from zeus_ros.cli.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--task', TASK,
@@ -244,7 +244,7 @@ def test_eval_any_values_with_paired_frozen_context_diagnostics(trained: Any, tm
                                                                 capsys: pytest.CaptureFixture
                                                                 ) -> None:
     """--values: any torso lengths, several episodes each; live vs frozen on the same seeds."""
-    from zeus_ros.offline.evaluation.evaluate import main
+    from zeus_ros.cli.evaluate import main
 
     out = tmp_path / 'eval'
     code = main(['--checkpoint', str(trained.out / 'final.pt'), '--values', '0.65,1.4',
@@ -317,7 +317,7 @@ def test_probe_beats_predicting_the_mean() -> None:
 @pytest.mark.slow
 def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) -> None:
     """Two rounds: random bag + fresh training, then an agent bag + resumed training."""
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
     from zeus_ros.offline.training.loop import run_loop
 
     results = run_loop(TASK, load_config(tiny_config), tmp_path, rounds=2, random_steps=300,
@@ -329,7 +329,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
     assert load_checkpoint(tmp_path / 'run' / 'checkpoint.pt').step == 60
     # Round 2 continues the schedule where round 1 stopped (step 300: its 4th and 5th train
     # values), instead of starting over at the first one.
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
     from zeus_ros.offline.data.ingest import ingest_bags
 
     values = [v['torso_length'] for v in load_preset(TASK, 'train')]
@@ -342,7 +342,7 @@ def test_loop_collects_trains_and_retrains(tiny_config: Path, tmp_path: Path) ->
 def test_export_card_and_no_resume_from_an_export(trained: Any, bags: Path, tiny_config: Path,
                                                   tmp_path: Path) -> None:
     """`zeus export` writes a small checkpoint + card; training refuses to resume from it."""
-    from zeus_ros.offline.evaluation.export import main as export_main
+    from zeus_ros.cli.export import main as export_main
 
     target = tmp_path / 'ship' / 'zeus_s0.pt'
     assert export_main(['--checkpoint', str(trained.out / 'final.pt'), '--out',
@@ -375,8 +375,8 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
     A tiny Cheetah-Run-v1 checkpoint (40-step episodes): the batch evaluates each checkpoint
     in a process of its own, where this module's short Cheetah-Run-v0 episodes do not apply.
     """
+    from zeus_ros.cli.evaluate import main
     from zeus_ros.learning.checkpoint import save_checkpoint
-    from zeus_ros.offline.evaluation.evaluate import main
     from zeus_ros.offline.evaluation.report import per_method
 
     from live_fixtures import tiny_checkpoint
@@ -411,7 +411,7 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
 @pytest.mark.slow
 def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) -> None:
     """--resume adds rounds to a finished loop without recollecting or retraining old ones."""
-    from zeus_ros.offline.training.loop import main as loop_main
+    from zeus_ros.cli.loop import main as loop_main
 
     argv = ['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
             '--random-steps', '300', '--steps', '200', '--updates', '20', '--no-eval',
@@ -429,7 +429,7 @@ def test_loop_resume_extends_a_finished_loop(tiny_config: Path, tmp_path: Path) 
 def test_set_overrides_config_fields_like_the_file(bags: Path, tiny_config: Path,
                                                    tmp_path: Path) -> None:
     """`zeus train --set k=3 batch_size=32`: the run is trained with (and records) those values."""
-    from zeus_ros.offline.training.train import main
+    from zeus_ros.cli.train import main
 
     out = tmp_path / 'run'
     assert main(['--bags', str(bags), '--config', str(tiny_config), '--out', str(out),
@@ -446,7 +446,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
         tiny_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture) -> None:
     """--resume needs only --out and --rounds (flags from OUT/loop.json); time_s adds up."""
-    from zeus_ros.offline.training.loop import main as loop_main
+    from zeus_ros.cli.loop import main as loop_main
 
     assert loop_main(['--task', TASK, '--config', str(tiny_config), '--out', str(tmp_path),
                       '--rounds', '1', '--random-steps', '300', '--steps', '200',
@@ -471,7 +471,7 @@ def test_loop_resume_reads_its_stored_flags_and_time_continues(
 
 
 def _trace(reward: list[float], context: list[float], segment: list[int]) -> Any:
-    from zeus_ros.offline.evaluation.evaluate import Trace
+    from zeus_ros.offline.rollout import Trace
 
     n = len(reward)
     first = np.zeros(n, bool)
@@ -530,7 +530,7 @@ def test_collection_curves_keep_coinciding_methods_apart(bags: Path, tmp_path: P
 
     from matplotlib.figure import Figure
 
-    from zeus_ros.offline.training.run_state import mark_trained
+    from zeus_ros.offline.runs import mark_trained
 
     folder = tmp_path / 'task'
     bag = next(bags.glob('bag_*'))

@@ -87,7 +87,7 @@ def demo_group(args: argparse.Namespace, checkpoint: Path | None) -> list[str]:
 
 def viewer_expects(group: Sequence[str]) -> list[str]:
     """The topics whose publishers the viewer must hear before it takes the steps."""
-    from zeus_ros.nodes.common import TOPICS
+    from zeus_ros.nodes.topics import TOPICS
 
     answers = [topic.lstrip('/') for node, topic in RECORDED_ANSWERS.items() if node in group]
     return [*answers, TOPICS.CONTEXT_TRUTH]
@@ -247,7 +247,7 @@ def frozen_context(checkpoint: Path) -> str:
     Stored in zoo checkpoints (scripts/build_zoo.py); for another checkpoint it is measured
     now on the train values (deterministic episodes), never on the demo's own run.
     """
-    from zeus_ros.offline.evaluation.readout import stored_train_mean
+    from zeus_ros.learning.readout import stored_train_mean
 
     mean = stored_train_mean(checkpoint.read_bytes())
     if mean is None:
@@ -271,11 +271,8 @@ def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
     """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.learning.methods import method_spec
-    from zeus_ros.offline.evaluation.readout import (
-        calibrate_readout,
-        readout_from_checkpoint_bytes,
-        store_readout,
-    )
+    from zeus_ros.learning.readout import readout_from_checkpoint_bytes, store_readout
+    from zeus_ros.offline.evaluation.calibrate import calibrate_readout
 
     if readout_from_checkpoint_bytes(checkpoint.read_bytes()) is not None:
         return checkpoint

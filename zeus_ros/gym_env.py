@@ -47,7 +47,7 @@ class ZeusEnv(gymnasium.Env):
                  obs: str = 'state',
                  seed: int | None = None, image_size: int = 84,
                  render_mode: str | None = None) -> None:
-        from zeus_ros.offline.training.collect import parse_schedule
+        from zeus_ros.offline.rollout import parse_schedule
 
         if obs not in OBS_KINDS:
             raise ValueError(f'obs={obs!r}: choose one of {", ".join(OBS_KINDS)}')

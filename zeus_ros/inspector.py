@@ -66,7 +66,7 @@ class Inspector:
         from rclpy.signals import SignalHandlerOptions
         from zeus_msgs.msg import Action, ContextEstimate, ContextTruth, StepFeedback
 
-        from zeus_ros.nodes.common import STEP_BACKLOG, TOPICS, step_qos
+        from zeus_ros.nodes.topics import STEP_BACKLOG, TOPICS, step_qos
 
         readable = (TOPICS.STEP, TOPICS.CONTEXT_TRUTH, TOPICS.CONTEXT, TOPICS.CONTEXT_READOUT,
                     TOPICS.CONTEXT_NOVELTY, TOPICS.ACTION)
@@ -121,7 +121,8 @@ class Inspector:
     def _take_steps_when_heard(self, readers: dict[str, Any], expect: Sequence[str],
                                timeout: float, subscribe_steps: Callable[[], None]) -> None:
         """Subscribe to the steps once the `expect`ed publishers are matched (or on timeout)."""
-        from zeus_ros.nodes.common import TOPICS, call_when_ready, unmatched_readers
+        from zeus_ros.nodes.peers import call_when_ready, unmatched_readers
+        from zeus_ros.nodes.topics import TOPICS
 
         node = self.node
 

@@ -117,7 +117,7 @@ class Progress:
         from rclpy.executors import SingleThreadedExecutor
         from zeus_msgs.msg import ContextTruth, StepFeedback
 
-        from zeus_ros.nodes.common import TOPICS, step_qos
+        from zeus_ros.nodes.topics import TOPICS, step_qos
 
         for key in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE'):
             os.environ[key] = env[key]

@@ -16,7 +16,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
-from zeus_ros.nodes.common import TOPICS, step_qos
+from zeus_ros.nodes.topics import TOPICS, step_qos
 
 MARK = 0.4321
 

@@ -1,4 +1,4 @@
-"""A node whose destroy hangs, run the way every zeus_ros node runs (common.run_node).
+"""A node whose destroy hangs, run the way every zeus_ros node runs (spin.run_node).
 
 `python hang_on_destroy.py gil|python`: `gil` blocks in C holding the GIL (libc sleep through
 ctypes.PyDLL, as a hang inside rcl would: no Python signal handler can run), `python` loops in
@@ -13,7 +13,7 @@ import time
 
 from rclpy.node import Node
 
-from zeus_ros.nodes.common import run_node
+from zeus_ros.nodes.spin import run_node
 
 
 class HangOnDestroy(Node):

@@ -19,7 +19,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from zeus_msgs.msg import Action, ContextEstimate, StateVector, StepFeedback
 
-from zeus_ros.nodes.common import TOPICS, step_qos
+from zeus_ros.nodes.topics import TOPICS, step_qos
 
 MARK = 0.4321
 INJECTED_STEP = 1_000_000

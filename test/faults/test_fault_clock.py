@@ -37,7 +37,8 @@ def test_two_namespaced_sim_time_systems_each_keep_their_own_clock(tmp_path: Pat
     from rosgraph_msgs.msg import Clock
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import seconds_from_stamp, step_qos
+    from zeus_ros.nodes.messages import seconds_from_stamp
+    from zeus_ros.nodes.topics import step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     params = tmp_path / 'params.yaml'

@@ -18,14 +18,15 @@ import pytest
 from rosbags.rosbag2 import Reader
 import torch
 
+from zeus_ros.bags.errors import IngestError
+from zeus_ros.bags.schema import TOPIC_ACTION, TOPIC_STATE, TOPIC_STEP, codec
+from zeus_ros.bags.writer import StepBagWriter
+from zeus_ros.cli import collect, export
+from zeus_ros.cli import train as train_command
 from zeus_ros.learning.checkpoint import load_checkpoint, nonfinite_tensors, save_checkpoint
 from zeus_ros.learning.errors import CheckpointError
-from zeus_ros.offline.data.bag_errors import IngestError
-from zeus_ros.offline.data.bag_writer import StepBagWriter
 from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
-from zeus_ros.offline.data.schema import TOPIC_ACTION, TOPIC_STATE, TOPIC_STEP, codec
-from zeus_ros.offline.evaluation import export
-from zeus_ros.offline.training import collect, train
+from zeus_ros.offline.training import train
 
 from ros_harness import REPO, fresh_domain_id, ros_environment
 from tiny_config import MINIMAL, config_fixture, write_config
@@ -141,14 +142,14 @@ def test_train_on_the_poisoned_bag_writes_finite_checkpoints(poisoned_bag: Path,
                                                              tiny_config: Path, tmp_path: Path,
                                                              capsys: Any) -> None:
     """`zeus train` drops the bad transitions (saying so) and every tensor it saves is finite."""
-    code = train.main(['--bags', str(poisoned_bag), '--config', str(tiny_config), '--out',
+    code = train_command.main(['--bags', str(poisoned_bag), '--config', str(tiny_config), '--out',
                        str(tmp_path / 'run'), '--no-eval', '--no-progress'])
     assert code == 0, capsys.readouterr().err
     for name in ('checkpoint.pt', 'final.pt'):
         state = torch.load(tmp_path / 'run' / name, weights_only=True)['state']
         assert nonfinite_tensors(state)[0] == []
     assert 'zeus train: warning: ' in capsys.readouterr().err
-    code = train.main(['--bags', str(poisoned_bag), '--config', str(tiny_config), '--out',
+    code = train_command.main(['--bags', str(poisoned_bag), '--config', str(tiny_config), '--out',
                        str(tmp_path / 'strict'), '--no-eval', '--no-progress', '--strict'])
     err = capsys.readouterr().err
     assert code == 2 and '--strict: the bag is refused' in err and 'Traceback' not in err
@@ -183,7 +184,7 @@ def test_a_nan_gradient_stops_training_naming_the_update_and_last_good_checkpoin
 
     monkeypatch.setattr(agent_module, 'make_agent', poisoned_agent)
     out = tmp_path / 'run'
-    code = train.main(['--bags', str(clean_bag), '--config', str(tiny_config), '--out',
+    code = train_command.main(['--bags', str(clean_bag), '--config', str(tiny_config), '--out',
                        str(out), '--no-eval', '--no-progress'])
     err = capsys.readouterr().err
     assert code == 1, err
@@ -239,7 +240,7 @@ def test_every_offline_load_refuses_a_nan_checkpoint_in_one_line(
     with pytest.raises(CheckpointError, match=r'refused: 1 of \d+ tensors hold NaN/Inf '
                        r'\(first: modules\.actor\.'):
         load_checkpoint(bad)
-    from zeus_ros.offline.evaluation import evaluate
+    from zeus_ros.cli import evaluate
 
     for main, argv in (
             (export.main, ['--checkpoint', str(bad), '--out', str(tmp_path / 'x.pt')]),

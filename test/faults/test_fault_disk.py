@@ -18,7 +18,7 @@ import pytest
 from small_disk import SmallDisk, mount_tmpfs
 
 from zeus_ros.atomic_file import WRITE_FAULT_ENV
-from zeus_ros.offline.training import collect, train
+from zeus_ros.cli import collect, train
 
 from tiny_config import MINIMAL, write_config
 

@@ -15,9 +15,9 @@ import pytest
 import torch
 
 from zeus_ros import demo, launcher
+from zeus_ros.cli import collect, loop, train
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.errors import CheckpointError
-from zeus_ros.offline.training import collect, loop, train
 
 from ros_harness import REPO
 

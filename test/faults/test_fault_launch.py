@@ -85,7 +85,7 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
     The SIGKILLed bag is recoverable; the SIGTERMed one closed itself; the last bag holds every
     step from its start to the loop's last (the group is stopped with Ctrl-C once it records).
     """
-    from zeus_ros.offline.data import recover
+    from zeus_ros.cli import recover
 
     out = tmp_path / 'bag'
     launch = _launch(_params(tmp_path, 0))

@@ -138,7 +138,7 @@ def _run(probe: Any, env: dict[str, str], tmp_path: Path, disk: SmallDisk, out: 
 
 def _check(output: str, code: int, out: Path, disk: SmallDisk) -> None:
     """Exit 3, the gap and the restart named; every step in a bag or in the named ranges."""
-    from zeus_ros.offline.data import recover
+    from zeus_ros.cli import recover
 
     assert code == 3, output[-3000:]
     assert 'Traceback' not in output, output[output.find('Traceback') - 2000:][:4000]

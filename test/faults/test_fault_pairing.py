@@ -56,7 +56,7 @@ def test_spoofed_injected_and_second_sources_are_refused_and_named(
     from impostor import INJECTED_STEP, MARK
     from zeus_msgs.msg import Action, StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
     sha256 = hashlib.sha256(checkpoint.read_bytes()).hexdigest()
@@ -151,8 +151,8 @@ def test_a_restart_without_the_launch_key_is_never_re_paired(ros_processes: Proc
     """
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
     from zeus_ros.nodes.handshake import KEY_ENV
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     key = {KEY_ENV: 'a1' * 16}
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}', 'action_timeout:=0.2'),

@@ -38,7 +38,7 @@ def _watch(probe: Any, steps: list[tuple[float, Any]], diagnostics: list[Any]) -
     from diagnostic_msgs.msg import DiagnosticArray
     from zeus_msgs.msg import StepFeedback
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     probe.create_subscription(StepFeedback, TOPICS.STEP,
                               lambda m: steps.append((time.monotonic(), m)), step_qos(100))
@@ -188,7 +188,7 @@ def test_two_action_publishers_at_start_wait_until_action_sender_names_one(
     """
     from zeus_msgs.msg import Action
 
-    from zeus_ros.nodes.common import TOPICS, step_qos
+    from zeus_ros.nodes.topics import TOPICS, step_qos
 
     steps: list[tuple[float, Any]] = []
     diagnostics: list[Any] = []

@@ -1,6 +1,6 @@
 """Fault matrix, shutdown row: a node never hangs at shutdown (a bounded destroy, then exit).
 
-A real node process run by common.run_node hangs in destroy_node, once in Python and once in
+A real node process run by spin.run_node hangs in destroy_node, once in Python and once in
 C with the GIL held (as a hang inside rcl does); it gets SIGINT, then SIGTERM, as Ctrl-C and a
 supervisor send them. The bound (faulthandler's watchdog, shutdown.py) ends it with exit 1 and
 the stack of where it hung, within the limit (shortened to 2 s here).

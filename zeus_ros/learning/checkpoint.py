@@ -12,6 +12,7 @@ run poisoned by bad data never reaches evaluation, export or a robot.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import io
 from pathlib import Path
 import pickle
 import re
@@ -171,8 +172,13 @@ def _load_error(error: Exception) -> str:
 
 def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu',
                     expect_task: str | None = None, expect_obs_kind: str | None = None,
-                    load_optimizers: bool = True) -> LoadedCheckpoint:
+                    load_optimizers: bool = True, data: bytes | None = None
+                    ) -> LoadedCheckpoint:
     """Rebuild the agent stored at `path` on `map_location`, validating it on the way.
+
+    `data`: the file's bytes, already read (a node hashes them to say what it runs): decoded
+    instead of reading `path` again, so what is hashed is what is loaded; `path` then only
+    names the file in errors.
 
     `load_optimizers=False` (and every deployment export) gives an agent that acts only (no
     optimizers: less memory and start-up; `update` refuses).
@@ -182,7 +188,7 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
             other than expected, or weights that do not fit the stored shapes.
     """
     path = Path(path)
-    if not path.is_file():
+    if data is None and not path.is_file():
         raise _fail(path, 'no such file')
     try:
         device = torch.device(map_location)
@@ -193,7 +199,8 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
                     + ('this torch build has no CUDA support' if torch.version.cuda is None
                        else 'no CUDA device is visible') + '; use device cpu')
     try:
-        payload = torch.load(path, map_location=map_location, weights_only=True)
+        payload = torch.load(path if data is None else io.BytesIO(data),
+                             map_location=map_location, weights_only=True)
     except Exception as error:  # torch raises many types for corrupt / foreign files
         raise _fail(path, _load_error(error)) from None
     if not isinstance(payload, dict) or 'format_version' not in payload:

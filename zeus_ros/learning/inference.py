@@ -144,10 +144,16 @@ class InferenceAgent:
     FEATURE_MEMO = 8
     """Frames whose phi is kept by content (the estimator's newest o' is the policy's o)."""
 
-    def __init__(self, agent: ZeusAgent, *, reuse_features: bool = False) -> None:
-        """`reuse_features`: encode each frame once (for the live nodes, see the module doc)."""
+    def __init__(self, agent: ZeusAgent, *, reuse_features: bool = False,
+                 extra: dict[str, Any] | None = None) -> None:
+        """`reuse_features`: encode each frame once (for the live nodes, see the module doc).
+
+        `extra`: what the checkpoint stores beside the networks (the context read-out and
+        novelty monitor, learning/readout.py), kept so that nothing decodes the file again.
+        """
         self.agent = agent
         self.reuse_features = reuse_features
+        self.extra: dict[str, Any] = dict(extra or {})
         self._low = np.asarray(agent.spec.action_low, dtype=np.float32)
         self._high = np.asarray(agent.spec.action_high, dtype=np.float32)
         self._memo: OrderedDict[bytes, torch.Tensor] = OrderedDict()
@@ -156,11 +162,16 @@ class InferenceAgent:
     def from_checkpoint(cls, path: str | Path, *, expect_task: str | None = None,
                         expect_obs_kind: str | None = None,
                         device: str | torch.device = 'cpu',
-                        reuse_features: bool = False) -> InferenceAgent:
-        """Load and validate a checkpoint (CheckpointError on any mismatch)."""
+                        reuse_features: bool = False,
+                        data: bytes | None = None) -> InferenceAgent:
+        """Load and validate a checkpoint (CheckpointError on any mismatch).
+
+        `data`: the file's bytes when the caller has read them already (load_checkpoint).
+        """
         loaded = load_checkpoint(path, map_location=device, expect_task=expect_task,
-                                 expect_obs_kind=expect_obs_kind, load_optimizers=False)
-        return cls(loaded.agent, reuse_features=reuse_features)
+                                 expect_obs_kind=expect_obs_kind, load_optimizers=False,
+                                 data=data)
+        return cls(loaded.agent, reuse_features=reuse_features, extra=loaded.extra)
 
     def drop_training_modules(self) -> None:
         """Free what acting never uses: critics, target copies, decoder, models, optimizers.

@@ -1,12 +1,14 @@
 """Representation losses of every method: ZeUS eq. 1, CaDM, UP-OSI and the SAC-AE decoder.
 
-Pure functions over the agent's modules; the agent steps the optimizers.
+Pure functions over the agent's modules; the agent steps the optimizers. They read the agent
+through `LossHost`, the few members they need, so this module sits below agent.py (which calls
+it) instead of importing it back.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import torch
 import torch.nn.functional as F  # noqa: N812
@@ -23,11 +25,14 @@ from zeus_ros.learning.utils import safe_norm
 if TYPE_CHECKING:
     from torch import nn
 
-    from zeus_ros.learning.agent import ZeusAgent
     from zeus_ros.learning.batch import HistoryBatch
+    from zeus_ros.learning.config import ZeusConfig
+    from zeus_ros.learning.context import HistoryFeatures
+    from zeus_ros.learning.methods import MethodSpec
 
 __all__ = [
     'ContextLoss',
+    'LossHost',
     'RepresentationLosses',
     'autoencoder_loss',
     'consistency_loss',
@@ -35,6 +40,35 @@ __all__ = [
     'dynamics_loss',
     'representation_losses',
 ]
+
+
+class LossHost(Protocol):
+    """What the losses read of an agent (learning.agent.ZeusAgent is the one implementation)."""
+
+    modules: dict[str, nn.Module]
+    config: ZeusConfig
+    method_spec: MethodSpec
+
+    def history_features(self, hist_obs: torch.Tensor, hist_action: torch.Tensor,
+                         hist_reward: torch.Tensor, hist_next_obs: torch.Tensor,
+                         hist_mask: torch.Tensor, *extra_obs: torch.Tensor
+                         ) -> tuple[HistoryFeatures, list[torch.Tensor]]:
+        """Encode a (B, k) history and extra observations in one encoder pass."""
+        ...
+
+    def normalize_action(self, action: torch.Tensor) -> torch.Tensor:
+        """Task-bound actions -> [-1, 1]."""
+        ...
+
+    def model_target(self, obs: torch.Tensor, next_obs: torch.Tensor,
+                     next_feat: torch.Tensor) -> torch.Tensor:
+        """What the transition model predicts for o -> o', gradient stopped."""
+        ...
+
+    def policy_context(self, context: torch.Tensor, noise: torch.Tensor | None = None
+                       ) -> torch.Tensor:
+        """A context as the policy sees it (normalised)."""
+        ...
 
 
 @dataclass(slots=True)
@@ -121,7 +155,7 @@ def autoencoder_loss(decoder: nn.Module, feat: torch.Tensor, obs: torch.Tensor,
     return reconstruction + latent_lambda * 0.5 * feat.pow(2).sum(-1).mean()
 
 
-def representation_losses(agent: ZeusAgent, batch: HistoryBatch, pair: HistoryBatch | None,
+def representation_losses(agent: LossHost, batch: HistoryBatch, pair: HistoryBatch | None,
                           metrics: dict[str, torch.Tensor]) -> RepresentationLosses:
     """Losses of the agent's method on one batch (H1) and, for ZeUS, a pair batch (H2)."""
     m, cfg = agent.modules, agent.config
@@ -213,7 +247,7 @@ def consistency_loss(psi: torch.Tensor, next_psi: torch.Tensor,
     return drift / (spread + 1e-8)
 
 
-def _true_context_losses(agent: ZeusAgent, batch: HistoryBatch,
+def _true_context_losses(agent: LossHost, batch: HistoryBatch,
                          metrics: dict[str, torch.Tensor]) -> RepresentationLosses:
     """The oracle's auxiliary losses: ZeUS's dynamics + reward models on the true context.
 

@@ -1,5 +1,11 @@
 """Load the checkpoint a node runs, with the node's name in every error.
 
+The file is read once: its bytes are hashed and decoded from memory by learning/ (the networks
+and, from the same payload, the context read-out and novelty monitor), so what a node says it
+runs is what it loaded. A relative path is found by launch_defaults.resolve_path, the one
+resolver `zeus launch` uses too (next to the params file when there is one, then the package
+share, then the working directory).
+
 A node says exactly what it loaded (absolute path and sha256), at start and on a live
 redeploy, and the estimator stamps every estimate with that sha256: the policy acts only on
 estimates of its own checkpoint, so a half-done redeploy never pairs mismatched networks.
@@ -25,7 +31,7 @@ import torch
 from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.offline.evaluation.readout import ContextReadout, NoveltyMonitor, stored_monitors
+from zeus_ros.learning.readout import ContextReadout, NoveltyMonitor, monitors_from_extra
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 
@@ -56,8 +62,8 @@ class LoadedAgent:
 def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAgent:
     """InferenceAgent from params checkpoint/task/device/torch_threads; ValueError if unusable.
 
-    A relative checkpoint that is not in the working directory is looked up in the package
-    share (where the shipped checkpoints are installed). Inference on these small networks
+    A relative checkpoint is looked up in the package share (where the shipped checkpoints
+    are installed), then in the working directory (resolve_path). Inference on these small networks
     gains nothing from intra-op threads, and three node processes on a few cores would
     oversubscribe them, so `torch_threads` defaults to 1 (which also keeps results
     bit-identical with the in-process tools).
@@ -65,12 +71,7 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
     if params['torch_threads'] < 1:
         raise ValueError(f'{node_name}: parameter torch_threads must be >= 1')
     torch.set_num_threads(int(params['torch_threads']))
-    given = str(params['checkpoint'])
-    path = Path(given).expanduser()
-    if not path.is_absolute():
-        path = Path.cwd() / path if (Path.cwd() / path).is_file() else resolve_path(
-            given, None, f'{node_name}: parameter checkpoint')
-    path = path.absolute()
+    path = resolve_path(str(params['checkpoint']), None, f'{node_name}: parameter checkpoint')
     try:
         data = path.read_bytes()
     except OSError as error:
@@ -82,22 +83,16 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
         try:
             agent = InferenceAgent.from_checkpoint(
                 path, expect_task=params['task'] or None, device=params['device'],
-                reuse_features=True)
+                reuse_features=True, data=data)
         except CheckpointError as error:
             raise ValueError(f'{node_name}: {error}') from error
         agent.drop_training_modules()
         _release_freed_memory()
         _SHARED[key] = agent
     try:
-        readout, novelty = stored_monitors(data)
+        readout, novelty = monitors_from_extra(agent.extra, agent.context_dim)
     except ValueError as error:
         raise ValueError(f'{node_name}: checkpoint {path}: {error}') from error
-    for what, size in (('context read-out', None if readout is None else len(readout.weights)),
-                       ('novelty monitor', None if novelty is None
-                        else novelty.centroids.shape[1])):
-        if size is not None and size != agent.context_dim:
-            raise ValueError(f'{node_name}: checkpoint {path}: its {what} expects psi of {size} '
-                             f'values, the agent has {agent.context_dim}')
     return LoadedAgent(agent, path, sha256, readout, novelty)
 
 

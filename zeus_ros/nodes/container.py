@@ -10,12 +10,12 @@ the three nodes share one executor (`zeus launch --single-process`). Each node g
 `--ros-args` it gets as a process of its own (params file, namespace, remaps, `-p` overrides) as
 its Node's `cli_args`, and is built by its own class, so names, parameters and behaviour are the
 same in both modes. The arguments before the first `--node` are the process's (log level).
-A node that stops (sim_bridge's max_steps) or a Ctrl-C stops them all (common.run_nodes).
+A node that stops (sim_bridge's max_steps) or a Ctrl-C stops them all (spin.run_nodes).
 
 Messages between the nodes are handed over as Python objects (intra-process delivery,
 nodes/intra_process.py) and still published on DDS for everyone outside; `--no-intra-process`
 sends them through DDS only, as between processes. The container spins on the executor
-$ZEUS_EXECUTOR names, as every node process does (nodes/common.make_executor).
+$ZEUS_EXECUTOR names, as every node process does (nodes/spin.make_executor).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import sys
 from typing import TYPE_CHECKING
 
 from zeus_ros.launch_defaults import CONTAINER_NO_INTRA, NODES
-from zeus_ros.nodes.common import run_nodes
 from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
+from zeus_ros.nodes.spin import run_nodes
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -4,7 +4,7 @@ For step k it needs o_k and StepFeedback k (reward r_k, applied a_{k-1}, episode
 appends (o_{k-1}, a_{k-1}, r_k, o_k) to the history, or clears it at an episode start, and
 publishes ContextEstimate k with the stamp of observation k. A step that never arrives is a
 counted gap (the transition across it is not formed), never a silent misalignment. When the
-checkpoint holds a context read-out (offline/evaluation/readout.py), the same step's estimate in
+checkpoint holds a context read-out (learning/readout.py), the same step's estimate in
 the context's units goes out on zeus/context_readout (ContextTruth type: names and values); with a
 novelty monitor, zeus/context_novelty carries its score, threshold and flag per step, and
 /diagnostics warns while most steps lie outside the training contexts.
@@ -20,16 +20,9 @@ import numpy as np
 from rclpy.node import Node
 from zeus_msgs.msg import ContextEstimate, ContextTruth, StepFeedback
 
+from zeus_ros.learning.readout import NoveltyTracker
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
-from zeus_ros.nodes.common import (
-    TOPICS,
-    diagnostics_message,
-    publisher_qos,
-    run_node,
-    steady_timer,
-    step_qos,
-)
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -38,10 +31,13 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
-from zeus_ros.offline.evaluation.readout import NoveltyTracker
+from zeus_ros.nodes.peers import steady_timer
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, publisher_qos, step_qos
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint holding phi and psi; a live change loads it (same task, '

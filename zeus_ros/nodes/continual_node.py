@@ -26,6 +26,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+# The one node that imports offline/: it is the ROS front end of the training library's
+# continual round (test/test_import_contract.py, CONTINUAL_NODE_IMPORTS).
 from zeus_ros.offline.training import continual as c
 from zeus_ros.offline.training.continual_watch import (
     LiveCheck,
@@ -79,7 +81,7 @@ class ContinualTrainer(Node):
         from diagnostic_msgs.msg import DiagnosticArray
         from zeus_msgs.msg import ContextTruth, StepFeedback
 
-        from zeus_ros.nodes.common import TOPICS, step_qos
+        from zeus_ros.nodes.topics import TOPICS, step_qos
 
         self.diagnostics = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         self.create_subscription(StepFeedback, TOPICS.STEP, self._on_step, step_qos(100))
@@ -110,7 +112,7 @@ class ContinualTrainer(Node):
 
     def report(self, event: str, message: str = '', problem: bool = False) -> None:
         """One /diagnostics status: the state, the counts, the deployed checkpoint."""
-        from zeus_ros.nodes.common import diagnostics_message
+        from zeus_ros.nodes.messages import diagnostics_message
 
         values = {'event': event, 'state': self.state, 'deployed': str(self.deployed),
                   'previous': str(self.previous or ''), 'history': str(self.history),

@@ -103,7 +103,7 @@ class Handshake:
     """
 
     def __init__(self, node: Node, period: float = 0.25) -> None:
-        from zeus_ros.nodes.common import steady_timer
+        from zeus_ros.nodes.peers import steady_timer
 
         self._node = node
         self.name = node.get_fully_qualified_name()
@@ -120,7 +120,7 @@ class Handshake:
 
     def announce(self) -> None:
         """Send this start's hello if it changed, or if it was last sent RESEND_S ago."""
-        from zeus_ros.nodes.senders import publisher_gid
+        from zeus_ros.nodes.rcl_bindings import publisher_gid
 
         publishers = list(self._node.publishers)
         sha256 = self.sha256()

@@ -113,7 +113,7 @@ class ClockWatch:
             return []
         own = None
         if self._own is not None:
-            from zeus_ros.nodes.senders import publisher_gid
+            from zeus_ros.nodes.rcl_bindings import publisher_gid
 
             own = publisher_gid(self._own)
         names = []

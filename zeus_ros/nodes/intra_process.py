@@ -23,9 +23,9 @@ sim_bridge -> estimator -> policy -> sim_bridge would otherwise recurse without 
 delivers for up to `budget` seconds (messages that callbacks publish meanwhile included), then
 hands the executor back, so timers, parameter services and DDS get their turn. A task, not a
 guard condition, so that rclpy's events executor (which serves no guard conditions) runs the
-container too. The bus assumes one executor thread over its nodes (common.run_nodes) and
+container too. The bus assumes one executor thread over its nodes (spin.run_nodes) and
 delivers on the executor of the first node attached; messages published before that node is
-on an executor wait for `wake()` (common.make_executor calls it).
+on an executor wait for `wake()` (spin.make_executor calls it).
 """
 
 from __future__ import annotations
@@ -40,7 +40,8 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from zeus_ros.nodes.senders import SenderSubscription, publisher_gid
+from zeus_ros.nodes.rcl_bindings import publisher_gid
+from zeus_ros.nodes.senders import SenderSubscription
 
 if TYPE_CHECKING:
     from rclpy.node import Node

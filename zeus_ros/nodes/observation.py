@@ -12,17 +12,11 @@ from zeus_msgs.msg import StateVector, StepFeedback
 
 from zeus_ros.learning.frames import FrameStack
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
-from zeus_ros.nodes.common import (
-    TOPICS,
-    array_from_image,
-    call_when_ready,
-    image_qos,
-    stamp_ns,
-    step_qos,
-    unmatched_readers,
-)
+from zeus_ros.nodes.messages import array_from_image, stamp_ns
 from zeus_ros.nodes.params import Spec
+from zeus_ros.nodes.peers import call_when_ready, unmatched_readers
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
+from zeus_ros.nodes.topics import TOPICS, image_qos, step_qos
 
 if TYPE_CHECKING:
     from rclpy.node import Node

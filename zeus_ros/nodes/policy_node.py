@@ -31,16 +31,6 @@ from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 from zeus_ros.learning.inference import MAX_CONTEXT_LAG, InferenceAgent
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
-from zeus_ros.nodes.common import (
-    TOPICS,
-    WaitReport,
-    action_qos,
-    count_publishers,
-    diagnostics_message,
-    run_node,
-    steady_timer,
-    step_qos,
-)
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -49,10 +39,14 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.peers import WaitReport, count_publishers, steady_timer
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, action_qos, step_qos
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '

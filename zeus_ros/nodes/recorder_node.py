@@ -37,26 +37,21 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from zeus_ros.nodes.common import (
-    TOPICS,
-    call_when_ready,
-    diagnostics_message,
-    run_node,
-    steady_timer,
-    step_qos,
-    unmatched_readers,
-)
+from zeus_ros.bags.durable import DurableBagWriter
+from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
+from zeus_ros.bags.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE, TOPIC_STEP
+from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.peers import call_when_ready, steady_timer, unmatched_readers
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, step_qos
 from zeus_ros.nodes.unrecorded import Unrecorded
-from zeus_ros.offline.data.bag_errors import BagError
-from zeus_ros.offline.data.durable import DurableBagWriter
-from zeus_ros.offline.data.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
-from zeus_ros.offline.data.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE, TOPIC_STEP
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration
 
-    from zeus_ros.offline.data.bag_writer import Storage
+    from zeus_ros.bags.writer import Storage
 
 STORAGES = ('mcap', 'sqlite3')
 MAX_FLUSH_PERIOD_S = 60.0

@@ -30,17 +30,6 @@ from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
 from sim_bridge.actions import ActionStatus, check_action
 from sim_bridge.rewards import JointObservation, load_reward
 from sim_bridge.robot import RobotSpec, parse_context
-from zeus_ros.nodes.common import (
-    TOPICS,
-    WaitReport,
-    diagnostics_message,
-    image_from_array,
-    image_qos,
-    missing_peers,
-    run_node,
-    steady_timer,
-    step_qos,
-)
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -49,8 +38,10 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.messages import diagnostics_message, image_from_array
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.peers import WaitReport, missing_peers, steady_timer
 from zeus_ros.nodes.robot_io import (
     COMMAND_TYPES,
     CommandPublisher,
@@ -60,6 +51,8 @@ from zeus_ros.nodes.robot_io import (
     read_joint_state,
 )
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, image_qos, step_qos
 
 SPECS: dict[str, Spec] = {
     'task': Spec('', "the robot's task name, written into every step (bags and checkpoints "
@@ -148,7 +141,7 @@ class RobotBridgeNode(Node):
         self._segment = 0
         self._known_context = dict(self.spec.context)
         self._started = False
-        self.finished = False  # max_steps reached: run_nodes ends the spin (common.py)
+        self.finished = False  # max_steps reached: run_nodes ends the spin (spin.py)
         self._start_after = math.inf
 
         self.command = CommandPublisher(

@@ -16,7 +16,7 @@ import numpy as np
 from sensor_msgs.msg import Image, JointState
 
 from sim_bridge.robot import joint_indices
-from zeus_ros.nodes.common import action_qos
+from zeus_ros.nodes.topics import action_qos
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -31,18 +31,16 @@ from rclpy.type_support import check_is_valid_msg_type
 from rclpy.waitable import NumberOfEntities, Waitable
 
 from zeus_ros.nodes.handshake import Hello, handshake_of
+from zeus_ros.nodes.rcl_bindings import GID_SIZE, TAKE_OK, Bytes, MessageInfo, rcl
 
 if TYPE_CHECKING:
     from rclpy.callback_groups import CallbackGroup
     from rclpy.event_handler import SubscriptionEventCallbacks
     from rclpy.node import Node
-    from rclpy.publisher import Publisher
     from rclpy.qos import QoSProfile
 
-__all__ = ['INTRODUCTION_S', 'PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'SenderSubscription',
-           'publisher_gid']
+__all__ = ['INTRODUCTION_S', 'PAIRING_SETTLE_S', 'Sender', 'SenderPairing', 'SenderSubscription']
 
-_GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy's rmw/types.h
 PAIRING_SETTLE_S = 2.0
 """Seconds the action publishers must stay the same before a bridge with no `action_sender`
 pairs with the only one. Discovery names endpoints one participant at a time: with 0.5 s a
@@ -51,81 +49,9 @@ was discovered 0.5-1 s later). Launches set `action_sender` and never wait for t
 INTRODUCTION_S = 3.0
 """Seconds a newcomer under the paired node's name has to complete the handshake (its hello
 may come after its first messages) before it is named as an impostor."""
-_TAKE_OK = 0
 _TAKE_EMPTY = 401  # RCL_RET_SUBSCRIPTION_TAKE_FAILED: nothing to take
 _UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
 _MAX_TAKE = 256  # per wake-up: a flood cannot keep the executor in one callback forever
-
-
-class _Allocator(ctypes.Structure):
-    _fields_ = [(name, ctypes.c_void_p) for name in
-                ('allocate', 'deallocate', 'reallocate', 'zero_allocate', 'state')]
-
-
-class _Bytes(ctypes.Structure):
-    """rcutils_uint8_array_t (= rmw_serialized_message_t)."""
-
-    _fields_ = [('buffer', ctypes.POINTER(ctypes.c_uint8)), ('buffer_length', ctypes.c_size_t),
-                ('buffer_capacity', ctypes.c_size_t), ('allocator', _Allocator)]
-
-
-class _Gid(ctypes.Structure):
-    _fields_ = [('implementation_identifier', ctypes.c_char_p),
-                ('data', ctypes.c_uint8 * _GID_SIZE)]
-
-
-class _MessageInfo(ctypes.Structure):
-    """rmw_message_info_t of Jazzy."""
-
-    _fields_ = [('source_timestamp', ctypes.c_int64), ('received_timestamp', ctypes.c_int64),
-                ('publication_sequence_number', ctypes.c_uint64),
-                ('reception_sequence_number', ctypes.c_uint64), ('publisher_gid', _Gid),
-                ('from_intra_process', ctypes.c_bool)]
-
-
-class _Rcl:
-    """The three C functions we need, from the librcl/librcutils rclpy has already loaded."""
-
-    def __init__(self) -> None:
-        rcl = ctypes.CDLL('librcl.so')
-        rcutils = ctypes.CDLL('librcutils.so')
-        self.take = rcl.rcl_take_serialized_message
-        self.take.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Bytes),
-                              ctypes.POINTER(_MessageInfo), ctypes.c_void_p]
-        self.take.restype = ctypes.c_int32
-        self.default_allocator = rcutils.rcutils_get_default_allocator
-        self.default_allocator.restype = _Allocator
-        self.init = rcutils.rcutils_uint8_array_init
-        self.init.argtypes = [ctypes.POINTER(_Bytes), ctypes.c_size_t,
-                              ctypes.POINTER(_Allocator)]
-        self.fini = rcutils.rcutils_uint8_array_fini
-        self.fini.argtypes = [ctypes.POINTER(_Bytes)]
-        self.rmw_publisher = rcl.rcl_publisher_get_rmw_handle
-        self.rmw_publisher.argtypes = [ctypes.c_void_p]
-        self.rmw_publisher.restype = ctypes.c_void_p
-        self.publisher_gid = rcl.rmw_get_gid_for_publisher  # found through librcl's rmw
-        self.publisher_gid.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Gid)]
-        self.publisher_gid.restype = ctypes.c_int32
-
-
-_RCL: _Rcl | None = None
-
-
-def _rcl() -> _Rcl:
-    global _RCL
-    if _RCL is None:
-        _RCL = _Rcl()
-    return _RCL
-
-
-def publisher_gid(publisher: Publisher) -> bytes:
-    """The GID of one of our own publishers: what its messages carry as publisher_gid."""
-    gid = _Gid()
-    with publisher.handle:
-        rmw_handle = _rcl().rmw_publisher(publisher.handle.pointer)
-        if not rmw_handle or _rcl().publisher_gid(rmw_handle, ctypes.byref(gid)) != _TAKE_OK:
-            raise RuntimeError(f'no GID for the publisher of {publisher.topic_name}')
-    return bytes(gid.data)
 
 
 class SenderSubscription(Waitable):
@@ -158,9 +84,9 @@ class SenderSubscription(Waitable):
         self.admit = admit
         self._index: int | None = None
         self._destroyed = False
-        self._buffer = _Bytes()
-        allocator = _rcl().default_allocator()
-        if _rcl().init(ctypes.byref(self._buffer), 256, ctypes.byref(allocator)) != _TAKE_OK:
+        self._buffer = Bytes()
+        allocator = rcl().default_allocator()
+        if rcl().init(ctypes.byref(self._buffer), 256, ctypes.byref(allocator)) != TAKE_OK:
             raise MemoryError('could not allocate a serialized-message buffer')
         self._events = [] if event_callbacks is None else event_callbacks.create_event_handlers(
             self.callback_group, self._handle, self.topic_name)
@@ -195,7 +121,7 @@ class SenderSubscription(Waitable):
             handler.destroy()
         self._node.remove_waitable(self)
         self._handle.destroy_when_not_in_use()
-        _rcl().fini(ctypes.byref(self._buffer))
+        rcl().fini(ctypes.byref(self._buffer))
 
     # -- Waitable API (called by the executor) ---------------------------------------------
     def __enter__(self) -> None:
@@ -211,14 +137,14 @@ class SenderSubscription(Waitable):
     def take_data(self) -> list[Any]:
         """Take what is waiting (at most _MAX_TAKE); keep the admitted messages."""
         taken = []
-        info = _MessageInfo()
+        info = MessageInfo()
         for _ in range(_MAX_TAKE):
             with self._handle:
-                result = _rcl().take(self._handle.pointer, ctypes.byref(self._buffer),
+                result = rcl().take(self._handle.pointer, ctypes.byref(self._buffer),
                                      ctypes.byref(info), None)
             if result == _TAKE_EMPTY:
                 break
-            if result != _TAKE_OK:
+            if result != TAKE_OK:
                 raise RuntimeError(f'rcl_take_serialized_message on {self.topic_name} '
                                    f'returned {result}')
             gid = bytes(info.publisher_gid.data)
@@ -314,7 +240,7 @@ class SenderPairing:
             for info in self._node.get_publishers_info_by_topic(self.topic):
                 name = '' if info.node_name == _UNKNOWN_NODE else \
                     info.node_namespace.rstrip('/') + '/' + info.node_name
-                gid = bytes(info.endpoint_gid)[:_GID_SIZE]
+                gid = bytes(info.endpoint_gid)[:GID_SIZE]
                 self._graph[gid] = Sender(gid, name)
             self._graph_at = now
         return self._graph

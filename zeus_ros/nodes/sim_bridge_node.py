@@ -26,19 +26,6 @@ from sim_bridge.actions import ActionStatus
 from sim_bridge.env import EnvStep, ScheduledEnv
 from sim_bridge.registry import TASK_NAMES, make_task
 from sim_bridge.schedules import schedule_from_config
-from zeus_ros.nodes.common import (
-    TOPICS,
-    WaitReport,
-    diagnostics_message,
-    image_from_array,
-    image_qos,
-    missing_peers,
-    publisher_qos,
-    run_node,
-    stamp_from_seconds,
-    steady_timer,
-    step_qos,
-)
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -47,9 +34,13 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.messages import diagnostics_message, image_from_array, stamp_from_seconds
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.peers import WaitReport, missing_peers, steady_timer
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
+from zeus_ros.nodes.spin import run_node
+from zeus_ros.nodes.topics import TOPICS, image_qos, publisher_qos, step_qos
 
 MODES = ('lockstep', 'realtime')
 ACTION_BACKLOG = 1000  # reader history of zeus/action: room for a flood between two takes
@@ -107,7 +98,7 @@ class SimBridgeNode(Node):
         self.env = ScheduledEnv(task, schedule)
         self.mode: str = self.params['mode']
         self.exit_code = 0
-        self.finished = False  # max_steps reached: run_nodes ends the spin (common.py)
+        self.finished = False  # max_steps reached: run_nodes ends the spin (spin.py)
         self.counts = dict.fromkeys(
             ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected', 'foreign'),
             0

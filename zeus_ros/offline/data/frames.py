@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.data.cdr_columns import payload_offset
+from zeus_ros.bags.cdr_columns import payload_offset
 
 __all__ = ['FrameStore']
 

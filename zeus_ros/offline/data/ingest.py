@@ -30,7 +30,6 @@ import os
 from pathlib import Path
 import re
 import struct
-import sys
 import time
 from typing import TYPE_CHECKING, Any
 import warnings
@@ -38,12 +37,10 @@ import warnings
 import numpy as np
 from rosbags.rosbag2 import Reader
 
-from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.data.bag_errors import BagError, IngestError
-from zeus_ros.offline.data.cdr_columns import decode_messages, stack_field
-from zeus_ros.offline.data.frames import FrameStore
-from zeus_ros.offline.data.mcap_file import channel_qos, closed_by_writer, qos_text
-from zeus_ros.offline.data.schema import (
+from zeus_ros.bags.cdr_columns import decode_messages, stack_field
+from zeus_ros.bags.errors import BagError, IngestError
+from zeus_ros.bags.mcap_file import channel_qos, closed_by_writer, qos_text
+from zeus_ros.bags.schema import (
     MSGTYPES,
     TOPIC_ACTION,
     TOPIC_CONTEXT_TRUTH,
@@ -52,12 +49,13 @@ from zeus_ros.offline.data.schema import (
     TOPIC_STEP,
     codec,
 )
+from zeus_ros.offline.data.frames import FrameStore
 
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
 __all__ = ['BAG_FILES', 'Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue',
-           'bag_topic', 'find_bags', 'ingest_bags', 'main']
+           'bag_topic', 'find_bags', 'ingest_bags']
 
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
@@ -857,34 +855,3 @@ def ingest_bags(
 
 def _bag_files(bag: Path) -> list[Path]:
     return [bag] if bag.is_file() else [f for f in bag.iterdir() if f.is_file()]
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`zeus ingest --bags BAG...`: read bags as training would and say what they hold or lack."""
-    parser = ZeusArgumentParser(
-        prog='zeus ingest', description='Read bags exactly as `zeus train` does and report '
-        'steps, episodes and every gap, duplicate or count mismatch (exit 1 if unusable).')
-    flag_or_positional(parser, '--bags', many=True, type=Path,
-                       help='bag directories, .mcap/.db3 files, or folders of bags, searched at '
-                       'any depth (bags/ of `zeus launch --record`; as `zeus train --bags`; also '
-                       'accepted without --bags)')
-    parser.add_argument('--namespace', default='',
-                        help='namespace of the recorded system: reads /<ns>/zeus/... topics')
-    parser.add_argument('--strict', action='store_true', help='any issue is an error')
-    parser.add_argument('--skip-corrupt', action='store_true',
-                        help='skip (and list) bags that cannot be read')
-    args = parser.parse_args(argv)
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter('always', IngestWarning)
-            data = ingest_bags(args.bags, skip_corrupt=args.skip_corrupt, strict=args.strict,
-                               namespace=args.namespace)
-    except (BagError, IngestError) as exc:
-        print(f'zeus ingest: {exc}', file=sys.stderr)
-        return 1
-    for warning in caught:
-        print(f'warning: {warning.message}', file=sys.stderr)
-    print(f'{data.task}: {len(data.episodes)} episode piece(s), {data.num_transitions} '
-          f'transitions; context {", ".join(data.context_names)}')
-    print(data.report.summary())
-    return 0

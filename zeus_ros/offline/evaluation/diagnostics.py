@@ -30,7 +30,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.evaluation.evaluate import Trace
+    from zeus_ros.offline.rollout import Trace
 
 __all__ = ['DIAGNOSTICS', 'context_sensitivity', 'extreme_indices', 'farthest_extreme',
            'frozen_contexts', 'mean_contexts', 'policy_contexts', 'spread_over_noise']

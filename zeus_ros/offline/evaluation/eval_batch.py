@@ -4,7 +4,7 @@
 
 Each checkpoint is evaluated into <out>/<group>/<method>_s<seed>/eval_<split>/, where the group
 names task and update budget (cheetah_run_v0_10k). Finished parts (recorded in
-<method>_s<seed>/state.json, training/run_state.py) are skipped, so an interrupted run resumes.
+<method>_s<seed>/state.json, offline/runs.py) are skipped, so an interrupted run resumes.
 report.write_report then writes per-group summary.csv / runs.csv / table.md / returns.png, and
 <out>/tables.md holds every group's table.
 """
@@ -21,7 +21,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from zeus_ros.offline.training.run_state import mark_evaluated, read_state
+from zeus_ros.offline.runs import mark_evaluated, read_state
 
 __all__ = ['EvalJob', 'evaluate_many', 'find_checkpoints', 'group_name']
 
@@ -71,7 +71,7 @@ def plan(checkpoints: Sequence[Path], out: Path, splits: Sequence[str] | None,
          force: bool = False, expect_task: str | None = None
          ) -> tuple[list[EvalJob], list[str]]:
     """Jobs still to run, and the group folders they belong to (in order of appearance)."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     owners: dict[Path, Path] = {}
     jobs, tasks = [], []

@@ -1,6 +1,6 @@
-"""`zeus eval`: a checkpoint in-process, on the deployment path the nodes use.
+"""Evaluation of a checkpoint in-process, on the deployment path the nodes use (`zeus eval`).
 
-Every step goes through ScheduledEnv -> collect.AgentPolicy (InferenceAgent + ContextHistory,
+Every step goes through ScheduledEnv -> rollout.AgentPolicy (InferenceAgent + ContextHistory,
 fed like the context_estimator node) -> action, so evaluation measures what runs on the robot.
 Reported, per split (train / interpolation / extrapolation value lists of the paper):
   - return per context value, one constant context per episode, next to a random policy;
@@ -12,19 +12,16 @@ Reported, per split (train / interpolation / extrapolation value lists of the pa
   - the identifiability probe of appendix B.2 (probe.py) on random-policy data;
   - the adaptation diagnostics of diagnostics.py: context sensitivity, spread / noise of the
     context, and the value of adaptation (return with the context live minus frozen, paired).
-`--values` evaluates any values of the task's context parameters instead of a preset split.
+`values=` evaluates any values of the task's context parameters instead of a preset split.
+The command line is zeus_ros/cli/evaluate.py.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 import hashlib
-import itertools
 import json
 from pathlib import Path
-import sys
 import time
 from typing import Any
 
@@ -33,16 +30,15 @@ from tqdm import tqdm
 
 from sim_bridge.presets import SPLITS
 from zeus_ros.atomic_file import replace_text
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
 from zeus_ros.labels import context_label
-from zeus_ros.offline.evaluation.metrics import format_table, plot_heatmaps, write_csv
+from zeus_ros.offline.evaluation.metrics import plot_heatmaps, write_csv
 from zeus_ros.offline.evaluation.probe import ProbeResult, Rollout, probe_context
 from zeus_ros.offline.evaluation.records import checkpoint_sha256, write_record
-from zeus_ros.offline.training.collect import AgentPolicy, Policy, random_policy
+from zeus_ros.offline.rollout import AgentPolicy, Policy, Trace, random_policy, run_steps
 
-__all__ = ['SPLITS', 'Trace', 'adaptation_latencies', 'context_rank_correlation',
-           'evaluate_contexts', 'main', 'mid_episode_switches', 'parse_values', 'run_steps',
-           'split_values', 'switching_order']
+__all__ = ['SPLITS', 'adaptation_latencies', 'context_rank_correlation', 'evaluate',
+           'evaluate_contexts', 'mid_episode_switches', 'parse_values', 'split_values',
+           'switching_order']
 
 RECOVERY_TOLERANCE = 0.10
 """A switch is absorbed once the reward is within 10% of its steady value on the new context."""
@@ -56,7 +52,7 @@ own oscillation is not read as a disturbance) before the recovery test; latencie
 # ---------------------------------------------------------------------- environment side
 def split_values(task: str, split: str) -> list[dict[str, float]]:
     """The context values of a split of the paper's tables, as one mapping per value."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     if split not in SPLITS:
         raise ValueError(f'split must be one of {", ".join(SPLITS)}, got {split!r}')
@@ -82,64 +78,6 @@ def _make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any,
 def _switch_schedule(values: Sequence[dict[str, float]], every: int) -> dict[str, Any]:
     """Cycle through `values`, switching every `every` steps, unannounced."""
     return {'kind': 'switch', 'every': int(every), 'values': [dict(v) for v in values]}
-
-
-# ---------------------------------------------------------------------- rollouts
-@dataclass(frozen=True)
-class Trace:
-    """Per-observation record of a run; reward[i] was earned by the action at i - 1."""
-
-    reward: np.ndarray
-    first: np.ndarray
-    context: np.ndarray
-    segment: np.ndarray
-    psi: np.ndarray | None
-    history_length: np.ndarray
-    obs: np.ndarray
-    action: np.ndarray
-
-    def episode_returns(self) -> list[float]:
-        """Return of every complete or partial episode (rewards after each start)."""
-        starts = [*list(np.flatnonzero(self.first)), len(self.reward)]
-        return [float(self.reward[a + 1:b].sum()) for a, b in itertools.pairwise(starts)]
-
-
-def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = '',
-              progress: bool = True, bar: tqdm | None = None) -> Trace:
-    """Drive `env` for `steps` observations with `policy`, as collect.collect does.
-
-    `bar`: a progress bar of a longer phase to advance instead of a bar of its own.
-    """
-    from zeus_ros.offline.training.collect import _record
-
-    cols: dict[str, list[Any]] = {k: [] for k in ('reward', 'first', 'context', 'segment',
-                                                   'psi', 'hist', 'obs', 'action')}
-    es = env.reset()
-    names = task.context_names
-    own = bar is None
-    bar = tqdm(total=steps, desc=desc, unit='step', disable=not progress, leave=False) \
-        if own else bar
-    for n in range(steps):
-        bar.update()
-        rec = _record(es, task, pixels=getattr(policy, 'frames', None) is not None)
-        out = policy(es, rec)
-        obs = es.observation
-        cols['reward'].append(0.0 if obs.first else float(obs.reward))
-        cols['first'].append(bool(obs.first))
-        cols['context'].append([obs.context[name] for name in names])
-        cols['segment'].append(int(es.segment))
-        cols['psi'].append(out.context)
-        cols['hist'].append(out.history_length)
-        cols['obs'].append(np.asarray(obs.state, np.float32))
-        cols['action'].append(np.asarray(out.action, np.float32))
-        if n < steps - 1:
-            es = env.step(out.action)
-    if own:
-        bar.close()
-    psi = None if any(p is None for p in cols['psi']) else np.stack(cols['psi'])
-    return Trace(np.asarray(cols['reward']), np.asarray(cols['first']),
-                 np.asarray(cols['context'], float), np.asarray(cols['segment']), psi,
-                 np.asarray(cols['hist']), np.stack(cols['obs']), np.stack(cols['action']))
 
 
 def _policy(agent: Any, task: Any, seed: int, frozen: np.ndarray | None = None,
@@ -535,132 +473,3 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
                  seconds=time.perf_counter() - started)
     return {'out': out, 'summary': summary, 'per_value': per_value, 'values': labels,
             'switches': switches, 'probe': probe}
-
-
-def _build_parser() -> argparse.ArgumentParser:
-    parser = ZeusArgumentParser(
-        prog='zeus eval', description='Evaluate a checkpoint in-process on a context split.')
-    parser.add_argument('--checkpoint', type=Path, nargs='+', required=True,
-                        help='checkpoint file(s) or folder(s) of them; several (or a folder, or '
-                        '--split all) evaluate each into OUT/<task>/<method>_s<seed>/ and '
-                        'write the tables over seeds (OUT/tables.md)')
-    parser.add_argument('--task', '--task-file', type=task_name,
-                        help=f'expected task (error if the checkpoint has another); {TASK_HELP}')
-    parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
-                        help="context split; 'all': every split the task's preset defines")
-    parser.add_argument('--values',
-                        help="any values of the task's context parameters instead of a split, "
-                        "e.g. '0.5,0.8,1.3' (one parameter) or 'x=0.1:y=0.2,x=0.3:y=0.1'; "
-                        "outputs are labelled split 'custom'")
-    parser.add_argument('--episodes', type=at_least(1), default=3,
-                        help='episodes per context value (each from other initial states)')
-    parser.add_argument('--switch-every', type=at_least(1),
-                        help='steps between unannounced context switches (switching run; '
-                        'default 100, or a quarter episode for shorter episodes)')
-    parser.add_argument('--switch-episodes', type=at_least(0), default=1,
-                        help='episodes of the switching run')
-    parser.add_argument('--probe-steps', type=at_least(0), default=4000,
-                        help='random-policy steps for the identifiability probe (0: skip)')
-    parser.add_argument('--seed', type=at_least(0), default=100)
-    parser.add_argument('--out', type=Path,
-                        help='output folder (default: eval_<split>/ next to the checkpoint); '
-                        'zeus export and zeus report find the results in any folder below the '
-                        "checkpoint's (eval.json names the checkpoint evaluated)")
-    parser.add_argument('--jobs', type=at_least(1), default=1,
-                        help='evaluations in parallel (several checkpoints)')
-    parser.add_argument('--force', action='store_true',
-                        help='re-run evaluations that already finished (several checkpoints)')
-    parser.add_argument('--threads', type=at_least(1), default=1,
-                        help='torch CPU threads (default 1: these networks act on one '
-                        'observation at a time, where more threads only wait on each other, '
-                        'several times slower on a busy machine; the nodes and --jobs use 1 '
-                        'too, so the numbers agree)')
-    parser.add_argument('--no-progress', action='store_true')
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus eval`; returns the process exit code."""
-    from zeus_ros.learning.errors import CheckpointError
-
-    args = _build_parser().parse_args(argv)
-    for flag in ('episodes', 'switch_every', 'switch_episodes', 'jobs'):
-        if getattr(args, flag) is not None and getattr(args, flag) < 1:
-            print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
-            return 2
-    import torch
-
-    torch.set_num_threads(args.threads)
-    if args.values is not None and args.split == 'all':
-        print('zeus eval: --values replaces the split: drop --split all', file=sys.stderr)
-        return 2
-    if len(args.checkpoint) > 1 or args.checkpoint[0].is_dir() or args.split == 'all':
-        return _main_many(args)
-    try:
-        values = None
-        if args.values is not None:
-            from zeus_ros.learning.inference import InferenceAgent
-
-            names = InferenceAgent.from_checkpoint(args.checkpoint[0],
-                                                   expect_task=args.task).context_names
-            values = parse_values(args.values, names)
-        result = evaluate(args.checkpoint[0], split='custom' if values else args.split,
-                          task=args.task, values=values,
-                          episodes=args.episodes, switch_every=args.switch_every,
-                          switch_episodes=args.switch_episodes, probe_steps=args.probe_steps,
-                          seed=args.seed, out=args.out, progress=not args.no_progress)
-    except (CheckpointError, ValueError, FileNotFoundError) as error:
-        print(f'zeus eval: {error}', file=sys.stderr)
-        return 2
-    per_value = result['per_value']
-    table = [{'context': label, **{policy: returns[i] for policy, returns in per_value.items()}}
-             for i, label in enumerate(result['values'])]
-    print(format_table(table, ['context', *per_value]))
-    print()
-    print(format_table(result['summary'], ['policy', 'split', 'mean_return', 'std_return',
-                                           'switching_return', 'switches', 'judged', 'recovered',
-                                           'mean_latency', 'spearman', 'probe_mse',
-                                           'probe_mean_mse']))
-    print()
-    from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
-
-    print(format_table(result['summary'][:1], list(DIAGNOSTICS)))
-    print(f'\nwrote CSV and PNG to {result["out"]}')
-    return 0
-
-
-def _main_many(args: argparse.Namespace) -> int:
-    """Several checkpoints (or all splits): evaluate each, then the tables over seeds."""
-    from zeus_ros.learning.errors import CheckpointError
-    from zeus_ros.offline.evaluation.eval_batch import evaluate_many, find_checkpoints
-    from zeus_ros.offline.evaluation.report import markdown_table
-
-    if args.out is None:
-        print('zeus eval: several checkpoints (or --split all) need --out', file=sys.stderr)
-        return 2
-    try:
-        checkpoints = find_checkpoints(args.checkpoint)
-        values, splits = None, None if args.split == 'all' else [args.split]
-        if args.values is not None:
-            from zeus_ros.learning.inference import InferenceAgent
-
-            names = InferenceAgent.from_checkpoint(checkpoints[0],
-                                                   expect_task=args.task).context_names
-            values, splits = parse_values(args.values, names), ['custom']
-        tables = evaluate_many(
-            checkpoints, args.out, splits=splits, values=values,
-            jobs=args.jobs, force=args.force, progress=not args.no_progress,
-            expect_task=args.task,
-            episodes=args.episodes, switch_every=args.switch_every,
-            switch_episodes=args.switch_episodes, probe_steps=args.probe_steps, seed=args.seed)
-    except (CheckpointError, ValueError, FileNotFoundError) as error:
-        print(f'zeus eval: {error}', file=sys.stderr)
-        return 2
-    for task, rows in tables.items():
-        print(f'\n{task}\n{markdown_table(rows)}')
-    print(f'\nwrote per-run CSV/PNG, per-task tables and {args.out / "tables.md"}')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -19,9 +19,8 @@ import sys
 from typing import Any
 
 from sim_bridge.presets import SPLITS
-from zeus_ros.cli_args import ZeusArgumentParser, at_least
 
-__all__ = ['card_text', 'export', 'find_evaluations', 'main']
+__all__ = ['card_text', 'export', 'find_evaluations']
 
 
 def _fmt(value: str | None, digits: int = 1) -> str:
@@ -91,7 +90,7 @@ def _eval_rows(summaries: dict[str, Path]) -> list[tuple[str, dict[str, str], di
 def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str | None,
               commit: str | None, source: Path | None = None) -> str:
     """The markdown card of an exported checkpoint; `summaries`: split -> eval summary.csv."""
-    from sim_bridge.presets import load_preset
+    from sim_bridge.families import load_preset
 
     config, spec, extra = loaded.config, loaded.spec, loaded.extra
     train_values = ', '.join(f'{v:g}' for value in load_preset(spec.task, 'train')
@@ -131,13 +130,13 @@ def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str
         f'| file | {pt.stat().st_size / 1e6:.2f} MB, sha256 `{digest}` |',
     ]
     if 'context_readout' in extra:
-        from zeus_ros.offline.evaluation.readout import ContextReadout
+        from zeus_ros.learning.readout import ContextReadout
 
         readout = ContextReadout.from_dict(extra['context_readout']).describe()
         readout = readout.removeprefix('context read-out (').removesuffix(')')
         lines.insert(-1, f'| context read-out | {readout} |')
     if 'context_novelty' in extra:
-        from zeus_ros.offline.evaluation.readout import NoveltyMonitor
+        from zeus_ros.learning.readout import NoveltyMonitor
 
         novelty = NoveltyMonitor.from_dict(extra['context_novelty']).describe()
         novelty = novelty.removeprefix('context novelty monitor (').split('; fitted on')[0]
@@ -190,7 +189,8 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
             method_spec(loaded.config.method).context_source == 'psi':
         from zeus_ros.learning.inference import InferenceAgent
-        from zeus_ros.offline.evaluation.readout import calibrate_readout, store_readout
+        from zeus_ros.learning.readout import store_readout
+        from zeus_ros.offline.evaluation.calibrate import calibrate_readout
 
         try:
             readout, novelty = calibrate_readout(InferenceAgent(loaded.agent),
@@ -205,57 +205,3 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     card.write_text(card_text(out, loaded, summaries=summaries, command=command, commit=commit,
                               source=checkpoint))
     return out, card
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus export`; returns the process exit code."""
-    from zeus_ros.learning.errors import CheckpointError
-
-    parser = ZeusArgumentParser(prog='zeus export', description=__doc__.splitlines()[0])
-    parser.add_argument('--checkpoint', type=Path, required=True, help='training checkpoint')
-    parser.add_argument('--out', type=Path, required=True, help='deployment checkpoint (.pt)')
-    parser.add_argument('--evals', type=Path,
-                        help="where the card's returns come from (default: the evaluations of "
-                        "this checkpoint that `zeus eval` wrote below the checkpoint's folder, "
-                        'eval_<split>/ by default, or in the sweep trial folder above it); a '
-                        'folder with eval_<split>/ folders or one evaluation folder')
-    parser.add_argument('--command',
-                        help='command that trained it, for checkpoints that did not record one')
-    parser.add_argument('--commit',
-                        help='source commit it was trained on, for checkpoints without one')
-    parser.add_argument('--readout-steps', type=at_least(0), default=2000,
-                        help='steps of the policy on the train contexts that calibrate the '
-                        'context read-out (psi -> context units, on zeus/context_readout) and '
-                        'the novelty monitor (distance from the training contexts, on '
-                        'zeus/context_novelty and /diagnostics) stored in the export; default '
-                        '%(default)s, 0: none')
-    args = parser.parse_args(argv)
-    if args.out.suffix != '.pt':
-        print(f'zeus export: --out {args.out} must end in .pt', file=sys.stderr)
-        return 2
-    if args.out.resolve() == args.checkpoint.resolve():
-        print('zeus export: --out must differ from --checkpoint', file=sys.stderr)
-        return 2
-    for flag, path in (('--checkpoint', args.checkpoint), ('--evals', args.evals)):
-        if path is not None and not path.exists():
-            print(f'zeus export: {flag} {path}: no such file or folder', file=sys.stderr)
-            return 2
-    try:
-        summaries = find_evaluations(args.checkpoint, args.evals)
-        pt, card = export(args.checkpoint, args.out, command=args.command, commit=args.commit,
-                          readout_steps=max(args.readout_steps, 0), summaries=summaries)
-    except (CheckpointError, ValueError) as error:
-        print(f'zeus export: {error}', file=sys.stderr)
-        return 2
-    before, after = args.checkpoint.stat().st_size, pt.stat().st_size
-    print(f'zeus export: {pt} ({after / 1e6:.2f} MB, {before / after:.1f}x smaller) and {card}')
-    scored = ', '.join(f'{split} ({path.parent})' for split, path in summaries.items())
-    print(f'zeus export: the card shows the evaluations of {scored}' if scored else
-          f'zeus export: no evaluation of {args.checkpoint} found below '
-          f'{args.checkpoint.parent} (run `zeus eval --checkpoint {args.checkpoint}` first, '
-          'or give --evals): the card says "Not evaluated yet"')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

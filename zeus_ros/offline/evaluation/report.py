@@ -6,7 +6,7 @@ Reads every finished evaluation below the folder: any folder with the eval.json 
 writes last (method, seed and split from it: `zeus eval --checkpoint runs/x/final.pt` writes
 runs/x/eval_<split>/, so `zeus report runs/x` finds it), and the layout of
 `experiments/run_one.sh` and sweeps, <method>_s<seed>/eval_<split>/summary.csv, finished
-where <method>_s<seed>/state.json (or an old .done marker) says so (training/run_state.py).
+where <method>_s<seed>/state.json (or an old .done marker) says so (offline/runs.py).
 Writes summary.csv, returns.png, table.md, runs.csv (every seed's numbers) and wall_times.md
 into --out (default FOLDER/report) and prints the markdown table (as in docs/results.md).
 """
@@ -18,18 +18,16 @@ import csv
 from dataclasses import dataclass
 from pathlib import Path
 import re
-import sys
 from typing import Any
 
 import numpy as np
 
 from sim_bridge.presets import SPLITS
-from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 from zeus_ros.labels import task_label
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.evaluation.diagnostics import DIAGNOSTICS
 from zeus_ros.offline.evaluation.records import find_records
-from zeus_ros.offline.training.run_state import RunState, RunStateError, read_state
+from zeus_ros.offline.runs import RunState, read_state
 
 __all__ = [
     'METRICS',
@@ -361,38 +359,3 @@ def write_report(folder: Path, out: Path, title: str | None = None) -> list[dict
         (out / 'headroom.md').write_text(headroom_table(headroom) + '\n')
     _plot(rows, task_label(title or folder.name), out / 'returns.png')
     return rows
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus report`; returns the process exit code."""
-    parser = ZeusArgumentParser(prog='zeus report', description=__doc__.splitlines()[0])
-    flag_or_positional(parser, '--folder', many=False, type=Path,
-                       help='folder of one task whose evaluations to report, searched at any '
-                       'depth: a run folder (runs/x, where `zeus eval --checkpoint '
-                       'runs/x/final.pt` writes eval_<split>/ by default), a folder of runs, or '
-                       'a sweep / `zeus eval --out` folder (also accepted without --folder, the '
-                       'old spelling)')
-    parser.add_argument('--out', type=Path,
-                        help='folder for CSV, MD and PNG (default: FOLDER/report)')
-    parser.add_argument('--title', help="plot title (default: the folder's task name)")
-    args = parser.parse_args(argv)
-    out = args.out if args.out is not None else args.folder / 'report'
-    try:
-        if not args.folder.is_dir():
-            raise ReportError(f'--folder {args.folder}: no such folder')
-        rows = write_report(args.folder, out, args.title)
-    except (ReportError, RunStateError) as error:
-        print(f'zeus report: {error}', file=sys.stderr)
-        return 2
-    print(markdown_table(rows))
-    print(f'\n{diagnostics_table(rows)}')
-    headroom = headroom_rows(per_run(args.folder))
-    if headroom:
-        print(f'\n{headroom_table(headroom)}')
-    print(f'\nwrote summary.csv, runs.csv, table.md, diagnostics.md, headroom.md, '
-          f'wall_times.md and returns.png to {out}')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

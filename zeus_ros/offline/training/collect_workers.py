@@ -1,4 +1,4 @@
-"""`zeus collect --workers N`: N simulators at once, each writing its own bag.
+"""N simulators at once, each writing its own bag (`zeus collect --workers N`, `zeus loop`).
 
 Worker i runs --steps/N steps (the first ones take the remainder) with seed worker_seeds(seed,
 N)[i] into bag_{K+i} (bag_K: the next free bag of --out), so the N bags are exactly what N
@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from zeus_ros.offline.training.collect import CollectStats
+from zeus_ros.offline.rollout import CollectStats
 
-__all__ = ['CollectJob', 'collect_bag', 'main_workers', 'portable_task', 'run_workers',
-           'split_steps', 'worker_seeds']
+__all__ = ['CollectJob', 'collect_bag', 'portable_task', 'run_workers', 'split_steps',
+           'worker_seeds']
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.offline.data.bag_writer import StepBagWriter
-    from zeus_ros.offline.training.collect import (
+    from zeus_ros.bags.writer import StepBagWriter
+    from zeus_ros.offline.rollout import (
         AgentPolicy,
         CollectDiskFull,
         collect,
@@ -148,29 +148,3 @@ def run_workers(template: CollectJob, workers: int, *, use_ray: bool = False,
             stats[futures[future]] = future.result()
             log(f'worker {futures[future]}: done, {stats[futures[future]].steps} steps')
     return [stats[i] for i in range(workers)]
-
-
-def main_workers(args: Any, schedule: dict[str, Any], bag: Path) -> int:
-    """`zeus collect --workers N` after collect.main checked every flag; the exit code."""
-    import signal
-    import sys
-    import time
-
-    template = CollectJob(args.task, schedule, bag, args.steps, args.seed,
-                          checkpoint=args.checkpoint, noise=args.noise, pixels=args.pixels,
-                          storage=args.storage, context_lag=args.context_lag)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    args.out.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    try:
-        stats = run_workers(template, args.workers, use_ray=args.ray)
-    except KeyboardInterrupt:
-        print(f'zeus collect: interrupted; the steps written so far are in {args.out}',
-              file=sys.stderr)
-        return 130
-    seconds = time.perf_counter() - start  # with the workers' start-up: what a user waits
-    total = sum(s.steps for s in stats)
-    print(f'wrote {total} steps ({sum(s.episodes for s in stats)} episode starts) to '
-          f'{len(stats)} bags {stats[0].bag.name}..{stats[-1].bag.name} in {args.out} in '
-          f'{seconds:.1f} s ({total / max(seconds, 1e-9):.0f} steps/s)')
-    return 0

@@ -199,9 +199,9 @@ def closed_splits(recording: Path | str) -> list[Path]:
 
     Never the one being written; a split opened before step 0 may hold no step (skipped).
     """
-    from zeus_ros.offline.data.bag_errors import BagError
+    from zeus_ros.bags.errors import BagError
+    from zeus_ros.bags.recover import bag_state
     from zeus_ros.offline.data.ingest import find_bags
-    from zeus_ros.offline.data.recover import bag_state
 
     recording = Path(recording)
     if not recording.exists():
@@ -264,9 +264,9 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
+    from zeus_ros.bags.writer import StepBagWriter
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.data.bag_writer import StepBagWriter
-    from zeus_ros.offline.training.collect import AgentPolicy, collect
+    from zeus_ros.offline.rollout import AgentPolicy, collect
 
     begin = time.perf_counter()
     agent = InferenceAgent.from_checkpoint(deployed, reuse_features=True)

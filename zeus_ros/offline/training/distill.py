@@ -161,7 +161,7 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
     """Run the DAgger rounds; write out/student.pt (deployment export) and out/rounds.csv."""
     from zeus_ros.learning.checkpoint import export_for_deployment, save_checkpoint
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.offline.training.collect import parse_schedule
+    from zeus_ros.offline.rollout import parse_schedule
 
     teacher = InferenceAgent.from_checkpoint(teacher_path)
     student = make_student(config, teacher, task, no_context=settings.no_context)

@@ -132,7 +132,8 @@ def collect_round(task_name: str, schedule: dict[str, Any], teacher: Any, studen
     of this very trajectory). Returns the complete episodes and their returns.
     """
     from zeus_ros.offline.evaluation.evaluate import _make_env
-    from zeus_ros.offline.training.collect import AgentPolicy, _record
+    from zeus_ros.offline.rollout import AgentPolicy
+    from zeus_ros.offline.rollout import record_step as _record
 
     env, task = _make_env(task_name, schedule, seed)
     labeller = AgentPolicy(teacher, noise=0.0, seed=seed)

@@ -7,7 +7,7 @@ Layout (that of experiments/run_one.sh, which `zeus report` reads):
   <out>/<group>/<method>_s<seed>/protocol.yaml  its loop and evaluation flags (LoopProtocol)
   <out>/<group>/<method>_s<seed>/bags, run/      what `zeus loop --out` writes
   <out>/<group>/<method>_s<seed>/state.json     what is finished, with wall seconds
-                                                 (run_state.py; old .done markers still read)
+                                                 (offline/runs.py; old .done markers still read)
   <out>/<group>/<method>_s<seed>/eval_<split>/   `zeus eval` output
   <out>/<group>/<method>_s<seed>.log             every attempt's output, appended
   <out>/<group>/<method>_s<seed>.pid             the running step's process id (while it runs)
@@ -34,7 +34,7 @@ from typing import Any
 
 import yaml
 
-from zeus_ros.offline.training.run_state import mark_evaluated, mark_trained, read_state
+from zeus_ros.offline.runs import mark_evaluated, mark_trained, read_state
 
 __all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'recorded_differences',
            'run_trial', 'trial_done', 'trial_steps']
@@ -89,7 +89,7 @@ def default_schedule(task: str) -> str:
 
     `task` stays in the signature so a task-specific default can return without changing callers.
     """
-    from zeus_ros.offline.training.collect import DEFAULT_SCHEDULE
+    from zeus_ros.offline.rollout import DEFAULT_SCHEDULE
 
     del task
     return DEFAULT_SCHEDULE

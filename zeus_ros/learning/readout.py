@@ -13,6 +13,10 @@ Beside it, the novelty monitor (`extra['context_novelty']`): the distance of the
 context, in units of the typical within-context spread. Its threshold is the 99th percentile of
 that score on the held-back training segments, times a margin: above it, the robot runs in a
 context it was not trained on (the estimator warns on /diagnostics).
+
+This module holds what the live nodes need (the monitors, fitting them, reading and writing
+them in a checkpoint) and so belongs to the learning core; calibrating them on a rollout of the
+policy is offline work: zeus_ros/offline/evaluation/calibrate.py.
 """
 
 from __future__ import annotations
@@ -35,10 +39,10 @@ __all__ = [
     'ContextReadout',
     'NoveltyMonitor',
     'NoveltyTracker',
-    'calibrate_readout',
     'fit_novelty',
     'fit_readout',
     'held_back',
+    'monitors_from_extra',
     'readout_from_checkpoint_bytes',
     'store_readout',
     'store_train_mean',
@@ -248,47 +252,22 @@ def fit_readout(psi: np.ndarray, truth: np.ndarray, names: Sequence[str], groups
                           tuple(r2.tolist()), fitted_on)
 
 
-def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None,
-                      seed: int = 1000, progress: bool = False
-                      ) -> tuple[ContextReadout, NoveltyMonitor]:
-    """Roll the agent through its train contexts; fit the read-out and the novelty monitor.
+def monitors_from_extra(extra: Mapping[str, Any], context_dim: int | None = None
+                        ) -> tuple[ContextReadout | None, NoveltyMonitor | None]:
+    """The read-out and novelty monitor in a loaded checkpoint's `extra` (None: absent).
 
-    Both on the same steps (switching mid-episode), with the same segments held back.
-
-    `agent` is an InferenceAgent with a learned context. Only steps with a full history count
-    (what the estimator publishes once an episode is k steps old).
+    `context_dim`: the agent's psi size; ValueError when a monitor expects another.
     """
-    from zeus_ros.offline.evaluation.evaluate import (
-        _make_env,
-        _switch_schedule,
-        default_switch_every,
-        run_steps,
-        split_values,
-        switching_order,
-    )
-    from zeus_ros.offline.training.collect import AgentPolicy
-
-    values = switching_order(split_values(agent.task, 'train'), seed)
-    # Short enough that every value comes back at least twice (one of them can be held back),
-    # long enough for a full history plus a settled novelty window in each segment.
-    every = every or max(agent.k + NOVELTY_WINDOW + 5,
-                         min(default_switch_every(agent.task), steps // (2 * len(values))))
-    env, task = _make_env(agent.task, _switch_schedule(values, every), seed)
-    try:
-        trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=seed), steps,
-                          desc='read-out', progress=progress)
-    finally:
-        task.close()
-    if trace.psi is None or trace.psi.shape[1] == 0:
-        raise ValueError(f'context read-out: a {agent.method} checkpoint has no learned context')
-    full = trace.history_length >= agent.k
-    fitted_on = (f'{int(full.sum())} steps of the policy on the train contexts of {agent.task}, '
-                 f'switching every {every} steps, seed {seed}')
-    episodes = np.cumsum(trace.first)[full]
-    return (fit_readout(trace.psi[full], trace.context[full], agent.context_names,
-                        trace.segment[full], fitted_on=fitted_on),
-            fit_novelty(trace.psi[full], trace.context[full], trace.segment[full], episodes,
-                        fitted_on=fitted_on))
+    stored_readout, stored_novelty = extra.get(EXTRA_KEY), extra.get(NOVELTY_KEY)
+    readout = None if stored_readout is None else ContextReadout.from_dict(stored_readout)
+    novelty = None if stored_novelty is None else NoveltyMonitor.from_dict(stored_novelty)
+    for what, size in (('context read-out', None if readout is None else len(readout.weights)),
+                       ('novelty monitor', None if novelty is None
+                        else novelty.centroids.shape[1])):
+        if context_dim is not None and size is not None and size != context_dim:
+            raise ValueError(f'its {what} expects psi of {size} values, the agent has '
+                             f'{context_dim}')
+    return readout, novelty
 
 
 def stored_monitors(data: bytes) -> tuple[ContextReadout | None, NoveltyMonitor | None]:
@@ -296,10 +275,7 @@ def stored_monitors(data: bytes) -> tuple[ContextReadout | None, NoveltyMonitor 
     import torch
 
     payload = torch.load(io.BytesIO(data), map_location='cpu', weights_only=True)
-    extra = payload.get('extra', {}) if isinstance(payload, dict) else {}
-    readout, novelty = extra.get(EXTRA_KEY), extra.get(NOVELTY_KEY)
-    return (None if readout is None else ContextReadout.from_dict(readout),
-            None if novelty is None else NoveltyMonitor.from_dict(novelty))
+    return monitors_from_extra(payload.get('extra', {}) if isinstance(payload, dict) else {})
 
 
 def stored_train_mean(data: bytes) -> np.ndarray | None:

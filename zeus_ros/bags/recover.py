@@ -1,7 +1,8 @@
-"""`zeus recover`: turn what a killed recorder left on disk back into a bag every reader opens.
+"""Recovery: turn what a killed recorder left on disk back into a bag every reader opens.
 
-The writer side of crash durability (periodic flush, provisional metadata.yaml) is
-`zeus_ros.offline.data.durable.DurableBagWriter`; this module reads what it leaves behind.
+`zeus recover` (zeus_ros/cli/recover.py) runs it on folders of bags. The writer side of crash
+durability (periodic flush, provisional metadata.yaml) is
+`zeus_ros.bags.durable.DurableBagWriter`; this module reads what it leaves behind.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ from pathlib import Path
 import shutil
 import sqlite3
 import struct
-import sys
 from typing import TYPE_CHECKING
 
 from rosbags.rosbag2 import Reader, StoragePlugin
@@ -21,17 +21,16 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
 from zeus_ros.atomic_file import replace_text
-from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.data.bag_errors import BagError
-from zeus_ros.offline.data.bag_writer import BAG_VERSION, JazzyWriter
-from zeus_ros.offline.data.durable import STATE_KEY, bag_metadata
-from zeus_ros.offline.data.mcap_file import closed_by_writer
-from zeus_ros.offline.data.schema import MSGTYPES, typestore
+from zeus_ros.bags.durable import STATE_KEY, bag_metadata
+from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.mcap_file import closed_by_writer
+from zeus_ros.bags.schema import MSGTYPES, typestore
+from zeus_ros.bags.writer import BAG_VERSION, JazzyWriter
 
 if TYPE_CHECKING:
     from collections.abc import Iterable
 
-__all__ = ['STEP_TOPICS', 'RecoveryReport', 'main', 'needs_recovery', 'recover_bag',
+__all__ = ['STEP_TOPICS', 'RecoveryReport', 'bag_state', 'needs_recovery', 'recover_bag',
            'stamp_from_cdr', 'step_from_cdr']
 
 STEP_TOPICS = frozenset(t for t, typ in MSGTYPES.items() if typ.startswith('zeus_msgs/'))
@@ -317,42 +316,3 @@ def recover_bag(path: Path | str, *, dry_run: bool = False,
     else:
         _recover_sqlite(bag, files[0], report, dry_run=dry_run)
     return report
-
-
-def _bag_dirs(path: Path) -> list[Path]:
-    """The bag folders at or below `path` (ingest.find_bags: a bag, or folders of bags)."""
-    from zeus_ros.offline.data.ingest import find_bags
-
-    return list(dict.fromkeys(bag.parent if bag.is_file() else bag for bag in find_bags(path)))
-
-
-def main(argv: list[str] | None = None) -> int:
-    """`zeus recover BAG...`: restore bags cut off by a crash, say what was kept and lost."""
-    parser = ZeusArgumentParser(
-        prog='zeus recover', description='Restore rosbag2 bags cut off by a crash (SIGKILL, '
-        'power loss of the process): rebuild the mcap summary / metadata.yaml from the data '
-        'on disk. Bags closed properly are left untouched.')
-    flag_or_positional(parser, '--bags', many=True, type=Path,
-                       help='bag directories, or folders of bags (searched at any depth, e.g. '
-                       'bags/ of `zeus launch --record`); also accepted without --bags, the old '
-                       'spelling')
-    parser.add_argument('--dry-run', action='store_true', help='report only, change nothing')
-    parser.add_argument('--keep-original', action='store_true',
-                        help='keep the damaged mcap next to the rebuilt one as *.mcap.orig')
-    args = parser.parse_args(argv)
-    failed = 0
-    for root in args.bags:
-        try:
-            if not root.exists():
-                raise BagError(root, 'no such file or directory')
-            for bag in _bag_dirs(root):
-                report = recover_bag(bag, dry_run=args.dry_run, keep_original=args.keep_original)
-                print(report.summary())
-        except (BagError, OSError, sqlite3.Error) as exc:
-            print(f'zeus recover: {exc}', file=sys.stderr)
-            failed += 1
-    return 1 if failed else 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

@@ -1,10 +1,15 @@
-"""What every zeus_ros node shares: topic names, QoS decisions, stamps, conversions, main()."""
+"""How a node process runs: its executor, its stop signals, draining and a bounded exit.
+
+Every zeus_ros node process (and the one-process container) is `run_node` / `run_nodes`: one
+clear line and exit code 2 for bad parameters, the executor `$ZEUS_EXECUTOR` names, Ctrl-C and
+SIGTERM ending the spin so that what a node published last still reaches its readers, and an
+exit that never hangs (shutdown.py).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 import faulthandler
-import math
 import os
 from pathlib import Path
 import signal
@@ -12,313 +17,30 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-import numpy as np
 import rclpy
-from rclpy.clock import Clock, ClockType
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
-from rclpy.qos import (
-    HistoryPolicy,
-    QoSProfile,
-    ReliabilityPolicy,
-    qos_profile_sensor_data,
-)
+from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import Image
 
 from zeus_ros.nodes.shutdown import bounded, start_stop_limit
 
 if TYPE_CHECKING:
     from rclpy.context import Context
     from rclpy.node import Node
-    from rclpy.timer import Timer
 
 __all__ = [
+    'DRAIN_LIMIT_S',
     'EXECUTORS',
     'EXECUTOR_ENV',
-    'TOPICS',
+    'STACKS_SIGNAL',
+    'STOP_DELIVERY_S',
     'NodeFinished',
-    'WaitReport',
-    'action_qos',
-    'array_from_image',
-    'call_when_ready',
-    'count_publishers',
-    'count_subscribers',
-    'diagnostics_message',
     'executor_kind',
-    'image_from_array',
-    'image_qos',
     'make_executor',
-    'missing_peers',
-    'publisher_qos',
+    'params_file_errors',
     'run_node',
     'run_nodes',
-    'seconds_from_stamp',
-    'stamp_from_seconds',
-    'stamp_ns',
-    'steady_timer',
-    'step_qos',
 ]
-
-
-class TOPICS:
-    """Topic names of the step protocol (DESIGN.md section 1); one place for all nodes.
-
-    The zeus topics are relative, so `__ns:=/robot1` moves a whole system and `-r` remaps them;
-    /clock and /diagnostics stay absolute, as ROS convention wants (one clock, one aggregator).
-    """
-
-    STATE = 'zeus/observation/state'
-    IMAGE = 'zeus/observation/image'
-    STEP = 'zeus/step'
-    CONTEXT_TRUTH = 'zeus/context_truth'
-    CONTEXT = 'zeus/context'
-    CONTEXT_READOUT = 'zeus/context_readout'
-    """ContextTruth-typed: the estimate in the context's units (the checkpoint's read-out)."""
-    CONTEXT_NOVELTY = 'zeus/context_novelty'
-    """ContextTruth-typed: names novelty, threshold, novel (1.0 outside the training contexts)."""
-    ACTION = 'zeus/action'
-    CLOCK = '/clock'
-    DIAGNOSTICS = '/diagnostics'
-
-
-def steady_timer(node: Node, period: float, callback: Callable[[], None]) -> Timer:
-    """A timer on the steady clock: it runs before /clock moves, even with use_sim_time."""
-    return node.create_timer(period, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
-
-
-def count_publishers(node: Node, topic: str) -> int:
-    """Publishers on `topic` as this node resolves it (namespace and remaps applied)."""
-    return node.count_publishers(node.resolve_topic_name(topic))
-
-
-def count_subscribers(node: Node, topic: str) -> int:
-    """Subscribers on `topic` as this node resolves it (namespace and remaps applied)."""
-    return node.count_subscribers(node.resolve_topic_name(topic))
-
-
-class WaitReport:
-    """Says what a start-up wait is waiting for, once it has lasted `after` seconds.
-
-    Quiet for a normal start; a wait that never ends (a remapped or missing peer) then names
-    the resolved topic and what is missing, every `every` seconds.
-    """
-
-    def __init__(self, node: Node, after: float = 3.0, every: float = 10.0) -> None:
-        self._node = node
-        self._start = time.monotonic()
-        self._after = after
-        self._every = every
-        self._last = -math.inf
-
-    def waiting(self, what: str) -> None:
-        """Log `what` if this wait has lasted long enough and nothing was said recently."""
-        now = time.monotonic()
-        if now - self._start >= self._after and now - self._last >= self._every:
-            self._last = now
-            self._node.get_logger().warning(
-                f'still waiting after {now - self._start:.0f} s: {what}')
-
-
-def call_when_ready(node: Node, short_of: Callable[[], list[str]], then: Callable[[], None],
-                    timeout: float, timeout_name: str, consequence: str) -> None:
-    """Call `then` once `short_of()` names nothing, or after `timeout` seconds in any case.
-
-    The one start-up gate of the nodes that give the loop its go-ahead by subscribing to the
-    steps (estimator, policy, recorder): polled on the steady clock (no busy wait, runs before
-    /clock moves), quiet for a normal start, then naming what is short (WaitReport); on
-    timeout it warns with the parameter's name and what the late start may cost.
-    """
-    if not short_of():
-        then()
-        return
-    deadline = time.monotonic() + timeout
-    report = WaitReport(node)
-
-    def poll() -> None:
-        short = short_of()
-        if short and time.monotonic() < deadline:
-            report.waiting('; '.join(short))
-            return
-        if short:
-            node.get_logger().warning(f'{timeout_name}: {timeout:g} s passed waiting for '
-                                      f'{"; ".join(short)}; {consequence}')
-        timer.cancel()
-        node.destroy_timer(timer)
-        then()
-
-    timer = steady_timer(node, 0.05, poll)
-
-
-def missing_peers(node: Node, outputs: Sequence[Any], action_sub: Any, min_observers: int,
-                  others: Sequence[Any] = (), named: Sequence[str] = ()) -> list[str]:
-    """What a step producer still waits for before step 0 (empty: start).
-
-    `outputs` are its publishers, the StepFeedback one first, then the observations; `others`
-    its further per-step publishers (true context, /clock), which only need every discovered
-    subscriber matched. Graph counts say who was discovered; the matched counts of our own
-    endpoints say whose data path is ready. Starting before they agree would drop step 0 for a
-    late peer (the estimator would miss it and the policy would act on no context; a recorder
-    would miss it in the bag). `min_observers` names how many step subscribers a launch
-    expects (estimator, policy, recorder, ...), so a peer that is still starting up is waited
-    for rather than missed; a recorder subscribes to the steps last, so once it counts here its
-    other subscriptions are known too. `named` (parameter `observers`) names the nodes that
-    must be among the step subscribers (a launcher's group): a count alone can be met by a
-    bystander (a status line, `ros2 topic echo`) while a node of the group is still starting.
-    Counted on the names as the node resolved them: namespace and remaps applied.
-    """
-    step_pub, observations = outputs[0], outputs[1:]
-    observers = sum(node.count_subscribers(pub.topic_name) for pub in observations)
-    unmatched = [pub.topic_name for pub in (*outputs, *others)
-                 if pub.get_subscription_count() < node.count_subscribers(pub.topic_name)]
-    action_topic = action_sub.topic_name
-    actions = node.count_publishers(action_topic)
-    listening = step_pub.get_subscription_count()
-    missing = []
-    if actions == 0:
-        missing.append(f'a policy publishing on {action_topic}')
-    if observers == 0:
-        missing.append(f'a subscriber of {observations[0].topic_name}')
-    if listening < min_observers:
-        missing.append(f'{min_observers} subscribers of {step_pub.topic_name} (min_observers; '
-                       f'{listening} so far)')
-    named = [name for name in named if name]  # the parameter's empty default: [''] (any)
-    if named:
-        present = {info.node_name
-                   for info in node.get_subscriptions_info_by_topic(step_pub.topic_name)}
-        absent = [name for name in named if name not in present]
-        if absent:
-            missing.append(f'{", ".join(absent)} subscribed to {step_pub.topic_name} '
-                           '(observers)')
-    if unmatched or action_sub.get_publisher_count() < actions:
-        missing.append(f'DDS to match the endpoints of {unmatched or [action_topic]}')
-    return missing
-
-
-def unmatched_readers(node: Node, readers: Sequence[tuple[Any, int]],
-                      sources: Sequence[str] = ()) -> list[str]:
-    """Which of this node's `(subscription, expected publishers)` cannot hear them all yet.
-
-    The start gates above count what the *writer* matched; a reader matches the writer on its
-    own side when its participant processes the writer's announcement, which on a loaded
-    machine can come later, and a volatile reader drops what arrives before that. A node that
-    gives the loop its go-ahead (subscribes to the steps) only once these readers have matched
-    every publisher the graph shows (and at least `expected`) loses nothing at step 0; a
-    reader created after its publishers were discovered matches them at once. With `sources`
-    (topics, relative or absolute: resolved in the node's namespace; the steps, and for a
-    node that acts on them the observations) it is also short while one of them has no
-    publisher discovered: a node that waits for the step source (estimator, policy, recorder,
-    viewer) then subscribes to a source it matches at once.
-    """
-    short = []
-    for reader, expected in readers:
-        needed = max(expected, node.count_publishers(reader.topic_name))
-        matched = reader.get_publisher_count()
-        if matched < needed:
-            short.append(f'{reader.topic_name} ({matched} of {needed} publishers matched)')
-    resolved = [node.resolve_topic_name(topic.lstrip('/')) for topic in sources]
-    unseen = [topic for topic in resolved if node.count_publishers(topic) == 0]
-    if unseen:
-        short.append(f'a publisher of {" and of ".join(unseen)}')
-    return short
-
-
-def step_qos(depth: int = 10) -> QoSProfile:
-    """Reliable keep-last: in lockstep no step may silently vanish (a loss shows as a gap)."""
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE
-    )
-
-
-STEP_BACKLOG = 1000
-"""History depth of a lockstep publisher. A reliable reader that misses messages (a recorder
-starved of CPU on a busy machine: its transport queue overflows) gets them resent when DDS
-notices the loss, which can take a good part of a second; at a few hundred steps/s a history
-of 10 was overwritten by then and the bag had gaps. The recorder's reader history is as deep
-(RECORD_DEPTH). Small messages: a few hundred KiB per topic at most."""
-
-
-def publisher_qos(mode: str) -> QoSProfile:
-    """Step-protocol publishers: reliable, with a STEP_BACKLOG-deep history in lockstep."""
-    return step_qos(STEP_BACKLOG) if mode == 'lockstep' else step_qos()
-
-
-def image_qos(mode: str) -> QoSProfile:
-    """Frames: reliable in lockstep (every step counts); sensor-data (best effort) in realtime."""
-    return step_qos() if mode == 'lockstep' else qos_profile_sensor_data
-
-
-def action_qos(mode: str) -> QoSProfile:
-    """Actions: reliable; in realtime only the newest matters (depth 1, zero-order hold)."""
-    return publisher_qos(mode) if mode == 'lockstep' else step_qos(depth=1)
-
-
-def stamp_from_seconds(seconds: float) -> Time:
-    """Simulation time in seconds as a builtin_interfaces/Time."""
-    nanoseconds = round(seconds * 1e9)
-    return Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
-
-
-def stamp_ns(stamp: Time) -> int:
-    """A builtin_interfaces/Time as integer nanoseconds (a dictionary key that never rounds)."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
-def seconds_from_stamp(stamp: Time) -> float:
-    """A builtin_interfaces/Time as float seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def image_from_array(frame: np.ndarray, stamp: Time, frame_id: str = 'camera') -> Image:
-    """An HxWx3 uint8 frame as an rgb8 Image, copied as bytes (never element by element)."""
-    msg = Image()
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame_id
-    msg.height, msg.width = int(frame.shape[0]), int(frame.shape[1])
-    msg.encoding = 'rgb8'
-    msg.is_bigendian = 0
-    msg.step = msg.width * 3
-    msg.data = np.ascontiguousarray(frame, dtype=np.uint8).tobytes()
-    return msg
-
-
-def array_from_image(msg: Image, expect_shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Decode an rgb8 Image to HxWx3 uint8; raise ValueError saying what is wrong with it."""
-    if msg.encoding != 'rgb8':
-        raise ValueError(f'image encoding is {msg.encoding!r}, expected rgb8')
-    if expect_shape is not None and (msg.height, msg.width) != tuple(expect_shape):
-        raise ValueError(
-            f'image is {msg.height}x{msg.width}, expected {expect_shape[0]}x{expect_shape[1]}'
-        )
-    expected = msg.height * msg.width * 3
-    if msg.step != msg.width * 3 or len(msg.data) != expected:
-        raise ValueError(
-            f'image data has {len(msg.data)} bytes (row step {msg.step}); '
-            f'{msg.height}x{msg.width} rgb8 needs {expected}'
-        )
-    return np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.width, 3)
-
-
-def diagnostics_message(
-    node: Node, name: str, values: dict[str, object], problems: Sequence[str] = (),
-    errors: Sequence[str] = (),
-) -> DiagnosticArray:
-    """One DiagnosticStatus (ERROR with `errors`, WARN with `problems`, else OK) in an array.
-
-    `problems` are faults the node covers and counts; `errors` need someone to act.
-    """
-    status = DiagnosticStatus()
-    status.name = f'{node.get_fully_qualified_name()}: {name}'
-    status.hardware_id = 'zeus_ros'
-    status.level = (DiagnosticStatus.ERROR if errors else
-                    DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
-    status.message = '; '.join([*errors, *problems]) or 'ok'
-    status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
-    array = DiagnosticArray()
-    array.header.stamp = node.get_clock().now().to_msg()
-    array.status = [status]
-    return array
 
 
 class NodeFinished(Exception):  # noqa: N818 - a signal, not an error

@@ -24,8 +24,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from ruamel.yaml import YAML
 
 from zeus_ros.atomic_file import injected_write_fault
-from zeus_ros.offline.data.bag_errors import BagError
-from zeus_ros.offline.data.schema import (
+from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.schema import (
     MSGTYPES,
     OFFERED_QOS,
     TOPIC_ACTION,
@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 
     from rosbags.interfaces import Connection, Qos
 
-    from zeus_ros.offline.data.schema import StepFeedbackFields
+    from zeus_ros.bags.schema import StepFeedbackFields
 
 __all__ = [
     'BAG_VERSION',

@@ -25,7 +25,7 @@ from rosbags.interfaces import (
 )
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from zeus_ros.offline.data.bag_errors import SchemaError
+from zeus_ros.bags.errors import SchemaError
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -93,7 +93,7 @@ def graph_qos(reliability: QosReliability = QosReliability.RELIABLE,
 
 
 OFFERED_QOS: dict[str, tuple[Qos, ...]] = {topic: (graph_qos(),) for topic in MSGTYPES}
-"""What the zeus publishers offer in lockstep mode (reliable, volatile: nodes/common.py
+"""What the zeus publishers offer in lockstep mode (reliable, volatile: nodes/topics.py
 step_qos), one publisher per topic. `zeus collect` bags carry these; the recorder asks the
 graph."""
 

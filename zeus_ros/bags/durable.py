@@ -20,7 +20,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
 from zeus_ros.atomic_file import injected_write_fault, replace_text
-from zeus_ros.offline.data.bag_writer import (
+from zeus_ros.bags.writer import (
     BAG_VERSION,
     ROS_DISTRO,
     QosSource,

@@ -12,14 +12,15 @@ when the copy starts; the run counts as trained once `seconds` is there). Folder
 this file hold marker files instead: `.done_train`, `.done_train_first`, `eval_<split>/.done`,
 each holding wall seconds; they are read as the same state, state.json winning where both say
 something. Writers lock the folder (several evaluations of one run finish in parallel) and
-replace the file atomically. Shell scripts (experiments/run_one.sh, run_queue.sh) use the
-command line:
+replace the file atomically. It sits beside rollout.py, below training/ (which marks runs
+trained) and evaluation/ (which marks splits evaluated and reports finished runs). Shell
+scripts (experiments/run_one.sh, run_queue.sh) use the command line, zeus_ros/cli/run_state.py:
 
-    python -m zeus_ros.offline.training.run_state done RUN [SPLIT ...]   # exit 0: finished
-    python -m zeus_ros.offline.training.run_state seconds RUN            # training seconds
-    python -m zeus_ros.offline.training.run_state mark-trained RUN SECONDS
-    python -m zeus_ros.offline.training.run_state mark-continued RUN EARLIER_SECONDS
-    python -m zeus_ros.offline.training.run_state mark-evaluated RUN SPLIT SECONDS
+    python -m zeus_ros.cli.run_state done RUN [SPLIT ...]   # exit 0: finished
+    python -m zeus_ros.cli.run_state seconds RUN            # training seconds
+    python -m zeus_ros.cli.run_state mark-trained RUN SECONDS
+    python -m zeus_ros.cli.run_state mark-continued RUN EARLIER_SECONDS
+    python -m zeus_ros.cli.run_state mark-evaluated RUN SPLIT SECONDS
 """
 
 from __future__ import annotations
@@ -31,12 +32,11 @@ import fcntl
 import json
 import os
 from pathlib import Path
-import sys
 from typing import Any
 
 from zeus_ros.atomic_file import replace_text
 
-__all__ = ['STATE_FILE', 'RunState', 'RunStateError', 'main', 'mark_continued',
+__all__ = ['STATE_FILE', 'RunState', 'RunStateError', 'mark_continued',
            'mark_evaluated', 'mark_trained', 'read_state']
 
 STATE_FILE = 'state.json'
@@ -142,48 +142,3 @@ def mark_evaluated(folder: Path, split: str, seconds: float) -> None:
     """Record that `split` is evaluated (its results in eval_<split>/), with its wall seconds."""
     _update(folder, lambda data: data.setdefault('eval', {}).update(
         {split: {'seconds': round(seconds, 1)}}))
-
-
-def main(argv: list[str] | None = None) -> int:
-    """The shell scripts' access to a run's state (see the module docstring)."""
-    from zeus_ros.cli_args import ZeusArgumentParser
-
-    parser = ZeusArgumentParser(prog='python -m zeus_ros.offline.training.run_state',
-                                description=__doc__.splitlines()[0])
-    commands = parser.add_subparsers(dest='command', required=True)
-
-    def command(name: str, summary: str, *positionals: str) -> None:
-        sub = commands.add_parser(name, help=summary)
-        sub.add_argument('run', type=Path, metavar='RUN', help='the run folder')
-        for positional in positionals:
-            if positional == 'splits':
-                sub.add_argument('splits', nargs='*', metavar='SPLIT')
-            else:
-                sub.add_argument(positional, type=float if 'seconds' in positional else str)
-
-    command('done', 'exit 0 when RUN is trained and every SPLIT evaluated, else 1', 'splits')
-    command('seconds', "print RUN's training seconds ('' when unknown)")
-    command('mark-trained', 'record that RUN is trained', 'seconds')
-    command('mark-continued', 'record that RUN continues a shorter run', 'earlier_seconds')
-    command('mark-evaluated', 'record that SPLIT of RUN is evaluated', 'split', 'seconds')
-    args = parser.parse_args(argv)
-    try:
-        if args.command == 'done':
-            return 0 if read_state(args.run).done(args.splits) else 1
-        if args.command == 'seconds':
-            seconds = read_state(args.run).train_seconds
-            print('' if seconds is None else f'{seconds:g}')
-        elif args.command == 'mark-trained':
-            mark_trained(args.run, args.seconds)
-        elif args.command == 'mark-continued':
-            mark_continued(args.run, args.earlier_seconds)
-        else:
-            mark_evaluated(args.run, args.split, args.seconds)
-    except RunStateError as error:
-        print(f'{parser.prog}: {error}', file=sys.stderr)
-        return 2
-    return 0
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())

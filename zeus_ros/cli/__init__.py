@@ -1,7 +1,8 @@
 """The `zeus` command: one entry point for the record -> retrain -> redeploy loop.
 
-Each subcommand lives in its own module with a `main(argv) -> int`; this file only dispatches,
-so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
+Each subcommand lives in its own module with a `main(argv) -> int` (the command line of a
+library function: zeus_ros/cli/<command>.py where it has moved here already); this file only
+dispatches, so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
 """
 
 from __future__ import annotations
@@ -10,23 +11,23 @@ import importlib
 import sys
 
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    'collect': ('zeus_ros.offline.training.collect',
+    'collect': ('zeus_ros.cli.collect',
                 'run a task in-process and write bags (no ROS)'),
-    'ingest': ('zeus_ros.offline.data.ingest',
+    'ingest': ('zeus_ros.cli.ingest',
                'read bags as training does; report what they hold'),
-    'train': ('zeus_ros.offline.training.train', 'train a checkpoint from bags'),
-    'eval': ('zeus_ros.offline.evaluation.evaluate', 'evaluate checkpoints in-process (+ tables)'),
-    'adaptation': ('zeus_ros.offline.evaluation.adaptation',
+    'train': ('zeus_ros.cli.train', 'train a checkpoint from bags'),
+    'eval': ('zeus_ros.cli.evaluate', 'evaluate checkpoints in-process (+ tables)'),
+    'adaptation': ('zeus_ros.cli.adaptation',
                    "a checkpoint's value of adaptation next to the zoo's"),
-    'report': ('zeus_ros.offline.evaluation.report', 'mean ± s.e. over seeds of evaluations'),
-    'export': ('zeus_ros.offline.evaluation.export', 'small deployment checkpoint + card'),
+    'report': ('zeus_ros.cli.report', 'mean ± s.e. over seeds of evaluations'),
+    'export': ('zeus_ros.cli.export', 'small deployment checkpoint + card'),
     'distill': ('zeus_ros.offline.training.distill',
                 'a pixel student from a state teacher (DAgger rounds, no RL)'),
-    'loop': ('zeus_ros.offline.training.loop', 'random collection -> train -> collect -> retrain'),
-    'sweep': ('zeus_ros.offline.training.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
+    'loop': ('zeus_ros.cli.loop', 'random collection -> train -> collect -> retrain'),
+    'sweep': ('zeus_ros.cli.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
     'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
     'inspect': ('zeus_ros.inspector', 'live view of the context topics (subscribe only)'),
-    'recover': ('zeus_ros.offline.data.recover', 'restore a bag cut off by a crash'),
+    'recover': ('zeus_ros.cli.recover', 'restore a bag cut off by a crash'),
     'demo': ('zeus_ros.demo', 'the live demo of the README'),
 }
 
@@ -52,6 +53,3 @@ def main(argv: list[str] | None = None) -> int:
     module = importlib.import_module(SUBCOMMANDS[name][0])
     return int(module.main(rest) or 0)
 
-
-if __name__ == '__main__':
-    raise SystemExit(main())

@@ -1,20 +1,21 @@
-"""`zeus collect`: run a scheduled task in-process (no ROS) and write bags like the recorder.
+"""Rollouts in-process: the twin of the live loop that collection, evaluation and training share.
 
-The bag holds exactly what the live nodes publish for each control step (same topics, types,
-header stamps = simulation time, step indices), so training cannot tell the two apart.
+A policy answers each control step as the context_estimator + policy nodes would
+(`random_policy`, `AgentPolicy`); `collect` writes the steps to a bag exactly as the recorder
+does (same topics, types, header stamps = simulation time, step indices), so training cannot
+tell the two apart; `run_steps` keeps them in memory as a `Trace` for evaluation.
+It sits below offline/training and offline/evaluation and above the bag format.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections import deque
 from collections.abc import Callable
 import contextlib
 from dataclasses import dataclass
+import itertools
 from pathlib import Path
 import shutil
-import signal
-import sys
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -22,15 +23,15 @@ import numpy as np
 from tqdm import tqdm
 import yaml
 
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
-from zeus_ros.offline.data.bag_writer import SimStep, StepBagWriter
-from zeus_ros.offline.data.schema import StepFeedbackFields, ns_from_sim_time
+from zeus_ros.bags.schema import StepFeedbackFields, ns_from_sim_time
+from zeus_ros.bags.writer import SimStep, StepBagWriter
 
 if TYPE_CHECKING:
     from zeus_ros.learning.inference import InferenceAgent
 
-__all__ = ['AgentPolicy', 'CollectStats', 'Policy', 'PolicyDecision', 'collect', 'main',
-           'next_bag_path', 'parse_schedule', 'random_policy']
+__all__ = ['DEFAULT_SCHEDULE', 'SCHEDULE_HELP', 'AgentPolicy', 'CollectDiskFull', 'CollectStats',
+           'Policy', 'PolicyDecision', 'Trace', 'collect', 'disk_full_line', 'next_bag_path',
+           'parse_schedule', 'random_policy', 'record_step', 'run_steps']
 
 DEFAULT_SCHEDULE = 'switch:train:every_episodes=1'
 """What `zeus loop` and `zeus sweep` collect with unless told: one train value per episode, in
@@ -79,7 +80,10 @@ Policy = Callable[[Any, SimStep], PolicyDecision]
 
 
 def parse_schedule(text: str) -> dict[str, Any]:
-    """A schedule config dict from a YAML file path or the inline form (see SCHEDULE_HELP)."""
+    """A schedule config dict from a YAML file path or the inline form.
+
+    The forms are listed in SCHEDULE_HELP (`zeus collect --help` prints it).
+    """
     path = Path(text)
     if path.suffix in {'.yaml', '.yml'} or path.is_file():
         if not path.is_file():
@@ -127,7 +131,7 @@ def disk_full_line(error: BaseException, bag: Path, writer: StepBagWriter | None
     The space needed is what the steps written so far took, scaled to all `steps`.
     """
     from zeus_ros.atomic_file import disk_full, free_space, size_text
-    from zeus_ros.offline.data.schema import TOPIC_STEP
+    from zeus_ros.bags.schema import TOPIC_STEP
 
     if disk_full(error) is None:
         return None
@@ -166,7 +170,7 @@ class _LogClock:
         return self.last
 
 
-def _record(es: Any, task: Any, pixels: bool) -> SimStep:
+def record_step(es: Any, task: Any, pixels: bool) -> SimStep:
     """The SimStep the sim_bridge node publishes for one EnvStep."""
     obs = es.observation
     applied = es.applied_action
@@ -212,7 +216,7 @@ def collect(
     es = env.reset()
     with tqdm(total=steps, disable=not progress, unit='step', desc='collect') as bar:
         for n in range(steps):
-            rec = _record(es, task, writer.pixels)
+            rec = record_step(es, task, writer.pixels)
             log = clock(rec.stamp_ns)
             writer.write_step(rec, log_ns=log)
             episodes += int(rec.feedback.first)
@@ -349,139 +353,56 @@ class AgentPolicy:
         return steps < self.blind_steps
 
 
-def _build_parser() -> argparse.ArgumentParser:
-    parser = ZeusArgumentParser(
-        prog='zeus collect',
-        description='Run a task with a context schedule in-process and write a rosbag2 bag '
-        'with the topics and stamps the live nodes publish (no ROS needed).',
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=SCHEDULE_HELP,
-    )
-    parser.add_argument('--task', '--task-file', required=True, type=task_name, help=TASK_HELP)
-    parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
-    parser.add_argument('--steps', type=at_least(1), required=True, help='control steps to record')
-    parser.add_argument('--seed', type=at_least(0), default=0,
-                        help='seeds task, schedule and policy')
-    parser.add_argument('--out', type=Path, required=True, help='directory for the bag(s)')
-    parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
-    parser.add_argument('--pixels', action='store_true', help='also record 84x84 rgb8 frames')
-    parser.add_argument('--checkpoint', type=Path, help='act with this agent, not at random')
-    parser.add_argument('--noise', type=at_least(0.0, float), default=0.0,
-                        help='Gaussian exploration noise for --checkpoint, as a fraction of '
-                        'half the action range (actions are clipped to the bounds)')
-    parser.add_argument('--context-lag', type=at_least(0), default=0,
-                        help="act on step k with the context of step k - L, as the policy "
-                        "node's context_lag parameter does, within its limit (default: 0)")
-    parser.add_argument('--append', action='store_true',
-                        help='add a new bag next to the bags already in --out')
-    parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
-    parser.add_argument('--workers', type=at_least(1), default=1,
-                        help='simulators at once, each writing its own bag of --steps/N steps '
-                        'with a seed derived from --seed (default: 1)')
-    parser.add_argument('--ray', action='store_true',
-                        help='run the workers as Ray tasks (RAY_ADDRESS: on that cluster, '
-                        '--out shared), not as local processes')
-    return parser
+@dataclass(frozen=True)
+class Trace:
+    """Per-observation record of a run; reward[i] was earned by the action at i - 1."""
+
+    reward: np.ndarray
+    first: np.ndarray
+    context: np.ndarray
+    segment: np.ndarray
+    psi: np.ndarray | None
+    history_length: np.ndarray
+    obs: np.ndarray
+    action: np.ndarray
+
+    def episode_returns(self) -> list[float]:
+        """Return of every complete or partial episode (rewards after each start)."""
+        starts = [*list(np.flatnonzero(self.first)), len(self.reward)]
+        return [float(self.reward[a + 1:b].sum()) for a, b in itertools.pairwise(starts)]
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus collect`; returns the process exit code."""
-    args = _build_parser().parse_args(argv)
-    if args.steps < 1:
-        print(f'zeus collect: --steps must be >= 1, got {args.steps}', file=sys.stderr)
-        return 2
-    if args.context_lag:
-        from zeus_ros.learning.inference import MAX_CONTEXT_LAG  # torch: only with a lag
+def run_steps(env: Any, task: Any, policy: Policy, steps: int, *, desc: str = '',
+              progress: bool = True, bar: tqdm | None = None) -> Trace:
+    """Drive `env` for `steps` observations with `policy`, as `collect` does.
 
-        if not 0 <= args.context_lag <= MAX_CONTEXT_LAG:
-            print(f'zeus collect: --context-lag must be between 0 and {MAX_CONTEXT_LAG} (the '
-                  f"policy node's limit), got {args.context_lag}", file=sys.stderr)
-            return 2
-    if not 1 <= args.workers <= args.steps:
-        print(f'zeus collect: --workers must be between 1 and --steps ({args.steps}), got '
-              f'{args.workers}', file=sys.stderr)
-        return 2
-    try:
-        schedule_config = parse_schedule(args.schedule)
-        bag = next_bag_path(args.out, append=args.append)
-    except (ValueError, FileExistsError) as exc:
-        print(f'zeus collect: {exc}', file=sys.stderr)
-        return 2
-    from sim_bridge.env import ScheduledEnv
-    from sim_bridge.registry import make_task
-    from sim_bridge.schedules import schedule_from_config
-    from zeus_ros.learning.errors import CheckpointError
-
-    try:
-        task = make_task(args.task, seed=args.seed)
-    except (KeyError, ValueError) as exc:
-        print(f'zeus collect: --task {args.task}: {exc}', file=sys.stderr)
-        return 2
-    try:
-        schedule = schedule_from_config(schedule_config, task, args.seed)
-    except (KeyError, TypeError, ValueError) as exc:
-        task.close()
-        print(f'zeus collect: --schedule {args.schedule}: {exc}', file=sys.stderr)
-        return 2
-    env = ScheduledEnv(task, schedule)
-    policy = random_policy(task, args.seed)
-    if args.checkpoint is not None:
-        import torch
-
-        from zeus_ros.learning.inference import InferenceAgent
-
-        # One thread, as the policy and estimator nodes run: the same float results (a live
-        # recording and a collection of the same schedule ingest to identical arrays).
-        torch.set_num_threads(1)
-        try:
-            agent = InferenceAgent.from_checkpoint(args.checkpoint, expect_task=task.name,
-                                                   reuse_features=True)  # as the nodes do
-        except CheckpointError as exc:
-            task.close()
-            print(f'zeus collect: --checkpoint: {exc}', file=sys.stderr)
-            return 2
-        if agent.obs_kind == 'pixels' and not args.pixels:
-            task.close()
-            print(f'zeus collect: {args.checkpoint} is a pixel agent; add --pixels',
-                  file=sys.stderr)
-            return 2
-        policy = AgentPolicy(agent, noise=args.noise, seed=args.seed,
-                             context_lag=args.context_lag)
-    if args.workers > 1 or args.ray:  # checked above, collected by the workers
-        task.close()
-        from zeus_ros.offline.training.collect_workers import main_workers
-
-        before = set(args.out.glob('bag_*'))
-        try:
-            return main_workers(args, schedule_config, bag)
-        except CollectDiskFull as full:  # every bag of this run goes: none is whole
-            for new in set(args.out.glob('bag_*')) - before:
-                shutil.rmtree(new, ignore_errors=True)
-            print(f'zeus collect: {full}; so is every other bag of this run', file=sys.stderr)
-            return 2
-    # SIGTERM ends the run like Ctrl-C, so the bag is still finalized and readable.
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
-    writer: StepBagWriter | None = None
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-        with StepBagWriter(bag, storage=args.storage, pixels=args.pixels) as writer:
-            stats = collect(env, task, policy, writer, args.steps, progress=not args.no_progress)
-    except KeyboardInterrupt:
-        print(f'zeus collect: interrupted; the steps written so far are in {bag}',
-              file=sys.stderr)
-        return 130
-    except Exception as error:  # a full disk is one line; anything else is a bug: traceback
-        line = disk_full_line(error, bag, writer, args.steps)
-        if line is None:
-            raise
-        print(f'zeus collect: {line}', file=sys.stderr)
-        return 2
-    finally:
-        task.close()
-    print(f'wrote {stats.steps} steps ({stats.episodes} episode starts) to {stats.bag} in '
-          f'{stats.seconds:.1f} s ({stats.steps_per_s:.0f} steps/s)')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
+    `bar`: a progress bar of a longer phase to advance instead of a bar of its own.
+    """
+    cols: dict[str, list[Any]] = {k: [] for k in ('reward', 'first', 'context', 'segment',
+                                                   'psi', 'hist', 'obs', 'action')}
+    es = env.reset()
+    names = task.context_names
+    own = bar is None
+    bar = tqdm(total=steps, desc=desc, unit='step', disable=not progress, leave=False) \
+        if own else bar
+    for n in range(steps):
+        bar.update()
+        rec = record_step(es, task, pixels=getattr(policy, 'frames', None) is not None)
+        out = policy(es, rec)
+        obs = es.observation
+        cols['reward'].append(0.0 if obs.first else float(obs.reward))
+        cols['first'].append(bool(obs.first))
+        cols['context'].append([obs.context[name] for name in names])
+        cols['segment'].append(int(es.segment))
+        cols['psi'].append(out.context)
+        cols['hist'].append(out.history_length)
+        cols['obs'].append(np.asarray(obs.state, np.float32))
+        cols['action'].append(np.asarray(out.action, np.float32))
+        if n < steps - 1:
+            es = env.step(out.action)
+    if own:
+        bar.close()
+    psi = None if any(p is None for p in cols['psi']) else np.stack(cols['psi'])
+    return Trace(np.asarray(cols['reward']), np.asarray(cols['first']),
+                 np.asarray(cols['context'], float), np.asarray(cols['segment']), psi,
+                 np.asarray(cols['hist']), np.stack(cols['obs']), np.stack(cols['action']))

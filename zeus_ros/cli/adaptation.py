@@ -1,0 +1,62 @@
+"""`zeus adaptation`: the command line of the value-of-adaptation check (adaptation.py)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+
+from zeus_ros.offline.evaluation import adaptation
+from zeus_ros.offline.evaluation.adaptation import EVAL_SEED, format_reports, measure_adaptation
+
+__all__ = ['main']
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus adaptation`."""
+    from zeus_ros.cli_args import ZeusArgumentParser, at_least
+
+    parser = ZeusArgumentParser(prog='zeus adaptation', description=adaptation.__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--checkpoint', type=Path, required=True, help='your checkpoint')
+    parser.add_argument('--against', default='zoo',
+                        help="'zoo' (the family's zoo checkpoint, default), 'none', or a file")
+    parser.add_argument('--episodes', type=at_least(1), default=3,
+                        help='episodes per context value')
+    parser.add_argument('--seed', type=at_least(0), default=EVAL_SEED, help='evaluation seed')
+    parser.add_argument('--no-progress', action='store_true')
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f'--episodes {args.episodes}: give at least 1')
+    from zeus_ros.learning.errors import CheckpointError
+
+    try:
+        mine = measure_adaptation(args.checkpoint, episodes=args.episodes, seed=args.seed,
+                                  progress=not args.no_progress)
+        reports = [('yours', mine)]
+        other = None
+        if args.against == 'zoo':
+            from zeus_ros.launch_defaults import zoo_checkpoint
+
+            try:
+                other = zoo_checkpoint(mine.task)
+            except ValueError as error:
+                print(f'zeus adaptation: no comparison: {error}', file=sys.stderr)
+        elif args.against != 'none':
+            other = Path(args.against)
+        if other is not None:
+            reports.append(('zoo' if args.against == 'zoo' else str(other),
+                            measure_adaptation(other, episodes=args.episodes, seed=args.seed,
+                                               progress=not args.no_progress)))
+    except (CheckpointError, ValueError, FileNotFoundError) as error:
+        print(f'zeus adaptation: {error}', file=sys.stderr)
+        return 2
+    print(f'{mine.task}: {args.episodes} episode(s) per value, evaluation seed {args.seed}; '
+          'mean ± s.e. over the context values; adaptation = live - frozen at the training-mean '
+          'context, paired')
+    print(format_reports(reports))
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
