@@ -180,14 +180,14 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     psi; pixel agents would render every step).
     """
     from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
-    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.learning.methods import method_objective
 
     if summaries is None:
         summaries = {} if evals is None else find_evaluations(checkpoint, evals)
     export_for_deployment(checkpoint, out)
     loaded = load_checkpoint(out)
     if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
-            method_spec(loaded.config.method).context_source == 'psi':
+            method_objective(loaded.config.method).context_source == 'psi':
         from zeus_ros.learning.inference import InferenceAgent
         from zeus_ros.learning.readout import store_readout
         from zeus_ros.offline.evaluation.calibrate import calibrate_readout
