@@ -40,7 +40,7 @@ CONTEXT_OPTIONS = ('context_norm', 'context_norm_momentum', 'context_input_init'
                    'context_noise', 'context_noise_steps')
 """Options read by every method whose policy sees a context (learned or true)."""
 
-LEARNED_CONTEXT_OPTIONS = (*CONTEXT_OPTIONS, 'aggregation', 'transition_dim',
+LEARNED_CONTEXT_OPTIONS = (*CONTEXT_OPTIONS, 'k', 'aggregation', 'transition_dim',
                            'context_hidden_dim', 'context_head', 'context_code_norm',
                            'context_lr', 'critic_context_grad', 'context_target_tau',
                            'context_consistency')
