@@ -95,9 +95,9 @@ def choose_seed(prefix: Path) -> tuple[Path, dict[int, float]]:
 def learned_context(path: Path) -> bool:
     """True when the checkpoint infers its context (psi), so it gets a read-out."""
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.learning.methods import method_objective
 
-    return method_spec(InferenceAgent.from_checkpoint(path).method).context_source == 'psi'
+    return method_objective(InferenceAgent.from_checkpoint(path).method).context_source == 'psi'
 
 
 def prepare(target: Path) -> None:

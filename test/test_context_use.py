@@ -13,9 +13,9 @@ from zeus_ros.learning.config import LEGACY_CONFIG, config_from_dict, upgrade_st
 from zeus_ros.learning.context import ContextNormalizer
 from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.inference import InferenceAgent
-from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
+from zeus_ros.learning.methods import METHOD_REGISTRY, method_objective
 from zeus_ros.learning.models import RewardModel, TransitionModel
-from zeus_ros.learning.representation import context_loss, representation_losses
+from zeus_ros.learning.representation import context_loss
 from zeus_ros.learning.synthetic import SyntheticSystem
 from zeus_ros.offline.evaluation.diagnostics import (
     context_sensitivity,
@@ -41,7 +41,7 @@ def _config(method: str, **changes: object) -> ZeusConfig:
 @pytest.mark.parametrize('name', list(METHOD_REGISTRY))
 def test_registry_entry_decides_what_the_agent_builds(name: str) -> None:
     """The context encoder exists iff the context is learned; declared models; one normaliser."""
-    spec = method_spec(name)
+    spec = method_objective(name)
     agent = make_agent(_config(name, context_norm='running'), SyntheticSystem(k=3).spec())
     assert ('psi' in agent.modules) == (spec.context_source == 'psi')
     for model in ('transition', 'reward', 'backward'):
@@ -54,7 +54,7 @@ def test_registry_entry_decides_what_the_agent_builds(name: str) -> None:
 def test_unknown_method_lists_the_registry() -> None:
     """A typo names every method."""
     with pytest.raises(ValueError, match='oracle_sac'):
-        method_spec('oracel')
+        method_objective('oracel')
     with pytest.raises(ConfigError, match='oracle_sac'):
         _config('oracel')
 
@@ -271,7 +271,7 @@ def test_psi_target_trails_psi_and_feeds_the_td_target() -> None:
     for old, new, online in zip(before, target.parameters(), psi.parameters(), strict=True):
         torch.testing.assert_close(new, 0.5 * old + 0.5 * online.detach())
     metrics: dict[str, torch.Tensor] = {}
-    losses = representation_losses(agent, batch, pair, metrics)
+    losses = agent.objective.losses(agent, batch, pair, metrics)
     history, (feat, next_feat) = agent.history_features(
         batch.hist_obs, batch.hist_action, batch.hist_reward, batch.hist_next_obs,
         batch.hist_mask, batch.obs, batch.next_obs)

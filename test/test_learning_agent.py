@@ -215,7 +215,6 @@ def test_observation_model_target_predicts_the_state_change(method: str) -> None
     the target is the normalised state change, not phi(o').
     """
     from zeus_ros.learning.models import gaussian_nll
-    from zeus_ros.learning.representation import representation_losses
 
     system = SyntheticSystem(k=3)
     agent = make_agent(_config(method, model_target='observation'), system.spec())
@@ -229,7 +228,7 @@ def test_observation_model_target_predicts_the_state_change(method: str) -> None
     batch = system.sample(8)
     metrics = {}
     with torch.no_grad():
-        representation_losses(agent, batch, system.sample(8), metrics)
+        agent.objective.losses(agent, batch, system.sample(8), metrics)
         m = agent.modules
         feat = m['encoder'](batch.obs)
         action = agent.normalize_action(batch.action)

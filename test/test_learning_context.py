@@ -8,7 +8,7 @@ import torch
 from zeus_ros.learning import AGGREGATIONS, ZeusConfig, make_agent
 from zeus_ros.learning.context import ContextEncoder, HistoryFeatures, aggregate
 from zeus_ros.learning.models import RewardModel, TransitionModel
-from zeus_ros.learning.representation import context_loss, representation_losses
+from zeus_ros.learning.representation import context_loss
 from zeus_ros.learning.synthetic import SyntheticSystem
 
 torch.set_num_threads(1)
@@ -170,7 +170,7 @@ def test_dynamics_target_gets_no_gradient() -> None:
     batch = system.sample(8)
     batch.next_obs.requires_grad_(True)
     batch.obs.requires_grad_(True)
-    losses = representation_losses(agent, batch, None, {})
+    losses = agent.objective.losses(agent, batch, None, {})
     losses.total.backward()
     assert batch.next_obs.grad is None or batch.next_obs.grad.abs().sum() == 0
     assert batch.obs.grad is not None and batch.obs.grad.abs().sum() > 0
@@ -181,7 +181,7 @@ def test_representation_step_trains_t_r_only_through_model_losses() -> None:
     system, agent = _tiny_zeus()
     batch, pair = system.sample(8), system.sample(8)
     metrics: dict[str, torch.Tensor] = {}
-    representation_losses(agent, batch, pair, metrics)
+    agent.objective.losses(agent, batch, pair, metrics)
     metrics['loss/context'].backward()
     for name in ('transition', 'reward'):
         assert all(p.grad is None for p in agent.modules[name].parameters())
@@ -195,16 +195,16 @@ def test_models_predict_the_sampled_transition_ahead() -> None:
     batch = system.sample(16)
     torch.manual_seed(0)
     plain: dict[str, torch.Tensor] = {}
-    representation_losses(agent, batch, None, plain)
+    agent.objective.losses(agent, batch, None, plain)
     batch.model_obs, batch.model_action = batch.obs, batch.action
     batch.model_reward, batch.model_next_obs = batch.reward, batch.next_obs
     same: dict[str, torch.Tensor] = {}
-    representation_losses(agent, batch, None, same)
+    agent.objective.losses(agent, batch, None, same)
     assert torch.allclose(same['loss/reward'], plain['loss/reward'])
     assert torch.allclose(same['loss/dynamics'], plain['loss/dynamics'])
     batch.model_reward = batch.reward + 10.0
     moved: dict[str, torch.Tensor] = {}
-    representation_losses(agent, batch, None, moved)
+    agent.objective.losses(agent, batch, None, moved)
     assert moved['loss/reward'] > plain['loss/reward'] + 50.0
     assert torch.allclose(moved['loss/dynamics'], plain['loss/dynamics'])
 

@@ -270,14 +270,14 @@ def with_readout(checkpoint: Path, out: Path, steps: int = 1000) -> Path:
     contexts (never on the demo's own run).
     """
     from zeus_ros.learning.inference import InferenceAgent
-    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.learning.methods import method_objective
     from zeus_ros.learning.readout import readout_from_checkpoint_bytes, store_readout
     from zeus_ros.offline.evaluation.calibrate import calibrate_readout
 
     if readout_from_checkpoint_bytes(checkpoint.read_bytes()) is not None:
         return checkpoint
     agent = InferenceAgent.from_checkpoint(checkpoint)
-    if agent.obs_kind != 'state' or method_spec(agent.method).context_source != 'psi':
+    if agent.obs_kind != 'state' or method_objective(agent.method).context_source != 'psi':
         return checkpoint
     print(f'[demo] calibrating a context read-out for {checkpoint.name} on {steps} steps of its '
           'train contexts (psi -> context units) ...', flush=True)

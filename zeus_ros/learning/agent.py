@@ -1,7 +1,8 @@
 """The agent: owns the networks, optimizers and target nets of every method, and updates them.
 
-What each method builds and where its context comes from is the registry (methods.py). Who
-trains what (one place to read it):
+What each method builds, where its context comes from and what its representation losses are
+is its objective (learning/objectives/, named in the registry methods.py); the agent asks it,
+never the method's name. Who trains what (one place to read it):
 - phi is trained by the critic loss (SAC-AE), by the representation losses of the method (eq. 1
   for ZeUS: gradients reach phi through phi(o_t) and through the history features), and for
   pixels by the SAC-AE autoencoder loss. Dynamics targets phi(o') are always stopped.
@@ -36,9 +37,8 @@ from zeus_ros.learning.batch import HistoryBatch
 from zeus_ros.learning.config import ZeusConfig, resolve_config
 from zeus_ros.learning.context import ContextEncoder, ContextNormalizer, HistoryFeatures
 from zeus_ros.learning.encoders import PixelDecoder, PixelEncoder, StateEncoder
-from zeus_ros.learning.methods import METHOD_REGISTRY, method_spec
+from zeus_ros.learning.methods import METHOD_REGISTRY, method_objective
 from zeus_ros.learning.models import RewardModel, TransitionModel
-from zeus_ros.learning.representation import representation_losses
 from zeus_ros.learning.sac import Actor, Critic, squashed_sample
 from zeus_ros.learning.spec import AgentSpec
 from zeus_ros.learning.utils import (
@@ -50,8 +50,8 @@ from zeus_ros.learning.utils import (
 
 __all__ = ['PSI_METHODS', 'ZeusAgent', 'make_agent']
 
-PSI_METHODS = frozenset(name for name, spec in METHOD_REGISTRY.items()
-                        if spec.context_source == 'psi')
+PSI_METHODS = frozenset(name for name, objective in METHOD_REGISTRY.items()
+                        if objective.context_source == 'psi')
 """Methods whose context comes from the learned encoder psi(H)."""
 
 
@@ -89,18 +89,11 @@ class ZeusAgent:
         self.config = config
         self.spec = spec
         self.method = config.method
-        self.method_spec = method_spec(config.method)
+        self.objective = method_objective(config.method)
         self.device = resolve_device(config.device) if device is None else torch.device(device)
         cfg, a_dim = config, spec.action_dim
-        source = self.method_spec.context_source
-        if source == 'none':
-            self.context_dim = 0
-        elif source == 'true' or self.method == 'up_osi':
-            if spec.num_context_params == 0:
-                raise ValueError(f'method {self.method!r} needs named context parameters')
-            self.context_dim = spec.num_context_params
-        else:
-            self.context_dim = cfg.context_dim
+        source = self.objective.context_source
+        self.context_dim = self.objective.context_dim(cfg, spec)
         low = torch.tensor(spec.action_low, dtype=torch.float32)
         high = torch.tensor(spec.action_high, dtype=torch.float32)
         self._action_scale = ((high - low) / 2).to(self.device)
@@ -122,7 +115,7 @@ class ZeusAgent:
                 cfg.transition_dim, cfg.context_hidden_dim, cfg.context_head,
                 cfg.context_code_norm)
         target_dim = spec.obs_shape[0] if cfg.model_target == 'observation' else None
-        for name in self.method_spec.models:
+        for name in self.objective.models:
             if name == 'reward':
                 self.modules[name] = RewardModel(cfg.feature_dim, a_dim, self.context_dim,
                                                  cfg.model_hidden_dim)
@@ -144,7 +137,7 @@ class ZeusAgent:
         if cfg.context_norm != 'none' and self.context_dim > 0:
             noise_scale = None
             if cfg.context_norm == 'reliability':  # the true context has no estimation noise
-                noise_scale = 0.0 if self.method_spec.context_source == 'true' else cfg.k / 2
+                noise_scale = 0.0 if source == 'true' else cfg.k / 2
             self.modules['context_norm'] = ContextNormalizer(
                 self.context_dim, cfg.context_norm_momentum, noise_scale=noise_scale)
         self.modules['encoder_target'] = copy.deepcopy(self.modules['encoder'])
@@ -191,26 +184,19 @@ class ZeusAgent:
     def has_representation_step(self) -> bool:
         """Whether update() runs a representation step (psi, models or pixel autoencoder)."""
         return ('psi' in self.modules or 'decoder' in self.modules
-                or bool(self.method_spec.models))
+                or bool(self.objective.models))
 
     @property
     def alpha(self) -> torch.Tensor:
         """Current SAC temperature."""
         return self.log_alpha.exp()
 
-    @property
-    def up_osi_warmup_updates(self) -> int:
-        """UP-OSI: updates during which the policy is conditioned on the true context."""
-        return int(self.config.up_osi_warmup_fraction * self.config.num_updates)
-
     def uses_true_context(self, step: int) -> bool:
         """Whether the policy is conditioned on the true context at this update (collectors too).
 
-        True for `oracle` always and for `up_osi` during its warm-up (the paper follows UP-OSI:
-        first condition the universal policy on the true parameters, then on the inferred ones).
+        The objective decides: always for the oracles, during its warm-up for UP-OSI.
         """
-        return self.method_spec.context_source == 'true' or (
-            self.method == 'up_osi' and step < self.up_osi_warmup_updates)
+        return self.objective.uses_true_context(self.config, step)
 
     def representation_frozen(self, step: int) -> bool:
         """Whether phi, psi and models are frozen at this update (representation_frozen_from)."""
@@ -335,10 +321,10 @@ class ZeusAgent:
                                'optimizers to train it')
         self._check_batch(batch, 'batch')
         batch = batch.to(self.device)
-        needs_pair = self.method_spec.context_loss and self.config.alpha_psi > 0
+        needs_pair = self.objective.needs_pair(self.config)
         if needs_pair:
             if pair is None:
-                raise ValueError('method zeus needs a pair batch for the context loss')
+                raise ValueError(f'method {self.method} needs a pair batch for the context loss')
             self._check_batch(pair, 'pair')
             if pair.batch_size != batch.batch_size:
                 raise ValueError(f'pair batch size {pair.batch_size} != batch size '
@@ -373,11 +359,11 @@ class ZeusAgent:
         context = next_context = None
         if self.has_representation_step and self.representation_frozen(step):
             with torch.no_grad():  # the same contexts and logged losses, nothing trained
-                losses = representation_losses(self, batch, pair, metrics)
+                losses = self.objective.losses(self, batch, pair, metrics)
             metrics['loss/representation'] = losses.total
             context, next_context = losses.context, losses.next_context
         elif self.has_representation_step:
-            losses = representation_losses(self, batch, pair, metrics)
+            losses = self.objective.losses(self, batch, pair, metrics)
             names = [name for name in ('encoder', 'decoder', 'psi', 'model')
                      if name in self.optimizers]
             for name in names:
@@ -470,7 +456,7 @@ class ZeusAgent:
     def encode_context(self, hist_obs: Any, hist_action: Any, hist_reward: Any,
                        hist_next_obs: Any, hist_mask: Any) -> torch.Tensor:
         """psi(H) for batched (B, k, ...) or single (k, ...) histories; (B, C) or (C,)."""
-        if self.method_spec.context_source == 'true':
+        if self.objective.context_source == 'true':
             raise ValueError(f'method {self.method} has no context encoder: it uses the true '
                              'context')
         mask = self._as_tensor(hist_mask).bool()

@@ -14,8 +14,9 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.learning.context import AGGREGATIONS, CONTEXT_HEADS
 from zeus_ros.learning.errors import ConfigError
-from zeus_ros.learning.methods import METHODS
+from zeus_ros.learning.methods import METHOD_REGISTRY, METHODS, method_objective
 
 __all__ = [
     'AGGREGATIONS',
@@ -51,10 +52,6 @@ LEGACY_CONFIG: dict[str, Any] = {'context_norm': 'none', 'context_loss': 'paper'
 """Values of the fields added with the method registry, for checkpoints written before them
 (whose 'oracle' was plain SAC on the true context, now 'oracle_sac')."""
 
-AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
-"""Operators that combine the k per-transition encodings of psi."""
-CONTEXT_HEADS = ('linear', 'mlp')
-"""What maps psi's aggregated transition codes to the context (context.ContextEncoder)."""
 
 
 
@@ -238,7 +235,7 @@ class ZeusConfig:
 
     def __post_init__(self) -> None:
         """Reject bad values early, naming the field."""
-        _check_choice('method', self.method, METHODS)
+        _check_choice('method', self.method, tuple(METHOD_REGISTRY))
         _check_choice('obs_kind', self.obs_kind, ('state', 'pixels'))
         _check_choice('aggregation', self.aggregation, AGGREGATIONS)
         _check_choice('dynamics_loss', self.dynamics_loss, ('gaussian_nll', 'mse'))
@@ -424,6 +421,6 @@ def resolve_config(config: ZeusConfig, task: str) -> ZeusConfig:
             defaults = DEFAULT_TRAINING  # beta1 of every dynamics family in the paper
         alpha_psi = defaults['alpha_psi'] if alpha_psi == 'auto' else alpha_psi
         beta1 = defaults['adam_beta1'] if beta1 == 'auto' else beta1
-    if config.method == 'zeus_no_context_loss':
-        alpha_psi = 0.0
-    return config.replace(alpha_psi=float(alpha_psi), adam_beta1=float(beta1))
+    pinned = method_objective(config.method).fixed  # e.g. the ablation's alpha_psi = 0
+    return config.replace(**{'alpha_psi': float(alpha_psi), 'adam_beta1': float(beta1),
+                             **pinned})

@@ -15,10 +15,15 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from zeus_ros.learning.config import AGGREGATIONS, CONTEXT_HEADS
 from zeus_ros.learning.utils import mlp
 
-__all__ = ['ContextEncoder', 'ContextNormalizer', 'HistoryFeatures', 'aggregate']
+__all__ = ['AGGREGATIONS', 'CONTEXT_HEADS', 'ContextEncoder', 'ContextNormalizer',
+           'HistoryFeatures', 'aggregate']
+
+AGGREGATIONS = ('sum', 'mean', 'concat', 'product', 'min', 'max')
+"""Operators that combine the k per-transition encodings of psi."""
+CONTEXT_HEADS = ('linear', 'mlp')
+"""What maps psi's aggregated transition codes to the context (ContextEncoder)."""
 
 
 @dataclass(slots=True)

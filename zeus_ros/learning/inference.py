@@ -197,7 +197,7 @@ class InferenceAgent:
     @property
     def needs_true_context(self) -> bool:
         """True for oracle: `context()` then requires the true context."""
-        return self.agent.method_spec.context_source == 'true'
+        return self.agent.objective.context_source == 'true'
 
     @property
     def obs_kind(self) -> str:

@@ -1,60 +1,41 @@
-"""The method registry: what each method builds, where its context comes from, what trains it.
+"""The method registry: method name -> its objective (learning/objectives/<method>.py).
 
-One entry per method. The agent, the representation losses, config validation, the CLI choices
-and the report order all read this table, so a new baseline (or a variant of one) is one entry
-here plus, if it needs a new objective, one branch in representation.py.
+The agent, config validation, the CLI choices, the cards and the report order all read this
+table, so a new training objective is one new module under objectives/ plus one line here.
+Nothing outside the objectives compares method names: ask the objective instead
+(`method_objective(name).needs_pair(config)`, `.context_source`, `.models`, `.reads(option)`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from zeus_ros.learning.objectives.base import Objective
+from zeus_ros.learning.objectives.cadm import Cadm
+from zeus_ros.learning.objectives.no_context import NoContext
+from zeus_ros.learning.objectives.oracle import Oracle, OracleSac
+from zeus_ros.learning.objectives.up_osi import UpOsi
+from zeus_ros.learning.objectives.zeus import Zeus, ZeusNoContextLoss
 
-__all__ = ['METHODS', 'METHOD_REGISTRY', 'MethodSpec', 'method_spec']
+__all__ = ['METHODS', 'METHOD_REGISTRY', 'method_objective']
 
-
-@dataclass(frozen=True)
-class MethodSpec:
-    """How one method conditions its policy and learns its context."""
-
-    name: str
-    context_source: str
-    """'psi' (learned encoder psi(H)), 'true' (the true context, privileged) or 'none'."""
-    models: tuple[str, ...]
-    """Auxiliary models trained on the context: 'transition', 'reward', 'backward'."""
-    objective: str
-    """Representation objective: 'zeus' (dynamics + reward, eq. 1 when alpha_psi > 0), 'cadm'
-    (forward + backward dynamics), 'up_osi' (regression on the true context) or 'none'."""
-    context_loss: bool
-    """Whether eq. 1's context loss applies (needs a pair batch)."""
-    description: str
-
-
-METHOD_REGISTRY: dict[str, MethodSpec] = {spec.name: spec for spec in (
-    MethodSpec('zeus', 'psi', ('transition', 'reward'), 'zeus', True,
-               'ZeUS: psi(H) trained by dynamics + reward prediction and the context loss'),
-    MethodSpec('zeus_no_context_loss', 'psi', ('transition', 'reward'), 'zeus', False,
-               'ZeUS ablation: alpha_psi = 0 (dynamics + reward only)'),
-    MethodSpec('no_context', 'none', (), 'none', False,
-               'SAC(-AE) on the observation alone'),
-    MethodSpec('up_osi', 'psi', (), 'up_osi', False,
-               'UP-OSI: psi(H) regressed on the true context (privileged in training)'),
-    MethodSpec('cadm', 'psi', ('transition', 'backward'), 'cadm', False,
-               'CaDM: psi(H) trained by forward + backward dynamics'),
-    MethodSpec('oracle', 'true', ('transition', 'reward'), 'zeus', False,
-               'upper bound: ZeUS architecture and auxiliary losses, psi replaced by the true '
-               'context (normalised like every context)'),
-    MethodSpec('oracle_sac', 'true', (), 'none', False,
-               'plain SAC on the observation and the true context'),
+METHOD_REGISTRY: dict[str, Objective] = {objective.name: objective for objective in (
+    Zeus(),
+    ZeusNoContextLoss(),
+    NoContext(),
+    UpOsi(),
+    Cadm(),
+    Oracle(),
+    OracleSac(),
 )}
 """Every method, in the order tables list them."""
 
 METHODS = tuple(METHOD_REGISTRY)
-"""Method names, in table order."""
+"""The shipped method names, in table order (a test may register more in METHOD_REGISTRY)."""
 
 
-def method_spec(name: str) -> MethodSpec:
-    """The registry entry of `name` (ValueError listing the methods when unknown)."""
+def method_objective(name: str) -> Objective:
+    """The objective of method `name` (ValueError listing the methods when unknown)."""
     try:
         return METHOD_REGISTRY[name]
     except KeyError:
-        raise ValueError(f'unknown method {name!r}; methods: {", ".join(METHODS)}') from None
+        raise ValueError(f'unknown method {name!r}; methods: '
+                         f'{", ".join(METHOD_REGISTRY)}') from None

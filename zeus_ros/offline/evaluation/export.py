@@ -87,6 +87,57 @@ def _eval_rows(summaries: dict[str, Path]) -> list[tuple[str, dict[str, str], di
     return rows
 
 
+CARD_OPTIONS = ('context_norm', 'context_loss', 'critic_context_grad', 'context_target_tau',
+                'context_consistency', 'context_head', 'model_horizon', 'model_target',
+                'dynamics_loss', 'cadm_beta', 'up_osi_warmup_fraction', 'context_noise')
+"""The method-specific options a card lists, in this order, where the method reads them."""
+EVERY_METHOD_OPTIONS = ('exploration', 'representation_frozen_from')
+"""Options of the card's options row that every method reads."""
+
+
+def _option(config: Any, name: str) -> str:
+    """`name value`, names and flags in code style."""
+    value = getattr(config, name)
+    return f'{name} `{value}`' if isinstance(value, str | bool) else f'{name} {value}'
+
+
+def _method_cell(loaded: Any) -> str:
+    """The method with the options that shape its context (only those its objective reads)."""
+    config, objective = loaded.config, loaded.agent.objective
+    cell = f'`{config.method}`'
+    if objective.reads('alpha_psi'):
+        cell += f' (alpha_psi = {config.alpha_psi})'
+    if objective.reads('k'):
+        cell += f', k = {config.k}'
+    if objective.reads('aggregation'):
+        cell += f', `{config.aggregation}` aggregation'
+    return cell + f', context dim {loaded.agent.context_dim}'
+
+
+def _options_cell(loaded: Any) -> str:
+    """The card's options row: those the method reads, then those every method reads."""
+    config, objective = loaded.config, loaded.agent.objective
+    names = [name for name in CARD_OPTIONS if objective.reads(name)]
+    return ', '.join(_option(config, name) for name in (*names, *EVERY_METHOD_OPTIONS))
+
+
+def _networks_cell(loaded: Any) -> str:
+    """Network widths: T/R and psi only for a method that has them."""
+    config, objective = loaded.config, loaded.agent.objective
+    parts = [f'{config.hidden_dim}-wide actor/critic']
+    if objective.reads('model_hidden_dim'):
+        parts.append(f'{config.model_hidden_dim}-wide {"/".join(_model_letters(objective))}')
+    if objective.reads('context_hidden_dim'):
+        parts.append(f'{config.context_hidden_dim}-wide psi')
+    return ', '.join([*parts, f'feature dim {config.feature_dim}'])
+
+
+def _model_letters(objective: Any) -> list[str]:
+    """T, R, B for the transition, reward and backward models the method trains."""
+    letters = {'transition': 'T', 'reward': 'R', 'backward': 'B'}
+    return [letters[name] for name in objective.models]
+
+
 def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str | None,
               commit: str | None, source: Path | None = None) -> str:
     """The markdown card of an exported checkpoint; `summaries`: split -> eval summary.csv."""
@@ -109,19 +160,10 @@ def card_text(pt: Path, loaded: Any, *, summaries: dict[str, Path], command: str
         '| field | value |', '|---|---|',
         f'| task | {spec.task} (context: {", ".join(spec.context_names)}; train values '
         f'{train_values}) |',
-        f'| method | `{config.method}` (alpha_psi = {config.alpha_psi}), k = {config.k}, '
-        f'`{config.aggregation}` aggregation, context dim {loaded.agent.context_dim} |',
-        f'| context options | context_norm `{config.context_norm}`, context_loss '
-        f'`{config.context_loss}`, critic_context_grad `{config.critic_context_grad}`, '
-        f'context_target_tau {config.context_target_tau}, '
-        f'context_consistency {config.context_consistency}, context_head '
-        f'`{config.context_head}`, model_horizon {config.model_horizon}, model_target '
-        f'`{config.model_target}`, '
-        f'context_noise {config.context_noise}, exploration `{config.exploration}`, '
-        f'representation_frozen_from {config.representation_frozen_from} |',
+        f'| method | {_method_cell(loaded)} |',
+        f'| method options | {_options_cell(loaded)} |',
         f'| observations | {obs} |',
-        f'| networks | {config.hidden_dim}-wide actor/critic, {config.model_hidden_dim}-wide '
-        f'T/R, {config.context_hidden_dim}-wide psi, feature dim {config.feature_dim} |',
+        f'| networks | {_networks_cell(loaded)} |',
         f'| data | {extra.get("transitions", "?")} transitions from {len(bags)} bag(s) |',
         f'| updates | {loaded.step:,}, batch {config.batch_size} |',
         f'| seed | {config.seed} |',
@@ -180,14 +222,14 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     psi; pixel agents would render every step).
     """
     from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
-    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.learning.methods import method_objective
 
     if summaries is None:
         summaries = {} if evals is None else find_evaluations(checkpoint, evals)
     export_for_deployment(checkpoint, out)
     loaded = load_checkpoint(out)
     if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
-            method_spec(loaded.config.method).context_source == 'psi':
+            method_objective(loaded.config.method).context_source == 'psi':
         from zeus_ros.learning.inference import InferenceAgent
         from zeus_ros.learning.readout import store_readout
         from zeus_ros.offline.evaluation.calibrate import calibrate_readout

@@ -372,7 +372,7 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
                          f'({config.batch_size}); wait for more steps')
     frozen = config.replace(representation_frozen_from=1, actor_bc_weight=settings.bc_weight)
     warmup = settings.warmup_updates if fresh_critic else 0
-    needs_pair = config.method == 'zeus' and float(config.alpha_psi) > 0
+    needs_pair = agent.objective.needs_pair(config)
     start = step = max(agent_step(Path(deployed)), 1)
     phases = ((frozen.replace(actor_update_freq=WARMUP_ACTOR_PERIOD), warmup),
               (frozen, settings.updates))

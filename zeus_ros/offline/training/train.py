@@ -223,10 +223,10 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig, step: int) -> li
     (methods.py) may change it: a no_context run trained while `alpha_psi: auto` meant 1.0
     continues unchanged now that it means 0.
     """
-    from zeus_ros.learning.methods import method_spec
+    from zeus_ros.learning.methods import method_objective
 
     old, new = stored.to_dict(), wanted.to_dict()
-    unread = set() if method_spec(stored.method).context_loss else {'alpha_psi'}
+    unread = {key for key in ('alpha_psi',) if not method_objective(stored.method).reads(key)}
 
     def not_reached(value: int) -> bool:
         return value == 0 or value >= step
@@ -338,7 +338,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
         else MetricsLog(out / 'metrics.csv')
     evals = MetricsLog.resume(out / 'eval.csv', up_to_step=start) if resume \
         else MetricsLog(out / 'eval.csv')
-    needs_pair = cfg.method == 'zeus' and float(cfg.alpha_psi) > 0
+    needs_pair = agent.objective.needs_pair(cfg)
     extra = {'bags': [str(b) for b in dataset.report.bags], 'transitions': len(replay),
              **provenance()}
     window = RunningMean()
