@@ -150,8 +150,12 @@ def test_launch_with_pixels_renders_frames_for_the_zoo_pixel_checkpoint() -> Non
     assert 'pixels' not in {n.name: n.parameters for n in launch_defaults.plan().nodes}[
         'sim_bridge']  # '': the params file decides
     with pytest.raises(ValueError, match=r'Cheetah-Run-v1 has no pixel checkpoint.*'
-                       r'families with one: Cheetah-Bias-v0'):
+                       r'families with one: Cheetah-Motor-v0, Cheetah-Bias-v0'):
         launch_defaults.plan(task='Cheetah-Run-v1', obs='pixels')
+    motor = launch_defaults.plan(task='Cheetah-Motor-v0', obs='pixels')
+    assert {n.parameters['checkpoint'] for n in motor.nodes if n.name in (
+        'context_estimator', 'policy')} == {
+        str(ROOT / 'checkpoints' / 'cheetah_motor_v0' / 'pixels_student.pt')}
     with pytest.raises(ValueError, match="obs 'camera'"):
         launch_defaults.plan(obs='camera')
 
