@@ -1,4 +1,4 @@
-"""`zeus distill`: a pixel student distilled from a state teacher, in DAgger rounds.
+"""A pixel student distilled from a state teacher in DAgger rounds (cli/distill.py: the command).
 
     zeus distill --task Cheetah-Bias-v0 --teacher checkpoints/cheetah_bias_v0/zeus.pt
         --out runs/pixels_student/s0
@@ -22,12 +22,10 @@ without psi); `extra['distill']` says how it was trained.
 
 from __future__ import annotations
 
-import argparse
 import csv
 from dataclasses import asdict, dataclass
 import hashlib
 from pathlib import Path
-import sys
 import time
 from typing import Any
 
@@ -38,10 +36,10 @@ from tqdm import tqdm
 
 from zeus_ros.learning.config import ZeusConfig
 from zeus_ros.learning.context import HistoryFeatures
-from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.learning.errors import ConfigError
 from zeus_ros.offline.training.distill_data import EpisodeStore, WindowBatch, collect_round
 
-__all__ = ['DistillSettings', 'distill', 'distill_loss', 'main', 'make_student',
+__all__ = ['DistillSettings', 'distill', 'distill_loss', 'make_student',
            'random_shift']
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / 'params' / 'train' / 'pixels_student.yaml'
@@ -240,59 +238,3 @@ def _write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
         writer = csv.DictWriter(handle, fieldnames=names)
         writer.writeheader()
         writer.writerows(rows)
-
-
-def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
-
-    parser = ZeusArgumentParser(prog='zeus distill', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
-    parser.add_argument('--teacher', type=Path, required=True,
-                        help="a state checkpoint of the task (the zoo's zeus.pt)")
-    parser.add_argument('--out', type=Path, required=True, help='folder for student.pt')
-    parser.add_argument('--config', type=Path, default=DEFAULT_CONFIG,
-                        help='pixel network config (default: params/train/pixels_student.yaml)')
-    parser.add_argument('--seed', type=int, help='override the config seed')
-    parser.add_argument('--data-cache', type=Path,
-                        help="round 0's teacher data: read when the file exists, else "
-                        'written (the seeds of a comparison share it)')
-    defaults = DistillSettings()
-    for name, value in asdict(defaults).items():
-        flag = '--' + name.replace('_', '-')
-        if isinstance(value, bool):
-            parser.add_argument(flag, action='store_true', help='student without psi')
-        else:
-            parser.add_argument(flag, type=type(value), default=value,
-                                help=f'(default: {value})')
-    parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
-    parser.add_argument('--no-progress', action='store_true')
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `zeus distill`; one line on stderr for bad input."""
-    args = _build_parser().parse_args(argv)
-    from zeus_ros.learning.config import load_config
-
-    torch.set_num_threads(args.threads)
-    settings = DistillSettings(**{name: getattr(args, name)
-                                  for name in DistillSettings.__dataclass_fields__})
-    if settings.rounds < 1 or settings.first_steps < 1 or settings.window < 1:
-        print('zeus distill: --rounds, --first-steps and --window must be >= 1', file=sys.stderr)
-        return 2
-    try:
-        config = load_config(args.config)
-        if args.seed is not None:
-            config = config.replace(seed=args.seed)
-        path = distill(args.task, args.teacher, config, settings, args.out,
-                       data_cache=args.data_cache, progress=not args.no_progress)
-    except (CheckpointError, ConfigError, ValueError) as error:
-        print(f'zeus distill: {error}', file=sys.stderr)
-        return 2
-    print(f'wrote {path}')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
