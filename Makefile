@@ -21,8 +21,9 @@ setup:
 demo: setup
 	@$(ENV) && python -m zeus_ros.demo $(DEMO_ARGS)
 
+# --durations: the 20 slowest tests close every run, so the suite's cost stays visible.
 test: setup
-	@$(ENV) && ruff check . && python -m pytest -q -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
+	@$(ENV) && ruff check . && python -m pytest -q --durations=20 -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
 
 # The fast lane: pytest --fast (test/conftest.py) leaves out the ros, slow, faults_only and
 # continual_live tests and names any test of the lane that took over 2 s.
