@@ -9,6 +9,7 @@ import pytest
 import torch
 import yaml
 
+from zeus_ros.cli.distill import main
 from zeus_ros.learning.config import load_config
 from zeus_ros.learning.frames import FrameStack
 from zeus_ros.learning.inference import InferenceAgent
@@ -16,7 +17,6 @@ from zeus_ros.offline.rollout import parse_schedule
 from zeus_ros.offline.training.distill import (
     SCHEDULE,
     distill_loss,
-    main,
     make_student,
     random_shift,
 )

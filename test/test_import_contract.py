@@ -45,9 +45,6 @@ CONTINUAL_NODE_IMPORTS = frozenset({
 so it runs the ROS-free training library; it imports that library's continual round and live
 checks and nothing else of offline/."""
 
-COMMANDS_NOT_YET_IN_CLI = frozenset({'zeus_ros.offline.training.distill'})
-"""Libraries that still carry their command's main(): `zeus distill` (being reworked beside
-issue 39; its command line moves to cli/distill.py next)."""
 LIBRARIES = ('zeus_ros.offline', 'zeus_ros.learning', 'zeus_ros.bags', 'sim_bridge')
 
 _ROS_TOP_LEVEL = frozenset({'rclpy', 'rosbag2_py', 'ament_index_python', 'launch',
@@ -216,7 +213,7 @@ def test_commands_live_in_one_wing() -> None:
         for path in (ROOT / library.replace('.', '/')).rglob('*.py')
         if any(isinstance(node, ast.FunctionDef) and node.name == 'main'
                for node in ast.parse(path.read_text(encoding='utf-8')).body))
-    assert with_main == sorted(COMMANDS_NOT_YET_IN_CLI)
+    assert with_main == []
 
 
 def test_the_rules_catch_what_they_forbid() -> None:

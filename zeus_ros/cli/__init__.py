@@ -21,7 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                    "a checkpoint's value of adaptation next to the zoo's"),
     'report': ('zeus_ros.cli.report', 'mean ± s.e. over seeds of evaluations'),
     'export': ('zeus_ros.cli.export', 'small deployment checkpoint + card'),
-    'distill': ('zeus_ros.offline.training.distill',
+    'distill': ('zeus_ros.cli.distill',
                 'a pixel student from a state teacher (DAgger rounds, no RL)'),
     'loop': ('zeus_ros.cli.loop', 'random collection -> train -> collect -> retrain'),
     'sweep': ('zeus_ros.cli.sweep', 'tasks x methods x seeds of loop + eval on Ray'),

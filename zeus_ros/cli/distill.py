@@ -1,0 +1,76 @@
+"""`zeus distill`: the command line of a pixel student from a state teacher.
+
+The distillation itself (DAgger rounds, the regression, the student) is
+zeus_ros/offline/training/distill.py; this module reads the command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+from pathlib import Path
+import sys
+
+import torch
+
+from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.offline.training import distill as library
+from zeus_ros.offline.training.distill import DEFAULT_CONFIG, DistillSettings, distill
+
+__all__ = ['main']
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+
+    parser = ZeusArgumentParser(prog='zeus distill', description=library.__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
+    parser.add_argument('--teacher', type=Path, required=True,
+                        help="a state checkpoint of the task (the zoo's zeus.pt)")
+    parser.add_argument('--out', type=Path, required=True, help='folder for student.pt')
+    parser.add_argument('--config', type=Path, default=DEFAULT_CONFIG,
+                        help='pixel network config (default: params/train/pixels_student.yaml)')
+    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--data-cache', type=Path,
+                        help="round 0's teacher data: read when the file exists, else "
+                        'written (the seeds of a comparison share it)')
+    defaults = DistillSettings()
+    for name, value in asdict(defaults).items():
+        flag = '--' + name.replace('_', '-')
+        if isinstance(value, bool):
+            parser.add_argument(flag, action='store_true', help='student without psi')
+        else:
+            parser.add_argument(flag, type=type(value), default=value,
+                                help=f'(default: {value})')
+    parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
+    parser.add_argument('--no-progress', action='store_true')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of `zeus distill`; one line on stderr for bad input."""
+    args = _build_parser().parse_args(argv)
+    from zeus_ros.learning.config import load_config
+
+    torch.set_num_threads(args.threads)
+    settings = DistillSettings(**{name: getattr(args, name)
+                                  for name in DistillSettings.__dataclass_fields__})
+    if settings.rounds < 1 or settings.first_steps < 1 or settings.window < 1:
+        print('zeus distill: --rounds, --first-steps and --window must be >= 1', file=sys.stderr)
+        return 2
+    try:
+        config = load_config(args.config)
+        if args.seed is not None:
+            config = config.replace(seed=args.seed)
+        path = distill(args.task, args.teacher, config, settings, args.out,
+                       data_cache=args.data_cache, progress=not args.no_progress)
+    except (CheckpointError, ConfigError, ValueError) as error:
+        print(f'zeus distill: {error}', file=sys.stderr)
+        return 2
+    print(f'wrote {path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
