@@ -130,7 +130,18 @@ def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Pat
                                                     len(later_steps))
     assert min(first_steps) == 0  # up to one flush period before the kill is lost
     assert max(first_steps) < min(middle) <= max(middle) < min(later_steps)
-    assert later_steps == list(range(min(later_steps), int(last.group(1)) + 1))
+    # Ctrl-C loses no tail: the last bag ends at the loop's last step. The lockstep loop does not
+    # wait for a respawned recorder, so on a loaded machine it may outrun it (CI once: 3 of
+    # about 270 steps): such a gap must be counted and named by the recorder, never silent.
+    assert max(later_steps) == int(last.group(1)), (max(later_steps), last.group(1))
+    missing = sorted(set(range(min(later_steps), int(last.group(1)) + 1)) - set(later_steps))
+    closed = re.findall(r'closed \d+ bag\(s\) in \S+: .*step gaps (.*)', output)
+    assert closed, output[-3000:]
+    counted = re.search(r"'/zeus/step': (\d+)", closed[-1])
+    assert (int(counted.group(1)) if counted else 0) == len(missing), (closed[-1], missing)
+    if missing:
+        assert f'/zeus/step: {missing[-1] + 1 - missing[0]}' in output or \
+            'step(s) missing before step' in output, output[-3000:]
     print(f'recorder SIGKILL at ~200, SIGTERM later: bags hold steps 0-{max(first_steps)}, '
           f'{min(middle)}-{max(middle)}, {min(later_steps)}-{max(later_steps)}')
 
