@@ -11,15 +11,41 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Iterator
+import fcntl
 import os
+from pathlib import Path
 import time
 
 import pytest
+
+from zeus_ros import processes
 
 from ros_harness import ProcessGroup, fresh_domain_id, require_ros
 
 os.environ.setdefault('MUJOCO_GL', 'egl')
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+
+def _worker_domain_range() -> None:
+    """Under pytest-xdist, give each worker its own slice of $ZEUS_DOMAIN_RANGE (default 1-100).
+
+    Two tests running side by side then never draw the same ROS_DOMAIN_ID; children inherit it.
+    """
+    worker = os.environ.get('PYTEST_XDIST_WORKER')
+    count = os.environ.get('PYTEST_XDIST_WORKER_COUNT')
+    if not worker or not count:
+        return
+    low, _sep, high = os.environ.get(processes.DOMAIN_RANGE_ENV, '1-100').partition('-')
+    first, last = int(low), int(high or low)
+    size = (last - first + 1) // int(count)
+    if size < 1:
+        raise RuntimeError(f'{processes.DOMAIN_RANGE_ENV}={first}-{last} is too small for '
+                           f'{count} pytest-xdist workers')
+    start = first + int(worker.removeprefix('gw')) * size
+    os.environ[processes.DOMAIN_RANGE_ENV] = f'{start}-{start + size - 1}'
+
+
+_worker_domain_range()
 
 FAST_LANE_EXCLUDES = ('ros', 'slow', 'faults_only', 'continual_live')
 """Markers whose tests the fast lane leaves out."""
@@ -85,3 +111,25 @@ def ros_processes() -> Iterator[ProcessGroup]:
         yield group
     finally:
         group.stop_all()
+
+
+@pytest.fixture(autouse=True)
+def _alone_when_marked(request: pytest.FixtureRequest,
+                       tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Under pytest-xdist, a test marked `alone` runs while no other worker runs a test.
+
+    Every test holds a shared lock on one file for the workers; an `alone` test holds it
+    exclusively. Timing-sensitive tests (a race against a settle time, steps counted against a
+    killed process) keep the quiet machine they were written for; the rest run side by side.
+    """
+    if not os.environ.get('PYTEST_XDIST_WORKER'):
+        yield
+        return
+    lock_path = Path(tmp_path_factory.getbasetemp()).parent / 'alone.lock'
+    exclusive = request.node.get_closest_marker('alone') is not None
+    with lock_path.open('a') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)

@@ -16,7 +16,8 @@ from typing import Any
 from zeus_ros import processes
 
 REPO = Path(__file__).resolve().parents[1]
-LOG_DIR = REPO / 'log' / 'test-processes'
+LOG_DIR = REPO / 'log' / 'test-processes' / os.environ.get('PYTEST_XDIST_WORKER', '')
+"""One folder per pytest-xdist worker, so that two tests' `sim_bridge.log` never mix."""
 
 
 def require_ros() -> None:

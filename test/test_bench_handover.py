@@ -46,6 +46,7 @@ def test_unknown_ring_is_named() -> None:
 
 
 @pytest.mark.ros
+@pytest.mark.alone  # timing: see the alone marker (pyproject.toml)
 def test_publish_cost_waits_for_its_readers(monkeypatch: pytest.MonkeyPatch) -> None:
     require_ros()
     monkeypatch.setenv('ROS_DOMAIN_ID', str(fresh_domain_id()))

@@ -79,6 +79,7 @@ def _recorded_steps(output: Path) -> list[int]:
     return sorted(steps)
 
 
+@pytest.mark.alone  # timing: see the alone marker (pyproject.toml)
 def test_a_killed_recorder_is_restarted_and_the_loop_keeps_running(tmp_path: Path) -> None:
     """SIGKILL, then SIGTERM to the recorder: the loop runs on, new bags, gaps named, exit 3.
 

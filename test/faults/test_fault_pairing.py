@@ -49,6 +49,7 @@ def _pose(group: ProcessGroup, probe: Any, label: str, *args: str) -> None:
     assert 'published' in group.log_text(label), group.log_text(label)
 
 
+@pytest.mark.alone  # timing: see the alone marker (pyproject.toml)
 def test_spoofed_injected_and_second_sources_are_refused_and_named(
         ros_processes: ProcessGroup, tmp_path: Path) -> None:
     """Name spoofing, context and observation injection, a second sim_bridge: all refused."""
