@@ -65,6 +65,29 @@ def test_replay_mix_is_bounded(bias_recording: list[Path]) -> None:
 
 
 @pytest.mark.slow
+def test_without_context_truth_the_read_out_names_the_seen_contexts(
+        bias_recording: list[Path], tmp_path: Path) -> None:
+    """A robot records no truth: the deployed checkpoint's read-out of each segment stands in."""
+    from dataclasses import replace
+
+    from zeus_ros.offline.data.ingest import ingest_bags
+    from zeus_ros.offline.training.continual_seen import seen_contexts
+
+    dataset = ingest_bags(bias_recording)
+    assert seen_contexts(zoo_checkpoint(BIAS), dataset, 6).source == 'truth'
+    blind = replace(dataset, context_names=(), episodes=[
+        replace(ep, context=ep.context[:, :0]) for ep in dataset.episodes])
+    seen = seen_contexts(zoo_checkpoint(BIAS), blind, 6)
+    assert seen.source == 'read-out' and 'R^2' in seen.detail, seen
+    biases = [value['motor_bias'] for value in seen.values]
+    assert len(biases) == 6 and min(biases) < -0.2 and max(biases) > 0.2  # truth: +-0.45..0.5
+    assert all(-1.0 <= b <= 1.0 for b in biases)  # inside the family's declared range
+    weak = weak_checkpoint(tmp_path / 'weak.pt')  # no read-out stored: the train values
+    none = seen_contexts(weak, blind, 6)
+    assert none.source == 'none' and none.values == [] and '--readout-steps' in none.detail
+
+
+@pytest.mark.slow
 def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
         bias_recording: list[Path], tmp_path: Path) -> None:
     zoo = zoo_checkpoint(BIAS)

@@ -22,10 +22,14 @@ import yaml
 
 from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
 
-TRAINER = {'new_steps': 300, 'updates': 400, 'actor_lr_scale': 1.0, 'bc_weight': 0.0,
+TRAINER = {'new_steps': 300, 'updates': 800, 'actor_lr_scale': 1.0, 'bc_weight': 0.0,
            'rehearsal_steps': 0,
-           'episodes': 1, 'max_seen_values': 2, 'max_train_values': 1, 'corrupt_rounds': [2],
-           'check_segments': 2, 'poll_s': 0.5}
+           'episodes': 1, 'max_seen_values': 3, 'max_train_values': 1, 'corrupt_rounds': [2],
+           'check_segments': 3, 'tolerance_floor': 4.0, 'poll_s': 0.5}
+"""A tiny budget with margins this test can rely on: the weak actor earns 0.1-0.4 per episode
+and 400 updates made it 2-5 (a gate gain of +3.7 against a required 2.1, and a live check at
+-1.9 against an allowed -2.0: one noisy segment from a rollback); 800 updates, three seen values
+and three checked segments, and a floor of 4.0 per episode keep the outcome off the edge."""
 
 
 def _params(folder: Path) -> Path:

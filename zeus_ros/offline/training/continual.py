@@ -29,7 +29,8 @@ new steps are recorded; everything it decides is computed here, so it is tested 
   updates, never trust. A swap, a rollback or a round that gained nothing starts afresh.
 - **Gate.** Candidate and deployed checkpoint are evaluated in-process on the same seeds (the
   same initial states per value): on the contexts seen in the new splits (the recording's
-  context truth) and on the family's train values (no forgetting). Deploy only when the mean
+  context truth; on a robot without truth, the deployed checkpoint's read-out of them:
+  continual_seen.py) and on the family's train values (no forgetting). Deploy only when the mean
   gain over the seen contexts is at least max(`margin`, 2 s.e.) and
   no value is worse than max(`tolerance_floor`, `tolerance` x |deployed return there|, 2 s.e.
   of that value's paired episode differences). The s.e. of the gain is that of a mean over
@@ -56,7 +57,7 @@ __all__ = ['Candidate', 'ContinualSettings', 'GateResult', 'RoundResult', 'Round
            'append_history',
            'closed_splits', 'continual_round', 'gate', 'read_history', 'rehearsal_bag',
            'replay_mix', 'resume_from',
-           'seen_contexts', 'split_steps', 'train_candidate']
+           'split_steps', 'train_candidate']
 
 CLOSED_STATES = ('closed', 'recovered', None)
 """A split in one of these states is complete. None: metadata without a zeus state, written by
@@ -149,6 +150,9 @@ class Candidate:
     warmup_updates: int
     seconds: float
     seen: list[dict[str, float]] = field(default_factory=list)
+    seen_from: str = 'truth'
+    """Where `seen` came from: 'truth', 'read-out', or 'none' (the gate uses the train
+    values)."""
 
 
 @dataclass
@@ -295,21 +299,6 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
     return bag
 
 
-def seen_contexts(dataset: Any, max_values: int) -> list[dict[str, float]]:
-    """Distinct true contexts in `dataset` (rounded to 1e-3), at most `max_values`, spread."""
-    if not dataset.episodes or not dataset.context_names:
-        return []
-    rows = np.concatenate([ep.context for ep in dataset.episodes])
-    rows = rows[np.isfinite(rows).all(axis=1)]
-    if not len(rows):
-        return []
-    unique = np.unique(np.round(rows, 3), axis=0)
-    if len(unique) > max_values:
-        unique = unique[np.round(np.linspace(0, len(unique) - 1, max_values)).astype(int)]
-    return [{name: float(v) for name, v in zip(dataset.context_names, row, strict=True)}
-            for row in unique]
-
-
 # ---------------------------------------------------------------------- candidate
 def _agent_from(deployed: Path) -> tuple[Any, bool]:
     """An agent that can train, from `deployed`; True when its critics are fresh."""
@@ -337,11 +326,14 @@ def _agent_from(deployed: Path) -> tuple[Any, bool]:
 def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Sequence[Path],
                     out: Path | str, settings: ContinualSettings, *,
                     corrupt_rewards: bool = False, log: Callable[[str], None] = print,
-                    stop: Callable[[], bool] = lambda: False) -> Candidate:
+                    stop: Callable[[], bool] = lambda: False,
+                    readout_from: Path | str | None = None) -> Candidate:
     """Continue `deployed` (or an earlier candidate) on new + old bags; write `out`/candidate.pt.
 
     `corrupt_rewards` multiplies every reward by CORRUPTION: the deliberately bad candidate
     the gate must refuse. `stop` is asked every 50 updates (a shutdown: RoundStopped).
+    `readout_from`: the checkpoint whose read-out names the seen contexts of a recording
+    without context truth (continual_seen.py; default `deployed`).
     Raises TrainError (bad data, another task, non-finite training).
     """
     from zeus_ros.learning.checkpoint import save_checkpoint
@@ -349,6 +341,7 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.data.replay import ReplayBuffer
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
+    from zeus_ros.offline.training.continual_seen import seen_contexts
     from zeus_ros.offline.training.train import TrainError
 
     begin = time.perf_counter()
@@ -358,8 +351,12 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
     if dataset.task != agent.spec.task:
         raise TrainError(f'the recording holds {dataset.task}, the deployed checkpoint '
                          f'{deployed} runs {agent.spec.task}')
-    seen = seen_contexts(ingest_bags(list(new_bags)) if old_bags else dataset,
+    seen = seen_contexts(readout_from or deployed,
+                         ingest_bags(list(new_bags)) if old_bags else dataset,
                          settings.max_seen_values)
+    if seen.source != 'truth':
+        log(f'continual: no context truth in the new splits; seen contexts: '
+            f'{seen.source} ({seen.detail})')
     if corrupt_rewards:
         dataset.episodes = [replace(ep, reward=CORRUPTION * ep.reward) for ep in dataset.episodes]
     config = agent.config
@@ -395,7 +392,7 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
         raise TrainError(f'candidate diverged: {error}') from None
     candidate = Candidate(path, checkpoint_sha256(path), [str(b) for b in new_bags],
                           [str(b) for b in old_bags], len(replay), step - start - warmup,
-                          warmup, time.perf_counter() - begin, seen)
+                          warmup, time.perf_counter() - begin, seen.values, seen.source)
     card = {**{k: v for k, v in asdict(candidate).items() if k != 'path'}, 'path': str(path),
             'from': str(deployed), 'corrupt_rewards': corrupt_rewards,
             'representation': 'phi and psi frozen (the deployed context space)'}
@@ -520,7 +517,8 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
     """
     old = [*replay_mix(splits, new_bags, settings), *([rehearsal] if rehearsal else [])]
     candidate = train_candidate(start or deployed, new_bags, old, out, settings,
-                                corrupt_rewards=corrupt_rewards, log=log, stop=stop)
+                                corrupt_rewards=corrupt_rewards, log=log, stop=stop,
+                                readout_from=deployed)
     result = gate(deployed, candidate.path, candidate.seen, settings)
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 
@@ -531,7 +529,8 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
         'new_bags': candidate.new_bags, 'old_bags': candidate.old_bags,
         'transitions': candidate.transitions, 'updates': candidate.updates,
         'warmup_updates': candidate.warmup_updates, 'train_s': round(candidate.seconds, 2),
-        'corrupt_rewards': corrupt_rewards, 'gain': result.gain, 'se': result.se,
+        'corrupt_rewards': corrupt_rewards, 'seen_from': candidate.seen_from,
+        'gain': result.gain, 'se': result.se,
         'required': result.required, 'deployed_seen': result.deployed_seen,
         'candidate_seen': result.candidate_seen, 'gate_s': round(result.seconds, 2),
         'values': result.values, 'decision': 'deploy' if result.deploy else 'refuse',
