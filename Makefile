@@ -9,7 +9,7 @@ help:
 	@echo 'make demo   set up, then run the live demo'
 	@echo 'make test   set up, then run the test suite'
 	@echo 'make test-fast  set up, then only the pure tests (no ROS, no episodes, no training; under a minute)'
-	@echo 'make lint   ruff over the project'
+	@echo 'make lint   ruff and mypy over the project'
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
 	@echo 'make faults set up, then run the whole fault matrix (test/faults; make test skips its long rows)'
 	@echo 'make soak   set up, then run the three-node loop for an hour (RSS growth, step gaps)'
@@ -28,7 +28,7 @@ demo: setup
 # TEST_WORKERS=0 runs the suite in one process.
 TEST_WORKERS ?= 2
 test: setup
-	@$(ENV) && ruff check . && python -m pytest -q --durations=20 -n $(TEST_WORKERS) --dist loadfile -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
+	@$(ENV) && ruff check . && mypy && python -m pytest -q --durations=20 -n $(TEST_WORKERS) --dist loadfile -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
 
 # The fast lane: pytest --fast (test/conftest.py) leaves out the ros, slow, faults_only and
 # continual_live tests and names any test of the lane that took over 2 s.
@@ -36,7 +36,7 @@ test-fast: setup
 	@$(ENV) && python -m pytest -q --fast $(PYTEST_ARGS)
 
 lint: setup
-	@$(ENV) && ruff check .
+	@$(ENV) && ruff check . && mypy
 
 bench: setup
 	@$(ENV) && for b in benchmarks/bench_*.py; do echo "== $$b"; python "$$b" || exit 1; done

@@ -78,7 +78,8 @@ class DmcTask(ContextualTask):
     """A suite task whose geometry context is applied by recompiling an edited `MjSpec`."""
 
     xml_name: str
-    camera: int = 0
+    camera: int | str = 0
+    """The camera frames come from: its index, or its name (task files, mjcf_task.py)."""
     n_sub_steps: int = 1
     """Physics steps per control step (the suite's control timestep / physics timestep)."""
     specs: tuple[ContextSpec, ...]

@@ -150,7 +150,7 @@ _VISUAL_FIELDS = (
 class SyncedRenderer:
     """Offscreen RGB renderer over a textured model whose geometry follows the model in force."""
 
-    def __init__(self, textured: mujoco.MjModel, camera: int) -> None:
+    def __init__(self, textured: mujoco.MjModel, camera: int | str) -> None:
         self._model = textured
         self._camera = camera
         self._renderer: mujoco.Renderer | None = None

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 import copy
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -123,17 +123,17 @@ class ZeusAgent:
                 self.modules[name] = TransitionModel(cfg.feature_dim, a_dim, self.context_dim,
                                                      cfg.model_hidden_dim, target_dim)
         policy_in = cfg.feature_dim + self.context_dim
-        self.modules['actor'] = Actor(policy_in, a_dim, cfg.hidden_dim, cfg.actor_log_std_min,
-                                      cfg.actor_log_std_max)
-        self.modules['critic'] = Critic(policy_in, a_dim, cfg.hidden_dim)
+        actor = Actor(policy_in, a_dim, cfg.hidden_dim, cfg.actor_log_std_min,
+                      cfg.actor_log_std_max)
+        critic = Critic(policy_in, a_dim, cfg.hidden_dim)
+        self.modules['actor'], self.modules['critic'] = actor, critic
         for module in self.modules.values():
             module.apply(weight_init)
         if cfg.context_input_init == 'zero' and self.context_dim > 0:
             context_inputs = slice(cfg.feature_dim, policy_in)  # input order: [phi, psi, (a)]
-            for net in (self.modules['actor'].net, self.modules['critic'].q1,
-                        self.modules['critic'].q2):
+            for net in (actor.net, critic.q1, critic.q2):
                 with torch.no_grad():
-                    net[0].weight[:, context_inputs] = 0.0
+                    cast(nn.Linear, net[0]).weight[:, context_inputs] = 0.0
         if cfg.context_norm != 'none' and self.context_dim > 0:
             noise_scale = None
             if cfg.context_norm == 'reliability':  # the true context has no estimation noise
@@ -250,7 +250,7 @@ class ZeusAgent:
         the units phi's input is normalised to, so every state dimension weighs alike.
         """
         if self.config.model_target == 'observation':
-            std = self.modules['encoder'].obs_std
+            std = cast(StateEncoder, self.modules['encoder']).obs_std  # observation: states
             return ((next_obs.float() - obs.float()) / std).detach()
         return next_feat.detach()
 
@@ -333,7 +333,7 @@ class ZeusAgent:
         metrics: dict[str, torch.Tensor] = {}
         context, next_context = self._representation_step(
             batch, pair if needs_pair else None, step, metrics)
-        norm = self.modules.get('context_norm')
+        norm = cast('ContextNormalizer | None', self.modules.get('context_norm'))
         if norm is not None:
             norm.update(context, next_context, batch.not_done)
             if norm.noise_scale is not None:
@@ -495,8 +495,8 @@ class ZeusAgent:
             raise ValueError(f'context has {ctx.shape[1]} values per sample, expected '
                              f'context_dim={self.context_dim}')
         action = self.act_on_features(self.modules['encoder'](obs_t), ctx, deterministic)
-        action = action.cpu().numpy()
-        return action[0] if single else action
+        out = action.cpu().numpy()
+        return out[0] if single else out
 
     @torch.no_grad()
     def act_on_features(self, feat: torch.Tensor, context: torch.Tensor,

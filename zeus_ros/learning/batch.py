@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 
@@ -58,11 +59,14 @@ class HistoryBatch:
 
     def to(self, device: torch.device | str) -> HistoryBatch:
         """Copy every field to `device`."""
-        return HistoryBatch(**{name: None if getattr(self, name) is None
-                               else getattr(self, name).to(device) for name in self.__slots__})
+        fields: dict[str, Any] = {name: None if getattr(self, name) is None
+                                  else getattr(self, name).to(device) for name in self.__slots__}
+        return HistoryBatch(**fields)
 
     def model_transition(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """(o, a, r, o') the models predict from psi(H_t): the sampled u's, else t's."""
         if self.model_obs is None:
             return self.obs, self.action, self.reward, self.next_obs
+        assert (self.model_action is not None and self.model_reward is not None
+                and self.model_next_obs is not None), 'model_obs comes with all model_ fields'
         return self.model_obs, self.model_action, self.model_reward, self.model_next_obs

@@ -152,6 +152,15 @@ class ContextNormalizer(nn.Module):
     no estimation noise (`noise_scale` 0: reliability 1).
     """
 
+    mean: torch.Tensor
+    """(dim,) buffer: running mean of the context."""
+    var: torch.Tensor
+    """(dim,) buffer: running (biased) variance."""
+    count: torch.Tensor
+    """() long buffer: batches seen by `update`."""
+    noise_var: torch.Tensor
+    """(dim,) buffer, only with `noise_scale`: running estimate of psi's noise variance."""
+
     def __init__(self, dim: int, momentum: float = 0.01, eps: float = 1e-10,
                  noise_scale: float | None = None) -> None:
         super().__init__()

@@ -44,6 +44,11 @@ class PixelEncoder(nn.Module):
 class StateEncoder(nn.Module):
     """MLP encoder for state vectors, normalised with the dataset mean / std it stores."""
 
+    obs_mean: torch.Tensor
+    """(obs_dim,) buffer: the dataset mean of the state vectors."""
+    obs_std: torch.Tensor
+    """(obs_dim,) buffer: their standard deviation."""
+
     def __init__(self, obs_dim: int, feature_dim: int = 50, hidden_dim: int = 256,
                  obs_mean: Sequence[float] | None = None,
                  obs_std: Sequence[float] | None = None) -> None:

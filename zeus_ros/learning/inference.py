@@ -98,11 +98,12 @@ class ContextHistory:
             self._features_of = owner
         out = []
         for (obs, _act, _rew, next_obs), slot in zip(self._items, self._features, strict=True):
-            if slot[0] is None:
-                slot[0] = encode(obs)
-            if slot[1] is None:
-                slot[1] = encode(next_obs)
-            out.append((slot[0], slot[1]))
+            feat, next_feat = slot
+            if feat is None:
+                feat = slot[0] = encode(obs)
+            if next_feat is None:
+                next_feat = slot[1] = encode(next_obs)
+            out.append((feat, next_feat))
         return out
 
     def transitions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -45,8 +45,8 @@ class SyntheticSystem:
         return AgentSpec(
             task=task, context_names=('gain',), obs_kind='pixels' if self.pixels else 'state',
             obs_shape=(9, 84, 84) if self.pixels else (self.obs_dim,),
-            action_dim=self.action_dim, action_low=[-1.0] * self.action_dim,
-            action_high=[1.0] * self.action_dim)
+            action_dim=self.action_dim, action_low=(-1.0,) * self.action_dim,
+            action_high=(1.0,) * self.action_dim)
 
     def _render(self, states: torch.Tensor) -> torch.Tensor:
         """State -> a deterministic uint8 frame stack (brightness bands from the state)."""

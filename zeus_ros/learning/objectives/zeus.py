@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, cast
 
 import torch.nn.functional as F  # noqa: N812
 
@@ -15,6 +15,7 @@ if TYPE_CHECKING:
 
     import torch
 
+    from zeus_ros.learning.models import RewardModel, TransitionModel
     from zeus_ros.learning.objectives.base import LossHost, ObjectiveConfig, PsiStep
 
 __all__ = ['Zeus', 'ZeusNoContextLoss']
@@ -30,7 +31,8 @@ class Zeus(PsiObjective):
     name = 'zeus'
     description = 'ZeUS: psi(H) trained by dynamics + reward prediction and the context loss'
     models = ('transition', 'reward')
-    options = (*LEARNED_CONTEXT_OPTIONS, *MODEL_OPTIONS, 'alpha_psi', 'context_loss')
+    options: ClassVar[tuple[str, ...]] = (*LEARNED_CONTEXT_OPTIONS, *MODEL_OPTIONS, 'alpha_psi',
+                                          'context_loss')
     predicts_transitions = True
 
     def needs_pair(self, config: ObjectiveConfig) -> bool:
@@ -52,7 +54,8 @@ class Zeus(PsiObjective):
             pair_history, _ = host.history_features(
                 pair.hist_obs, pair.hist_action, pair.hist_reward, pair.hist_next_obs,
                 pair.hist_mask)
-            ctx = context_loss(m['transition'], m['reward'], step.feat, step.action, step.psi,
+            ctx = context_loss(cast('TransitionModel', m['transition']),
+                               cast('RewardModel', m['reward']), step.feat, step.action, step.psi,
                                m['psi'](pair_history),
                                use_sigma=cfg.dynamics_loss == 'gaussian_nll',
                                scale_free=cfg.context_loss.startswith('scale_free'),
