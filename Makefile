@@ -13,7 +13,7 @@ help:
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
 	@echo 'make faults set up, then run the whole fault matrix (test/faults; make test skips its long rows)'
 	@echo 'make soak   set up, then run the three-node loop for an hour (RSS growth, step gaps)'
-	@echo 'make test-continual  the live continual run (swap + refusal; timing-dependent, not in make test)'
+	@echo 'make test-continual  only the live continual run (swap + refusal; also in make test)'
 
 setup:
 	@bash scripts/setup.sh
@@ -28,7 +28,7 @@ demo: setup
 # TEST_WORKERS=0 runs the suite in one process.
 TEST_WORKERS ?= 2
 test: setup
-	@$(ENV) && ruff check . && mypy && python -m pytest -q --durations=20 -n $(TEST_WORKERS) --dist loadfile -m 'not faults_only and not continual_live' $(PYTEST_ARGS)
+	@$(ENV) && ruff check . && mypy && python -m pytest -q --durations=20 -n $(TEST_WORKERS) --dist loadfile -m 'not faults_only' $(PYTEST_ARGS)
 
 # The fast lane: pytest --fast (test/conftest.py) leaves out the ros, slow, faults_only and
 # continual_live tests and names any test of the lane that took over 2 s.

@@ -4,7 +4,9 @@ The system deploys a weak Cheetah-Run-v0 policy (continual_fixtures.weak_checkpo
 trainer's first round earns clearly more and is swapped in live on estimator and policy (both
 log the new sha256) and kept by the live check; its second round is a drill trained on
 negated rewards, which the gate refuses. sim_bridge runs in realtime at 60 steps/s so
-the niced trainer gets CPU on two shared cores. About 100 s (150 s with other tests beside it).
+the niced trainer gets CPU on two shared cores. 80-100 s with the machine to itself (marked
+`alone`: under `make test`'s two workers the other one waits), up to 190 s on a loaded one
+(it gives up after 290 s).
 """
 
 from __future__ import annotations
@@ -25,11 +27,15 @@ from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
 TRAINER = {'new_steps': 300, 'updates': 800, 'actor_lr_scale': 1.0, 'bc_weight': 0.0,
            'rehearsal_steps': 0,
            'episodes': 1, 'max_seen_values': 3, 'max_train_values': 1, 'corrupt_rounds': [2],
-           'check_segments': 3, 'tolerance_floor': 4.0, 'poll_s': 0.5}
+           'check_segments': 3, 'tolerance_floor': 4.0, 'warmup_updates': 300, 'margin': 0.5,
+           'poll_s': 0.5}
 """A tiny budget with margins this test can rely on: the weak actor earns 0.1-0.4 per episode
 and 400 updates made it 2-5 (a gate gain of +3.7 against a required 2.1, and a live check at
 -1.9 against an allowed -2.0: one noisy segment from a rollback); 800 updates, three seen values
-and three checked segments, and a floor of 4.0 per episode keep the outcome off the edge."""
+and three checked segments, a floor of 4.0 and a margin of 0.5 per episode keep the outcome
+off the edge (800 updates gained +1.3 to +5.3 live here, about +4 offline on three recordings).
+The drill (round 2) trains fresh critics on the negated rewards (300 warm-up updates) first:
+it lost 1.2 per episode."""
 
 
 def _params(folder: Path) -> Path:
@@ -52,7 +58,8 @@ def _history(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-@pytest.mark.continual_live  # timing-dependent on a loaded machine: `make test-continual`
+@pytest.mark.continual_live
+@pytest.mark.alone  # a realtime loop and a niced trainer: the machine to itself under xdist
 def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
         tmp_path: Path) -> None:
     require_ros()
@@ -60,14 +67,14 @@ def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
     history = tmp_path / 'rec_continual' / 'history.jsonl'
     argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', WEAK_TASK,
             '--checkpoint', str(weak), '--continual', '--params', str(_params(tmp_path)),
-            '--no-progress', '--timeout', '180']
+            '--no-progress', '--timeout', '300']
     env = ros_environment(fresh_domain_id())
     log = tmp_path / 'launch.log'
     with log.open('w') as out:
         launch = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
                                   cwd=tmp_path, start_new_session=True)
         try:
-            deadline = time.monotonic() + 170
+            deadline = time.monotonic() + 290
             while time.monotonic() < deadline and launch.poll() is None:
                 events = _history(history)
                 if any(e.get('decision') == 'refuse' for e in events) and any(

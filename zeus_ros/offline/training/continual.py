@@ -67,7 +67,13 @@ STEP_TOPIC = '/zeus/step'
 CORRUPTION = -1.0
 """The drill's corrupted rewards: every reward times this (negated: the opposite task). Scaled
 up (x -10) the TD errors grow so large that a weak policy's round can land anywhere, better
-included (measured once: +126 on a weak Cheetah-Run-v0 policy), so the drill stays a flip."""
+included (measured once: +126 on a weak Cheetah-Run-v0 policy), so the drill stays a flip.
+The drill also starts from fresh critics (warmed up on the corrupted rewards): a trained
+critic's values dominate a few hundred TD targets (r + gamma Q', with Q near r / (1 - gamma)),
+so an actor trained against it keeps improving on the true task whatever the rewards say
+(measured: a negated-reward round of 800 updates continuing a competent critic earned +31.5
+per episode on Cheetah-Run-v0, and the gate rightly deployed it). A critic learned from the
+corrupted rewards alone is what a reward bug produces."""
 WARMUP_ACTOR_PERIOD = 10**9
 """actor_update_freq during the critic warm-up: no warm-up update index is a multiple of it."""
 
@@ -300,14 +306,17 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
 
 
 # ---------------------------------------------------------------------- candidate
-def _agent_from(deployed: Path) -> tuple[Any, bool]:
-    """An agent that can train, from `deployed`; True when its critics are fresh."""
+def _agent_from(deployed: Path, fresh_critics: bool = False) -> tuple[Any, bool]:
+    """An agent that can train, from `deployed`; True when its critics are fresh.
+
+    A deployment export has no critics; `fresh_critics` drops those of a full checkpoint too.
+    """
     from zeus_ros.learning.agent import ZeusAgent
     from zeus_ros.learning.checkpoint import DEPLOY_MODULES, load_checkpoint
 
     loaded = load_checkpoint(deployed, load_optimizers=False)
     config = loaded.config.replace(device='cpu')
-    if not loaded.deploy:
+    if not loaded.deploy and not fresh_critics:
         full = load_checkpoint(deployed, map_location='cpu').agent
         full.config = config
         return full, False
@@ -346,7 +355,7 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
 
     begin = time.perf_counter()
     out = Path(out)
-    agent, fresh_critic = _agent_from(Path(deployed))
+    agent, fresh_critic = _agent_from(Path(deployed), fresh_critics=corrupt_rewards)
     dataset = ingest_bags([*new_bags, *old_bags])
     if dataset.task != agent.spec.task:
         raise TrainError(f'the recording holds {dataset.task}, the deployed checkpoint '
