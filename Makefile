@@ -19,7 +19,7 @@ setup:
 	@bash scripts/setup.sh
 
 demo: setup
-	@$(ENV) && python -m zeus_ros.demo $(DEMO_ARGS)
+	@$(ENV) && python -m zeus_ros.cli demo $(DEMO_ARGS)
 
 # --durations: the 20 slowest tests close every run, so the suite's cost stays visible.
 # Two pytest-xdist workers, one test file each at a time: most tests wait on ROS processes

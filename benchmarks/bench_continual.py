@@ -93,7 +93,7 @@ def _descends(pid: int, root: int) -> bool:
 def run_mode(mode: str, folder: Path, args: argparse.Namespace) -> dict[str, Any]:
     """One launch for --wall seconds; the trainer's CPU sampled every 2 s."""
     folder.mkdir(parents=True, exist_ok=True)
-    from zeus_ros.processes import DOMAIN_RANGE_ENV, fresh_domain_id, ros_env
+    from zeus_ros.system.processes import DOMAIN_RANGE_ENV, fresh_domain_id, ros_env
 
     params = _params(folder, args, mode)
     argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params), '--record',

@@ -213,7 +213,7 @@ def _spin_ring(executor: Any, ring: _Ring, cpu: Callable[[], float]) -> Round:
 @contextmanager
 def _helpers(argvs: Sequence[Sequence[str]], env: dict[str, str]) -> Iterator[list[Any]]:
     """Child processes of this script (relays, sinks), stopped on leaving; their log in /tmp."""
-    from zeus_ros.processes import start_node, stop_nodes
+    from zeus_ros.system.processes import start_node, stop_nodes
 
     with (Path(tempfile.gettempdir()) / 'zeus_bench_handover.log').open('w') as log:
         children = [start_node([sys.executable, __file__, *argv], env, stdout=log)
@@ -230,7 +230,7 @@ def rclpy_ring(rounds: int, payload_bytes: int, work: Sequence[float], executor_
     import rclpy
 
     from zeus_ros.nodes.spin import EXECUTOR_ENV, make_executor
-    from zeus_ros.processes import ros_context, ros_env
+    from zeus_ros.system.processes import ros_context, ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     env[EXECUTOR_ENV] = executor_kind
@@ -255,7 +255,7 @@ def one_process_ring(rounds: int, payload_bytes: int, work: Sequence[float], bus
 
     from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
     from zeus_ros.nodes.spin import make_executor
-    from zeus_ros.processes import ros_context, ros_env
+    from zeus_ros.system.processes import ros_context, ros_env
 
     node_class = with_intra_process(Node, IntraProcessBus()) if bus else Node
     with ros_context(int(ros_env()['ROS_DOMAIN_ID'])) as context:
@@ -301,7 +301,7 @@ def publish_cost(readers: int, rounds: int, payload_bytes: int, gap: float = 1e-
     from zeus_msgs.msg import Action
 
     from zeus_ros.nodes.topics import step_qos
-    from zeus_ros.processes import ros_context, ros_env
+    from zeus_ros.system.processes import ros_context, ros_env
 
     env = ros_env()
     sink = ['--relay', '1', '--members', '2']  # a relay whose link onwards nobody reads

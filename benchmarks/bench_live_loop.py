@@ -197,10 +197,15 @@ def live_rate(checkpoint: Path, steps: int, pixels: bool, mode: str = 'multi',
     from rclpy.executors import SingleThreadedExecutor
     from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
-    from zeus_ros.launch_defaults import CONTAINER, CONTAINER_MODULE, CONTAINER_NO_INTRA, NODES
     from zeus_ros.nodes.spin import EXECUTOR_ENV
     from zeus_ros.nodes.topics import TOPICS, step_qos
-    from zeus_ros.processes import ros_env
+    from zeus_ros.system.launch_defaults import (
+        CONTAINER,
+        CONTAINER_MODULE,
+        CONTAINER_NO_INTRA,
+        NODES,
+    )
+    from zeus_ros.system.processes import ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     if executor is not None:

@@ -100,7 +100,7 @@ def main() -> int:
     from zeus_msgs.msg import StepFeedback
 
     from zeus_ros.nodes.topics import TOPICS, step_qos
-    from zeus_ros.processes import ros_env
+    from zeus_ros.system.processes import ros_env
 
     with tempfile.TemporaryDirectory() as tmp:
         env = ros_env(domain)

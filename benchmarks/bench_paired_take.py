@@ -23,7 +23,7 @@ def cost_us(kind: str, messages: int, domain: int) -> float:
     from zeus_ros.nodes.senders import SenderSubscription
     from zeus_ros.nodes.spin import make_executor
     from zeus_ros.nodes.topics import step_qos
-    from zeus_ros.processes import ros_context
+    from zeus_ros.system.processes import ros_context
 
     with ros_context(domain) as context:
         talker = rclpy.create_node('talker', context=context)
@@ -49,7 +49,7 @@ def cost_us(kind: str, messages: int, domain: int) -> float:
 
 def main() -> None:
     """Print the cost of each kind, twice, alternately."""
-    from zeus_ros.processes import fresh_domain_id
+    from zeus_ros.system.processes import fresh_domain_id
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--messages', type=int, default=3000)

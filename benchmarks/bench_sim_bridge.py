@@ -52,7 +52,7 @@ def node_rate(task_name: str, steps: int, pixels: bool) -> float:
     from zeus_msgs.msg import Action, StateVector
 
     from zeus_ros.nodes.topics import TOPICS, step_qos
-    from zeus_ros.processes import ros_env
+    from zeus_ros.system.processes import ros_env
 
     env = ros_env()  # $ROS_DOMAIN_ID, else one from $ZEUS_DOMAIN_RANGE; loopback only
     domain = int(env['ROS_DOMAIN_ID'])

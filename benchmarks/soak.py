@@ -25,7 +25,7 @@ import time
 
 import yaml
 
-from zeus_ros.processes import group_domain_id
+from zeus_ros.system.processes import group_domain_id
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = {'sim_bridge': 'sim_bridge_node', 'context_estimator': 'context_estimator_node',

@@ -11,7 +11,7 @@ r"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder), se
 Runs from any folder with only the installed files: the params file defaults to
 share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's
 folder, then the package share. Arguments, defaults and parameter overrides come from
-`zeus_ros.launch_defaults`, which `zeus launch` uses too: the two cannot drift apart.
+`zeus_ros.system.launch_defaults`, which `zeus launch` uses too: the two cannot drift apart.
 `ros2 launch zeus_ros zeus.launch.py --show-args` lists the arguments. Any node but the recorder
 and the continual trainer exiting shuts the whole launch down. Discovery scope and domain come
 from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID before launching).
@@ -26,7 +26,7 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from zeus_ros import launch_defaults
+from zeus_ros.system import launch_defaults
 
 
 def launch_nodes(context: LaunchContext) -> list:
@@ -76,7 +76,7 @@ def dds_env() -> dict[str, str]:
     """The loopback-only Fast DDS profile for the nodes, unless the user has a profile set."""
     import os
 
-    from zeus_ros.processes import loopback_dds_profile
+    from zeus_ros.system.processes import loopback_dds_profile
 
     profile = loopback_dds_profile()
     if profile is None or 'FASTRTPS_DEFAULT_PROFILES_FILE' in os.environ:

@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from zeus_ros import processes
+from zeus_ros.system import processes
 
 from ros_harness import ProcessGroup, fresh_domain_id, require_ros
 

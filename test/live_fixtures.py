@@ -62,7 +62,7 @@ def start_gates(name: str, group: tuple[str, ...] = LOOP_GROUP) -> tuple[str, ..
     Nodes started one by one need them as much as a launch does: without them a reader whose
     side of a match comes late (the recorder's, on a loaded machine) misses the first steps.
     """
-    from zeus_ros.launch_defaults import start_args
+    from zeus_ros.system.launch_defaults import start_args
 
     return tuple(start_args(name, group)[1::2])  # without the '-p's
 

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import Any
 
-from zeus_ros import processes
+from zeus_ros.system import processes
 
 REPO = Path(__file__).resolve().parents[1]
 LOG_DIR = REPO / 'log' / 'test-processes' / os.environ.get('PYTEST_XDIST_WORKER', '')
@@ -160,7 +160,7 @@ def python_module(module: str, *args: str) -> list[str]:
 
 
 ros_context = processes.ros_context
-"""An rclpy context of its own in the test process (zeus_ros.processes)."""
+"""An rclpy context of its own in the test process (zeus_ros.system.processes)."""
 
 
 @contextlib.contextmanager

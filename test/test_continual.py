@@ -15,8 +15,8 @@ from continual_fixtures import WEAK_TASK, record, weak_checkpoint
 import pytest
 import torch
 
-from zeus_ros.launch_defaults import zoo_checkpoint
 from zeus_ros.offline.training import continual as c
+from zeus_ros.system.launch_defaults import zoo_checkpoint
 
 BIAS = 'Cheetah-Bias-v0'
 

@@ -106,7 +106,7 @@ def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
 def test_continual_plan_points_the_trainer_at_the_recording_and_the_checkpoint(
         tmp_path: Path) -> None:
     """Both launchers get the trainer from launch_defaults; step 0 never waits for it."""
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     full = str(FULL_RUN_V0)
     plan = d.plan_from_arguments({'continual': 'true', 'task': WEAK_TASK, 'checkpoint': full,

@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from zeus_ros.demo import DEFAULT_TASK, default_checkpoint
+from zeus_ros.cli.demo import DEFAULT_TASK, default_checkpoint
 from zeus_ros.offline.evaluation.metrics import read_csv
 
 from ros_harness import fresh_domain_id, python_module, require_ros, ros_environment
@@ -23,7 +23,7 @@ def test_demo_compares_the_live_and_the_frozen_context_on_one_schedule(tmp_path:
     require_ros()
     assert default_checkpoint(DEFAULT_TASK).is_file()
     out = tmp_path / 'demo'
-    done = subprocess.run(python_module('zeus_ros.demo', '--steps', '60', '--seeds', '1',
+    done = subprocess.run(python_module('zeus_ros.cli.demo', '--steps', '60', '--seeds', '1',
                                         '--out', str(out)),
                           env=ros_environment(fresh_domain_id()), capture_output=True,
                           text=True, timeout=360, check=False)
@@ -58,7 +58,7 @@ def test_the_pixel_demo_runs_the_zoo_pixel_checkpoint_on_rendered_frames(tmp_pat
     """
     require_ros()
     out = tmp_path / 'demo'
-    done = subprocess.run(python_module('zeus_ros.demo', '--obs', 'pixels', '--steps', '40',
+    done = subprocess.run(python_module('zeus_ros.cli.demo', '--obs', 'pixels', '--steps', '40',
                                         '--seeds', '1', '--out', str(out)),
                           env=ros_environment(fresh_domain_id()), capture_output=True,
                           text=True, timeout=300, check=False)
@@ -74,7 +74,7 @@ def test_the_pixel_demo_runs_the_zoo_pixel_checkpoint_on_rendered_frames(tmp_pat
 
 def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> None:
     """The demo's schedule follows the task's episode length (no per-task special case)."""
-    from zeus_ros.demo import schedule_lengths
+    from zeus_ros.cli.demo import schedule_lengths
 
     assert schedule_lengths('Cheetah-Run-v1') == (20, 400)  # 40-step episodes
     assert schedule_lengths('Cheetah-Bias-v0') == (20, 400)
@@ -83,7 +83,7 @@ def test_short_episodes_switch_mid_episode_and_long_ones_every_150_steps() -> No
 
 def test_a_family_without_a_zoo_checkpoint_is_refused_in_one_line() -> None:
     """`zeus demo --task Walker-Walk-v0` names the families that have one; nothing starts."""
-    done = subprocess.run(python_module('zeus_ros.demo', '--task', 'Walker-Walk-v0'),
+    done = subprocess.run(python_module('zeus_ros.cli.demo', '--task', 'Walker-Walk-v0'),
                           capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 2
     assert 'has no zoo checkpoint (families with one: Cheetah-Run-v1, Cheetah-Motor-v0, ' \
@@ -95,7 +95,7 @@ def test_sim_bridge_waits_for_the_demo_viewer_which_waits_for_the_answers() -> N
     """The viewer is named among sim_bridge's observers; it expects every answer of the group."""
     import argparse
 
-    from zeus_ros.demo import VIEWER, build_nodes, viewer_expects
+    from zeus_ros.cli.demo import VIEWER, build_nodes, viewer_expects
 
     args = argparse.Namespace(task=DEFAULT_TASK, steps=60, seed=0, every=20, record=False,
                               pixels=False)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from zeus_ros.demo_summary import (
+from zeus_ros.cli.demo_summary import (
     adaptation_rows,
     plot_adaptation,
     summarize_adaptation,

@@ -117,7 +117,7 @@ def test_setup_installs_the_zoo_and_nothing_of_the_archive() -> None:
 
 def test_launch_with_a_task_runs_its_schedule_and_zoo_checkpoint() -> None:
     """`zeus launch --task` / task:= set sim_bridge's family and schedule, and the pair."""
-    from zeus_ros import launch_defaults
+    from zeus_ros.system import launch_defaults
 
     plan = launch_defaults.plan_from_arguments({'task': 'Cheetah-Motor-v0'})
     nodes = {node.name: node.parameters for node in plan.nodes}
@@ -138,7 +138,7 @@ def test_launch_with_a_task_runs_its_schedule_and_zoo_checkpoint() -> None:
 
 def test_launch_with_pixels_renders_frames_for_the_zoo_pixel_checkpoint() -> None:
     """`zeus launch --obs pixels` / obs:=pixels: sim_bridge's frames and the pixel pair."""
-    from zeus_ros import launch_defaults
+    from zeus_ros.system import launch_defaults
 
     plan = launch_defaults.plan_from_arguments({'obs': 'pixels'})
     nodes = {node.name: node.parameters for node in plan.nodes}

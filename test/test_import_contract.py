@@ -14,8 +14,14 @@ hold on it:
   nothing from nodes/, offline/ or the command line (cli/);
 - ROS (rclpy, message packages, rosbag2_py, rosidl, ament, launch) is imported only in nodes/
   and the live tools named in LIVE_TOOLS;
-- every command line lives in cli/ (one module per command): nothing else imports cli/, and
-  the libraries (offline/, learning/, bags/, sim_bridge/) define no `main`.
+- every command line lives in cli/ (one module per command, `zeus launch`, `zeus inspect` and
+  `zeus demo` included): nothing else imports cli/, and no module outside cli/ and the node
+  executables of nodes/ defines a `main` (the libraries offline/, learning/, bags/,
+  sim_bridge/, the live system's system/, the top-level utilities);
+- what runs the live system (the node plan and its defaults, processes, respawn, progress)
+  lives in system/, which imports nothing from offline/;
+- the top of zeus_ros/ holds only the shared utilities named in TOP_LEVEL_UTILITIES: a new
+  module goes into its room (cli/, system/, nodes/, offline/, learning/, bags/).
 """
 
 from __future__ import annotations
@@ -29,10 +35,10 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ('zeus_ros', 'sim_bridge')
 
 LIVE_TOOLS = frozenset({
-    'zeus_ros.inspector',  # `zeus inspect`: subscribes to the context topics
-    'zeus_ros.launch_progress',  # `zeus launch`: watches the nodes come up
-    'zeus_ros.processes',  # starts and stops the node processes, waits for the graph
-    'zeus_ros.launch_defaults',  # the package share through ament_index (optional import)
+    'zeus_ros.cli.inspect_topics',  # `zeus inspect`: subscribes to the context topics
+    'zeus_ros.system.launch_progress',  # `zeus launch`: watches the nodes come up
+    'zeus_ros.system.processes',  # starts and stops the node processes, waits for the graph
+    'zeus_ros.system.launch_defaults',  # the package share via ament_index (optional import)
 })
 """Modules outside nodes/ that may import ROS: the tools that talk to a running graph."""
 
@@ -46,6 +52,20 @@ so it runs the ROS-free training library; it imports that library's continual ro
 checks and nothing else of offline/."""
 
 LIBRARIES = ('zeus_ros.offline', 'zeus_ros.learning', 'zeus_ros.bags', 'sim_bridge')
+
+WITH_MAIN = ('zeus_ros.cli', 'zeus_ros.nodes')
+"""Where a `main` may be: the commands, and the node executables (console scripts)."""
+
+TOP_LEVEL_UTILITIES = frozenset({
+    'zeus_ros.atomic_file',  # the one atomic write
+    'zeus_ros.cli_args',  # argument types and errors; input_path is also read by training
+    'zeus_ros.config_sets',  # --set KEY=VALUE on a config; also the sweep's grids
+    'zeus_ros.gym_env',  # the zeus_ros/<task> Gymnasium registrations
+    'zeus_ros.labels',  # task and context labels for tables and plots
+    'zeus_ros.step_log',  # per-step records, context segments, plots (inspect, demo)
+    'zeus_ros.yaml_text',  # a user's YAML file, with a one-line error saying where
+})
+"""The modules at the top of zeus_ros/: utilities shared by several rooms, no command, no ROS."""
 
 _ROS_TOP_LEVEL = frozenset({'rclpy', 'rosbag2_py', 'ament_index_python', 'launch',
                             'launch_ros', 'launch_testing', 'message_filters', 'rmw',
@@ -209,11 +229,29 @@ def test_commands_live_in_one_wing() -> None:
     assert [edge for edge in _edges('zeus_ros', 'zeus_ros.cli')
             if not _under(edge.split(' -> ')[0], 'zeus_ros.cli')] == []
     with_main = sorted(
-        _module_name(path) for library in LIBRARIES
-        for path in (ROOT / library.replace('.', '/')).rglob('*.py')
-        if any(isinstance(node, ast.FunctionDef) and node.name == 'main'
-               for node in ast.parse(path.read_text(encoding='utf-8')).body))
+        _module_name(path) for package in PACKAGES for path in (ROOT / package).rglob('*.py')
+        if not any(_under(_module_name(path), room) for room in WITH_MAIN)
+        and any(isinstance(node, ast.FunctionDef) and node.name == 'main'
+                for node in ast.parse(path.read_text(encoding='utf-8')).body))
     assert with_main == []
+    assert not any(_under(module, room) for module in with_main for room in LIBRARIES)
+
+
+def test_the_live_system_is_one_room() -> None:
+    """system/ (plan, processes, respawn, progress) runs the nodes, never the offline tools."""
+    inside, _ = import_graph()
+    assert {'zeus_ros.system.launch_defaults', 'zeus_ros.system.processes',
+            'zeus_ros.system.respawn', 'zeus_ros.system.launch_progress'} <= set(inside)
+    assert _edges('zeus_ros.system', 'zeus_ros.offline') == []
+
+
+def test_the_top_level_holds_only_utilities() -> None:
+    """zeus_ros/*.py: the shared utilities, no command, no launch plumbing, no ROS."""
+    _, outside = import_graph()
+    top = {_module_name(path) for path in (ROOT / 'zeus_ros').glob('*.py')} - {'zeus_ros'}
+    assert top == TOP_LEVEL_UTILITIES
+    assert sorted(f'{module} imports {name}' for module in top for name in outside[module]
+                  if is_ros(name)) == []
 
 
 def test_the_rules_catch_what_they_forbid() -> None:

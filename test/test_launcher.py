@@ -54,7 +54,7 @@ def test_the_group_runs_until_the_time_limit_then_stops_cleanly(tmp_path) -> Non
 
 def test_defaults_are_the_installed_params_and_checkpoint() -> None:
     """No arguments: the installed zeus.yaml, its checkpoint as an absolute installed path."""
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     plan = d.plan()
     share = d.share_dir()
@@ -80,7 +80,7 @@ def test_record_counts_the_recorder_and_arguments_apply_to_every_node(tmp_path: 
 
     namespace, use_sim_time, checkpoint and log_level reach every node they concern.
     """
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     ckpt = tmp_path / 'mine.pt'
     ckpt.write_bytes(b'x')
@@ -122,7 +122,7 @@ def test_clock_and_pairing_peers_follow_the_namespace(tmp_path: Path) -> None:
 
     A peer the params file names is left as the file says; a bad clock is one clear error.
     """
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     plan = d.plan_from_arguments({'namespace': 'r1', 'use_sim_time': 'true',
                                   'clock': 'namespace', 'record': 'true'})
@@ -151,7 +151,7 @@ def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
 
     A missing one is an error naming every place looked in.
     """
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     (tmp_path / 'cfg').mkdir()
     (tmp_path / 'cfg' / 'mine.pt').write_bytes(b'x')
@@ -199,7 +199,7 @@ def _stub_launch_modules(monkeypatch: Any) -> None:
 
 def _installed_launch_description(monkeypatch: Any) -> list[Any]:
     """The actions of the installed zeus.launch.py (launch modules stubbed: not on PyPI)."""
-    from zeus_ros import launch_defaults as d
+    from zeus_ros.system import launch_defaults as d
 
     _stub_launch_modules(monkeypatch)
     installed = d.share_dir() / 'launch' / 'zeus.launch.py'
@@ -216,8 +216,8 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     It declares the shared arguments; for record:=true in a namespace on sim time it builds the
     nodes, parameters and ROS arguments `zeus launch` gives its children.
     """
-    from zeus_ros import launch_defaults as d
-    from zeus_ros.launcher import plan_processes
+    from zeus_ros.cli.launch import plan_processes
+    from zeus_ros.system import launch_defaults as d
 
     *declared, opaque = _installed_launch_description(monkeypatch)
     defaults = {a.args[0]: a.kwargs['default_value'] for a in declared}
@@ -297,9 +297,9 @@ def test_container_arguments_give_each_node_its_own(monkeypatch: Any) -> None:
 
     Inside, each node has the --ros-args its own process would get; bad arguments are refused.
     """
-    from zeus_ros import launch_defaults as d
-    from zeus_ros.launcher import plan_processes
+    from zeus_ros.cli.launch import plan_processes
     from zeus_ros.nodes.container import parse_container_args
+    from zeus_ros.system import launch_defaults as d
 
     *declared, opaque = _installed_launch_description(monkeypatch)
     context = {**{a.args[0]: a.kwargs['default_value'] for a in declared},
@@ -337,8 +337,8 @@ def test_a_node_finds_the_shipped_checkpoint_from_any_folder(tmp_path: Path,
     """
     import hashlib
 
-    from zeus_ros.launch_defaults import share_dir
     from zeus_ros.nodes.agent_loader import load_inference_agent
+    from zeus_ros.system.launch_defaults import share_dir
 
     monkeypatch.chdir(tmp_path)
     relative = 'checkpoints/cheetah_bias_v0/zeus.pt'  # the zoo: what the package installs
@@ -362,8 +362,8 @@ def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) 
     import shutil
     import weakref
 
-    from zeus_ros.launch_defaults import share_dir
     from zeus_ros.nodes.agent_loader import load_inference_agent
+    from zeus_ros.system.launch_defaults import share_dir
 
     shipped = share_dir() / 'checkpoints/cheetah_bias_v0/zeus.pt'
     copy = tmp_path / 'copy.pt'

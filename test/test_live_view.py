@@ -98,7 +98,7 @@ def _publish_steps(stop: threading.Event) -> None:
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
     from zeus_ros.nodes.topics import TOPICS, step_qos
-    from zeus_ros.processes import ros_context
+    from zeus_ros.system.processes import ros_context
 
     with ros_context(DOMAIN_CTRL_C) as context:
         import rclpy
@@ -174,7 +174,7 @@ def test_a_step_without_an_estimate_means_no_estimator_only_once_discovery_settl
     """
     from zeus_msgs.msg import ContextTruth, StepFeedback
 
-    from zeus_ros.inspector import DISCOVERY_SETTLE_S, Inspector
+    from zeus_ros.cli.inspect_topics import DISCOVERY_SETTLE_S, Inspector
 
     with pytest.raises(ValueError, match=r"expect names \['zeus/bogus'\]"):
         Inspector(expect=['zeus/bogus'])

@@ -111,8 +111,8 @@ def test_objectives_list_only_config_options() -> None:
 NAMES_NOT_LOGIC = {
     'zeus_ros/learning/config.py': "stored configs from before the registry: old 'oracle' is "
                                    "today's 'oracle_sac' (a rename, read once at load)",
-    'zeus_ros/launch_defaults.py': "zoo file naming: a family's checkpoint is the zeus one, "
-                                   'the others sit beside it as <method>.pt',
+    'zeus_ros/system/launch_defaults.py': "zoo file naming: a family's checkpoint is the zeus "
+                                          'one, the others sit beside it as <method>.pt',
 }
 """Modules where a method name is compared as a name (file names, renames), not as logic."""
 

@@ -1,4 +1,4 @@
-"""zeus_ros.processes: the one way launch, demo and tests start and stop node processes."""
+"""zeus_ros.system.processes: the one way launch, demo and tests start and stop node processes."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from zeus_ros import processes
+from zeus_ros.system import processes
 
 # A child that exits 0 on SIGINT unless told to ignore it (and/or SIGTERM), once ready.
 CHILD = """

@@ -1,4 +1,4 @@
-"""zeus launch's restart policy (zeus_ros/respawn.py): limits, window, back-off, where it is set.
+"""zeus launch's restart policy (system/respawn.py): limits, window, back-off, where it is set.
 
 The restarts themselves run with real processes in test/faults/test_fault_logging.py.
 """
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from zeus_ros import launcher
-from zeus_ros.respawn import (
+from zeus_ros.cli import launch
+from zeus_ros.system.respawn import (
     DEFAULT_POLICIES,
     RespawnPolicy,
     RespawnState,
@@ -61,16 +61,16 @@ def test_a_bad_params_section_is_named(params: dict, message: str) -> None:
                                    'policy=1/-5'])
 def test_a_bad_respawn_flag_is_one_line_exit_2(value: str, tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
-    assert launcher.main(['--respawn', value, '--timeout', '1', '--no-progress']) == 2
+    assert launch.main(['--respawn', value, '--timeout', '1', '--no-progress']) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f'zeus launch: --respawn {value}:') and len(err.splitlines()) == 1, err
 
 
-def _group(tmp_path: Path, **argv: str) -> list[launcher.NodeProcess]:
+def _group(tmp_path: Path, **argv: str) -> list[launch.NodeProcess]:
     """Stand-in nodes: plain processes running the given Python code (no ROS needed here)."""
     import sys
 
-    return [launcher.NodeProcess(name, [sys.executable, '-c', code]) for name, code in
+    return [launch.NodeProcess(name, [sys.executable, '-c', code]) for name, code in
             argv.items()]
 
 
@@ -82,7 +82,7 @@ def test_a_crashing_policy_is_restarted_up_to_its_limit_then_the_group_stops(
 
     nodes = _group(tmp_path, sim_bridge='import time; time.sleep(30)',
                    policy='import sys; sys.exit(1)')
-    supervisor = launcher.Supervisor(nodes, dict(os.environ), out=sys.stdout, policies={
+    supervisor = launch.Supervisor(nodes, dict(os.environ), out=sys.stdout, policies={
         'policy': RespawnPolicy(limit=2, window_s=60.0, backoff_s=0.1)})
     supervisor.start()
     try:
@@ -103,7 +103,7 @@ def test_a_restarted_recorder_that_refuses_to_start_does_not_stop_the_loop(
     nodes = _group(tmp_path, sim_bridge='import time; time.sleep(30)', recorder=(
         f'import pathlib, sys; m = pathlib.Path({str(marker)!r})\n'
         'if m.exists(): sys.exit(2)\nm.touch(); sys.exit(1)'))
-    supervisor = launcher.Supervisor(nodes, dict(os.environ), out=sys.stdout)
+    supervisor = launch.Supervisor(nodes, dict(os.environ), out=sys.stdout)
     supervisor.start()
     try:
         assert supervisor.wait(timeout=3) == (None, 0)  # the time limit, not a node's exit

@@ -161,7 +161,7 @@ def test_both_launchers_put_robot_bridge_in_sim_bridges_place(tmp_path: Path) ->
 
     Without a checkpoint the random policy records alone (its task: the robot's params file).
     """
-    from zeus_ros.launch_defaults import plan, plan_from_arguments
+    from zeus_ros.system.launch_defaults import plan, plan_from_arguments
 
     checkpoint = tmp_path / 'arm.pt'
     checkpoint.write_bytes(b'')

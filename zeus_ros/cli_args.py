@@ -58,7 +58,7 @@ def input_path(value: str | os.PathLike[str], flag: str) -> Path:
     As given (absolute, or relative to the working directory), else relative to the installed
     package share; a ValueError names both places.
     """
-    from zeus_ros.launch_defaults import share_dir
+    from zeus_ros.system.launch_defaults import share_dir
 
     path = Path(os.path.expanduser(os.fspath(value)))
     if path.is_absolute() or path.exists():

@@ -14,8 +14,7 @@ from typing import Any
 import pytest
 import torch
 
-from zeus_ros import demo, launcher
-from zeus_ros.cli import collect, loop, train
+from zeus_ros.cli import collect, demo, launch, loop, train
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.errors import CheckpointError
 
@@ -162,7 +161,7 @@ def test_launch_refuses_a_garbage_params_file_before_starting_nodes(
     """What rcl would refuse in every node (a traceback each) is one line from zeus launch."""
     params = tmp_path / 'params.yaml'
     params.write_bytes(text)
-    assert launcher.main(['--params', str(params), '--timeout', '1']) == 2
+    assert launch.main(['--params', str(params), '--timeout', '1']) == 2
     _one_line(capsys, f'zeus launch: params file {params}: ', needle)
 
 

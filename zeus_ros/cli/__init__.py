@@ -1,7 +1,8 @@
 """The `zeus` command: one entry point for the record -> retrain -> redeploy loop.
 
 Each subcommand lives in its own module with a `main(argv) -> int` (the command line of a
-library function: zeus_ros/cli/<command>.py where it has moved here already); this file only
+library function, or of the live system in zeus_ros/system/): zeus_ros/cli/<command>.py, all
+of them here (`zeus inspect` is inspect_topics.py, `zeus eval` evaluate.py); this file only
 dispatches, so `zeus --help` stays fast (heavy imports happen inside the chosen subcommand).
 """
 
@@ -25,10 +26,10 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                 'a pixel student from a state teacher (DAgger rounds, no RL)'),
     'loop': ('zeus_ros.cli.loop', 'random collection -> train -> collect -> retrain'),
     'sweep': ('zeus_ros.cli.sweep', 'tasks x methods x seeds of loop + eval on Ray'),
-    'launch': ('zeus_ros.launcher', 'start sim_bridge, context_estimator, policy (+recorder)'),
-    'inspect': ('zeus_ros.inspector', 'live view of the context topics (subscribe only)'),
+    'launch': ('zeus_ros.cli.launch', 'start sim_bridge, context_estimator, policy (+recorder)'),
+    'inspect': ('zeus_ros.cli.inspect_topics', 'live view of the context topics (subscribe only)'),
     'recover': ('zeus_ros.cli.recover', 'restore a bag cut off by a crash'),
-    'demo': ('zeus_ros.demo', 'the live demo of the README'),
+    'demo': ('zeus_ros.cli.demo', 'the live demo of the README'),
 }
 
 

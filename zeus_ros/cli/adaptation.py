@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
         reports = [('yours', mine)]
         other = None
         if args.against == 'zoo':
-            from zeus_ros.launch_defaults import zoo_checkpoint
+            from zeus_ros.system.launch_defaults import zoo_checkpoint
 
             try:
                 other = zoo_checkpoint(mine.task)

@@ -28,10 +28,10 @@ import weakref
 
 import torch
 
-from zeus_ros.launch_defaults import resolve_path
 from zeus_ros.learning.checkpoint import CheckpointError
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.learning.readout import ContextReadout, NoveltyMonitor, monitors_from_extra
+from zeus_ros.system.launch_defaults import resolve_path
 
 __all__ = ['LoadedAgent', 'check_swappable', 'load_inference_agent']
 

@@ -26,9 +26,9 @@ import importlib
 import sys
 from typing import TYPE_CHECKING
 
-from zeus_ros.launch_defaults import CONTAINER_NO_INTRA, NODES
 from zeus_ros.nodes.intra_process import IntraProcessBus, with_intra_process
 from zeus_ros.nodes.spin import run_nodes
+from zeus_ros.system.launch_defaults import CONTAINER_NO_INTRA, NODES
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -278,11 +278,11 @@ def share_dir() -> Path:
             get_package_share_directory,
         )
     except ImportError:
-        return Path(__file__).resolve().parents[1]
+        return Path(__file__).resolve().parents[2]
     try:
         return Path(get_package_share_directory(PACKAGE))
     except PackageNotFoundError:
-        return Path(__file__).resolve().parents[1]
+        return Path(__file__).resolve().parents[2]
 
 
 def task_overrides(task: str, checkpoint: str = '') -> dict[str, Any]:
@@ -349,7 +349,7 @@ def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
         raise ValueError(f'{task} has no zoo checkpoint (families with one: {", ".join(zoo)}); '
                          'pass a checkpoint you trained')
     relative = Path(declared).with_name(f'{method}.pt') if method != 'zeus' else Path(declared)
-    candidates = [Path(__file__).resolve().parents[1] / 'checkpoints' / relative,
+    candidates = [Path(__file__).resolve().parents[2] / 'checkpoints' / relative,
                   share_dir() / 'checkpoints' / relative]
     found = next((path for path in candidates if path.is_file()), None)
     if found is None:

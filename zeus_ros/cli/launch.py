@@ -4,13 +4,13 @@ Every child gets loopback-only discovery and one shared domain id, its output is
 a `[name]` prefix, and the whole group stops on Ctrl-C or as soon as one node of the control
 loop exits for good: a non-zero exit names the node that died. A dead context estimator, policy
 or recorder is restarted (by default up to 3 times per 60 s, after a 1 s back-off that doubles;
-per node from the params file's `/**/zeus_launch` section or --respawn, zeus_ros/respawn.py)
+per node from the params file's `/**/zeus_launch` section or --respawn, zeus_ros/system/respawn.py)
 while the bridge applies its safe action; logging never stops control: the recorder restarts
 into a new bag, a recorder that cannot write retries on its own, and every gap is reported.
 Exit status: 0 clean, 1 a node died for good or failed to stop, 3 the loop ran but degraded (a
 node was restarted or the recording has gaps; an unfinished bag is named, `zeus recover`
 closes it). Nodes, parameters
-and defaults come from `zeus_ros.launch_defaults`, exactly as for `ros2 launch zeus_ros
+and defaults come from `zeus_ros.system.launch_defaults`, exactly as for `ros2 launch zeus_ros
 zeus.launch.py`: without --params the installed share/zeus_ros/params/zeus.yaml applies, from
 any folder.
 """
@@ -29,9 +29,9 @@ import threading
 import time
 from typing import IO
 
-from zeus_ros import launch_defaults
 from zeus_ros.cli_args import ZeusArgumentParser, at_least
-from zeus_ros.launch_defaults import (
+from zeus_ros.system import launch_defaults
+from zeus_ros.system.launch_defaults import (
     CONTAINER,
     CONTAINER_MODULE,
     NODES,
@@ -39,8 +39,8 @@ from zeus_ros.launch_defaults import (
     TRAINER,
     LaunchPlan,
 )
-from zeus_ros.processes import ros_env, start_node, stop_nodes
-from zeus_ros.respawn import (
+from zeus_ros.system.processes import ros_env, start_node, stop_nodes
+from zeus_ros.system.respawn import (
     DEFAULT_POLICIES,
     RespawnPolicy,
     RespawnState,
@@ -425,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     env = {**ros_env(args.domain_id), **launch_defaults.launch_env()}  # + the pairing key
     if args.no_progress:
         return run_group(plan_processes(launch), env, args.timeout, policies=policies)
-    from zeus_ros.launch_progress import Progress
+    from zeus_ros.system.launch_progress import Progress
 
     progress = Progress(env, launch.namespace)
     try:

@@ -1,6 +1,6 @@
 """Node processes with the project's environment, started and stopped one way.
 
-`zeus launch` (launcher.Supervisor), the demo (through the same Supervisor) and the test harness
+`zeus launch` (cli.launch.Supervisor), the demo (through the same Supervisor) and the test harness
 (test/ros_harness.py) all start their ROS children here: loopback-only discovery, one domain id
 for the group, unbuffered output, each child in its own session (a signal reaches the node and
 whatever it spawned). Stopping escalates: SIGINT (the node closes its bag or files), then SIGTERM
@@ -55,9 +55,9 @@ def loopback_dds_profile() -> Path | None:
 
     A user's own FASTRTPS_DEFAULT_PROFILES_FILE (several machines) is left as it is by callers.
     """
-    from zeus_ros.launch_defaults import share_dir
+    from zeus_ros.system.launch_defaults import share_dir
 
-    for base in (Path(__file__).resolve().parents[1], share_dir()):
+    for base in (Path(__file__).resolve().parents[2], share_dir()):
         candidate = base / 'params' / 'dds' / 'fastdds_loopback.xml'
         if candidate.is_file():
             return candidate

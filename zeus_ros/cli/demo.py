@@ -28,23 +28,23 @@ from typing import Any
 import numpy as np
 
 from sim_bridge.registry import TASK_NAMES
-from zeus_ros.cli_args import ZeusArgumentParser, at_least
-from zeus_ros.demo_summary import (
+from zeus_ros.cli.demo_summary import (
     adaptation_rows,
     plot_adaptation,
     summarize_adaptation,
     write_rows,
 )
-from zeus_ros.inspector import Inspector
-from zeus_ros.launch_defaults import (
+from zeus_ros.cli.inspect_topics import Inspector
+from zeus_ros.cli.launch import NodeProcess, Supervisor, node_argv
+from zeus_ros.cli_args import ZeusArgumentParser, at_least
+from zeus_ros.step_log import format_segments, percentile, plot_inspection
+from zeus_ros.system.launch_defaults import (
     RECORDED_ANSWERS,
     pixel_checkpoint,
     start_args,
     zoo_checkpoint,
 )
-from zeus_ros.launcher import NodeProcess, Supervisor, node_argv
-from zeus_ros.processes import group_domain_id, ros_env
-from zeus_ros.step_log import format_segments, percentile, plot_inspection
+from zeus_ros.system.processes import group_domain_id, ros_env
 
 DEFAULT_TASK = 'Cheetah-Bias-v0'
 """The demo's family: physics that changes (a motor bias), where the zoo's ZeUS policy reads its
