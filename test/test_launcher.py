@@ -264,6 +264,7 @@ def _recorded_steps(cwd: Path) -> list[int]:
                       for conn, _, raw in reader.messages() if conn.topic == '/zeus/step')
 
 
+@pytest.mark.alone  # every step of a free-running lockstep loop in the recorder's bag
 def test_zeus_launch_without_params_runs_from_any_folder(tmp_path: Path) -> None:
     """`zeus launch --record` without --params, outside the repository, runs the installed files.
 
@@ -276,6 +277,7 @@ def test_zeus_launch_without_params_runs_from_any_folder(tmp_path: Path) -> None
     assert len(steps) > 50 and steps == list(range(len(steps))), steps[:10]
 
 
+@pytest.mark.alone  # every step of a free-running lockstep loop in the recorder's bag
 def test_single_process_runs_the_same_loop_in_one_process(tmp_path: Path) -> None:
     """--single-process: one container child holds the three nodes under their own names.
 
