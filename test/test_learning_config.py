@@ -138,3 +138,13 @@ def test_a_task_files_training_section_sets_the_auto_values(tmp_path: Path) -> N
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match='training: alpha_psi: expected a number'):
         resolve_config(ZeusConfig(), str(path))
+
+
+def test_pixels_cpu_is_the_paper_config_made_small() -> None:
+    """pixels_cpu.yaml (issue 36, route b) changes sizes and the shift, keeps the paper's rest."""
+    paper = load_config(PARAMS / 'pixels_paper.yaml')
+    cpu = load_config(PARAMS / 'pixels_cpu.yaml')
+    assert cpu.obs_kind == 'pixels' and cpu.augment_shift == 4 and paper.augment_shift == 0
+    assert (cpu.num_conv_layers, cpu.num_filters, cpu.batch_size, cpu.device) == (2, 8, 32, 'cpu')
+    assert (cpu.method, cpu.k, cpu.critic_tau, cpu.actor_lr) == \
+        (paper.method, paper.k, paper.critic_tau, paper.actor_lr)

@@ -33,6 +33,7 @@ import torch
 from torch import nn
 import torch.nn.functional as F  # noqa: N812
 
+from zeus_ros.learning.augment import random_shift
 from zeus_ros.learning.batch import HistoryBatch
 from zeus_ros.learning.config import ZeusConfig, resolve_config
 from zeus_ros.learning.context import ContextEncoder, ContextNormalizer, HistoryFeatures
@@ -153,6 +154,8 @@ class ZeusAgent:
                                       requires_grad=True)
         self.target_entropy = -float(a_dim)
         self._acting_error: torch.Tensor | None = None  # context_noise_steps > 0 in act()
+        # Draws the augment_shift offsets; unused (no draw at all) when augment_shift is 0.
+        self._shift_rng = np.random.default_rng(cfg.seed)
         self.optimizers = self._make_optimizers() if optimizers else {}
 
     def _make_optimizers(self) -> dict[str, torch.optim.Optimizer]:
@@ -301,6 +304,28 @@ class ZeusAgent:
                 raise ValueError(f'{name}.{field} has shape {found}, expected {shape} '
                                  f'(task {spec.task}, k={k})')
 
+    def augment(self, batch: HistoryBatch) -> HistoryBatch:
+        """The batch with its frames shifted (config.augment_shift; DrQ), or itself when off.
+
+        One shift per sample for all its frames (history, o_t, o_{t+1} and the model's
+        transition): the camera moves, the window stays consistent, so the history's chaining
+        (history_features) and H_{t+1} = H_t + (o_t, a_t, r, o_{t+1}) still hold.
+        """
+        pad = self.config.augment_shift
+        if pad <= 0 or self.spec.obs_kind != 'pixels':
+            return batch
+        names = ['obs', 'next_obs', *(['model_obs', 'model_next_obs']
+                                      if batch.model_obs is not None else [])]
+        k = batch.hist_obs.shape[1]
+        frames = torch.cat([batch.hist_obs, batch.hist_next_obs,
+                            *(getattr(batch, name).unsqueeze(1) for name in names)], dim=1)
+        shifted = random_shift(frames, pad, self._shift_rng)
+        fields = {name: getattr(batch, name) for name in batch.__slots__}
+        fields['hist_obs'], fields['hist_next_obs'] = shifted[:, :k], shifted[:, k:2 * k]
+        for i, name in enumerate(names):
+            fields[name] = shifted[:, 2 * k + i]
+        return HistoryBatch(**fields)
+
     # ------------------------------------------------------------------ update
     def update(self, batch: HistoryBatch, pair: HistoryBatch | None, step: int
                ) -> dict[str, float]:
@@ -320,7 +345,7 @@ class ZeusAgent:
                                'with load_optimizers=False): load the checkpoint with its '
                                'optimizers to train it')
         self._check_batch(batch, 'batch')
-        batch = batch.to(self.device)
+        batch = self.augment(batch.to(self.device))
         needs_pair = self.objective.needs_pair(self.config)
         if needs_pair:
             if pair is None:
@@ -329,7 +354,7 @@ class ZeusAgent:
             if pair.batch_size != batch.batch_size:
                 raise ValueError(f'pair batch size {pair.batch_size} != batch size '
                                  f'{batch.batch_size}')
-            pair = pair.to(self.device)
+            pair = self.augment(pair.to(self.device))
         metrics: dict[str, torch.Tensor] = {}
         context, next_context = self._representation_step(
             batch, pair if needs_pair else None, step, metrics)

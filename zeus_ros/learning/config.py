@@ -166,6 +166,11 @@ class ZeusConfig:
     """Pixel phi: number of 3x3 conv layers (first has stride 2)."""
     num_filters: int = 32
     """Pixel phi: filters per conv layer."""
+    augment_shift: int = 0
+    """Pixels: DrQ's random shift (learning/augment.py) of up to this many pixels, one shift
+    per sample for its whole window (history, o_t, o_{t+1}), drawn anew at every update. Why:
+    it is what lets a small pixel encoder learn from few frames (DrQ, Kostrikov et al. 2020);
+    0 (the default): no augmentation, every earlier run unchanged."""
     encoder_hidden_dim: int = 256
     """State phi: width of the hidden layer of the MLP encoder."""
     hidden_dim: int = 1024
@@ -279,6 +284,13 @@ class ZeusConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f'{name} must be a positive integer, got {value!r}')
+        if isinstance(self.augment_shift, bool) or not isinstance(self.augment_shift, int) \
+                or self.augment_shift < 0:
+            raise ConfigError(f'augment_shift must be an integer >= 0 (pixels; 0: off), '
+                              f'got {self.augment_shift!r}')
+        if self.augment_shift > 0 and self.obs_kind != 'pixels':
+            raise ConfigError(f'augment_shift={self.augment_shift} shifts frames; obs_kind is '
+                              f'{self.obs_kind!r}: use 0 for state observations')
         if isinstance(self.seed_steps, bool) or not isinstance(self.seed_steps, int) \
                 or self.seed_steps < 0:
             raise ConfigError(f'seed_steps must be an integer >= 0, got {self.seed_steps!r}')

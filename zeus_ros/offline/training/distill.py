@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F  # noqa: N812
 from tqdm import tqdm
 
+from zeus_ros.learning.augment import random_shift
 from zeus_ros.learning.config import ZeusConfig
 from zeus_ros.learning.context import HistoryFeatures
 from zeus_ros.learning.errors import ConfigError
@@ -102,17 +103,6 @@ def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: boo
         changes = {'method': teacher.method, 'k': teacher.k, 'context_dim': teacher.context_dim}
     return make_agent(config.replace(context_norm='none', **changes), pixel_spec,
                       device='cpu')
-
-
-def random_shift(stacks: torch.Tensor, pad: int, rng: np.random.Generator) -> torch.Tensor:
-    """One random shift per window (DrQ's augmentation; the camera moves, not each frame)."""
-    if pad <= 0:
-        return stacks
-    e, n, c, h, w = stacks.shape
-    padded = F.pad(stacks.reshape(e, n * c, h, w).float(), (pad,) * 4, mode='replicate')
-    dx, dy = rng.integers(0, 2 * pad + 1, size=(2, e))
-    out = torch.stack([padded[i, :, dy[i]:dy[i] + h, dx[i]:dx[i] + w] for i in range(e)])
-    return out.reshape(e, n, c, h, w)
 
 
 def distill_loss(student: Any, batch: WindowBatch, k: int, psi_scale: torch.Tensor,
