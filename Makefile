@@ -24,7 +24,8 @@ demo: setup
 # --durations: the 20 slowest tests close every run, so the suite's cost stays visible.
 # Two pytest-xdist workers, one test file each at a time: most tests wait on ROS processes
 # rather than compute (0.85 of 2 cores busy run one by one), so two side by side halve
-# the waiting. Tests marked `alone` run while the other worker waits (test/conftest.py).
+# the waiting. Two ROS tests never run at once, and tests marked `alone` run while the other
+# worker waits (test/conftest.py).
 # TEST_WORKERS=0 runs the suite in one process.
 TEST_WORKERS ?= 2
 test: setup

@@ -113,23 +113,48 @@ def ros_processes() -> Iterator[ProcessGroup]:
         group.stop_all()
 
 
+ROS_FILE_MARKS = ('ros_environment(', 'require_ros(', 'fresh_domain_id(', 'ros_processes')
+"""A test file that mentions one of these starts ROS 2 processes (or rclpy) in some test."""
+_ros_files: dict[str, bool] = {}
+
+
+def _starts_ros(item: pytest.Item) -> bool:
+    """Marked `ros`, or in a file that starts ROS somewhere (not every such test is marked)."""
+    if item.get_closest_marker('ros'):
+        return True
+    path = str(item.path)
+    if path not in _ros_files:
+        text = Path(path).read_text(encoding='utf-8', errors='replace')
+        _ros_files[path] = any(mark in text for mark in ROS_FILE_MARKS)
+    return _ros_files[path]
+
+
 @pytest.fixture(autouse=True)
 def _alone_when_marked(request: pytest.FixtureRequest,
                        tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
-    """Under pytest-xdist, a test marked `alone` runs while no other worker runs a test.
+    """Under pytest-xdist: two ROS systems never run at once; an `alone` test runs by itself.
 
-    Every test holds a shared lock on one file for the workers; an `alone` test holds it
-    exclusively. Timing-sensitive tests (a race against a settle time, steps counted against a
-    killed process) keep the quiet machine they were written for; the rest run side by side.
+    Every test holds a shared lock on `alone.lock`, an `alone` test holds it exclusively; a test
+    that starts ROS processes also holds `ros.lock` exclusively. So a ROS test runs beside at
+    most a library test (training, evaluation, bags): two ROS systems side by side on two
+    cores missed discovery and pairing deadlines (a restarted policy not re-paired in time,
+    `zeus inspect` without a step view), while the ROS tests' waiting is what the second
+    worker fills. Timing-sensitive tests (a race against a settle time, steps counted against
+    a killed process) keep the quiet machine they were written for.
     """
     if not os.environ.get('PYTEST_XDIST_WORKER'):
         yield
         return
-    lock_path = Path(tmp_path_factory.getbasetemp()).parent / 'alone.lock'
+    folder = Path(tmp_path_factory.getbasetemp()).parent
     exclusive = request.node.get_closest_marker('alone') is not None
-    with lock_path.open('a') as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+    with (folder / 'alone.lock').open('a') as alone, (folder / 'ros.lock').open('a') as ros:
+        fcntl.flock(alone, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        held = [alone]
         try:
+            if not exclusive and _starts_ros(request.node):
+                fcntl.flock(ros, fcntl.LOCK_EX)
+                held.append(ros)
             yield
         finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+            for lock in reversed(held):
+                fcntl.flock(lock, fcntl.LOCK_UN)

@@ -32,6 +32,7 @@ from zeus_ros.offline.training.trial import LoopProtocol, trial_steps
 from tiny_config import TINY, config_fixture
 
 torch.set_num_threads(1)  # as the trials' OMP_NUM_THREADS=1
+pytestmark = pytest.mark.alone  # Ray runs two trials at once: both cores (xdist: see conftest)
 TASK = 'Cheetah-Run-v1'
 PROTOCOL = LoopProtocol(rounds=1, random_steps=100, updates=30, eval_episodes=1)
 FLAGS = ['--rounds', '1', '--random-steps', '100', '--updates', '30', '--eval-episodes', '1',
