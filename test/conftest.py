@@ -35,8 +35,7 @@ def _worker_domain_range() -> None:
     count = os.environ.get('PYTEST_XDIST_WORKER_COUNT')
     if not worker or not count:
         return
-    low, _sep, high = os.environ.get(processes.DOMAIN_RANGE_ENV, '1-100').partition('-')
-    first, last = int(low), int(high or low)
+    first, last = processes.domain_range()
     size = (last - first + 1) // int(count)
     if size < 1:
         raise RuntimeError(f'{processes.DOMAIN_RANGE_ENV}={first}-{last} is too small for '

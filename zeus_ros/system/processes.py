@@ -19,7 +19,8 @@ import subprocess
 import time
 from typing import IO, Any
 
-__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'fresh_domain_id', 'group_domain_id',
+__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'domain_range', 'fresh_domain_id',
+           'group_domain_id',
            'ros_context', 'ros_env', 'start_node', 'stop_nodes']
 
 DOMAIN_RANGE_ENV = 'ZEUS_DOMAIN_RANGE'
@@ -30,8 +31,8 @@ KILL_WAIT_S = 5.0
 """How long to wait for the kernel to reap a SIGKILLed node."""
 
 
-def fresh_domain_id() -> int:
-    """A random domain id in $ZEUS_DOMAIN_RANGE (default 1-100: Fast DDS ports stay valid)."""
+def domain_range() -> tuple[int, int]:
+    """(first, last) of $ZEUS_DOMAIN_RANGE (default 1-100: Fast DDS ports stay valid)."""
     text = os.environ.get(DOMAIN_RANGE_ENV, '1-100')
     first, _sep, last = text.partition('-')
     try:
@@ -40,7 +41,12 @@ def fresh_domain_id() -> int:
         raise ValueError(f'{DOMAIN_RANGE_ENV}={text}: expected FIRST-LAST, e.g. 200-219') from None
     if not 0 <= low <= high <= 232:
         raise ValueError(f'{DOMAIN_RANGE_ENV}={text}: domain ids must lie in 0..232')
-    return random.SystemRandom().randint(low, high)
+    return low, high
+
+
+def fresh_domain_id() -> int:
+    """A random domain id in $ZEUS_DOMAIN_RANGE (domain_range)."""
+    return random.SystemRandom().randint(*domain_range())
 
 
 def group_domain_id(wanted: int | None = None) -> int:
