@@ -106,7 +106,7 @@ def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
                       reward=rng.standard_normal(20).astype(np.float32),
                       teacher_action=rng.uniform(-0.8, 0.8, (20, 6)).astype(np.float32),
                       teacher_psi=rng.standard_normal((20, 10)).astype(np.float32),
-                      context=np.zeros((20, 1))))
+                      context=np.zeros((20, 1)), state=np.zeros((20, 0), np.float32)))
     batch = store.sample(rng, 2, 8, 10)
     assert batch.stacks.shape == (2, 18, 9, 84, 84)
     assert random_shift(batch.stacks, 4, rng).shape == batch.stacks.shape
@@ -131,6 +131,9 @@ def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
     (['--teacher', str(TEACHER), '--config', str(REPO / 'params' / 'train' / 'state_cpu.yaml')],
      "obs_kind 'state'"),
     (['--teacher', str(REPO / 'nowhere.pt')], 'no such file'),
+    (['--teacher', str(TEACHER), '--head', 'mine'], "head must be one of own, teacher"),
+    (['--teacher', str(TEACHER), '--head', 'teacher', '--no-context'],
+     'cannot be a no_context student'),
 ])
 def test_bad_input_is_one_clear_line(args: list[str], message: str, tmp_path: Path,
                                      capsys: pytest.CaptureFixture[str]) -> None:
@@ -151,3 +154,69 @@ def test_the_context_sensitivity_of_a_pixel_agent_is_not_measured_from_states(
     student = InferenceAgent(make_student(load_config(tiny), teacher, TASK))
     values = [{'motor_bias': -0.3}, {'motor_bias': 0.3}]
     assert np.isnan(context_sensitivity(student, [], values))
+
+
+@pytest.mark.slow
+def test_the_teacher_head_trains_phi_only_under_the_teachers_frozen_psi_and_actor(
+        tiny: Path) -> None:
+    """head 'teacher': psi and actor are the teacher's and stay so; phi(o) learns phi_T(s)."""
+    from zeus_ros.offline.training.distill import distill
+
+    teacher = InferenceAgent.from_checkpoint(TEACHER)
+    student = make_student(load_config(tiny), teacher, TASK, head='teacher')
+    assert student.config.feature_dim == teacher.agent.config.feature_dim
+    for name in ('psi', 'actor'):
+        mine, theirs = student.modules[name].state_dict(), teacher.agent.modules[name].state_dict()
+        assert all(torch.equal(mine[key], theirs[key]) for key in theirs)
+        assert not any(p.requires_grad for p in student.modules[name].parameters())
+
+    rng = np.random.default_rng(1)
+    n = 24
+    state = rng.standard_normal((n, 17)).astype(np.float32)
+    store = EpisodeStore(1000)
+    store.add(Episode(frames=rng.integers(0, 255, (n, 3, 84, 84), dtype=np.uint8),
+                      applied=rng.uniform(-1, 1, (n, 6)).astype(np.float32),
+                      reward=rng.standard_normal(n).astype(np.float32),
+                      teacher_action=rng.uniform(-0.8, 0.8, (n, 6)).astype(np.float32),
+                      teacher_psi=rng.standard_normal((n, 10)).astype(np.float32),
+                      context=np.zeros((n, 1)), state=state))
+    batch = store.sample(rng, 2, 8, 10)
+    assert batch.state.shape == (2, 18, 17)
+    with torch.no_grad():
+        target = teacher.agent.modules['encoder'](batch.state.flatten(0, 1)).view(2, 18, -1)
+    optimizer = torch.optim.Adam(student.modules['encoder'].parameters(), lr=3e-3)
+    frozen = {k: v.clone() for k, v in student.modules['actor'].state_dict().items()}
+    scale = torch.from_numpy(store.psi_scale())
+    losses = []
+    for _ in range(40):
+        loss, metrics = distill_loss(student, batch, 10, scale, 1.0, target, 1.0)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(metrics['loss/feature'])
+    assert losses[-1] < 0.5 * losses[0], losses[::10]
+    assert all(torch.equal(v, frozen[k]) for k, v in student.modules['actor'].state_dict().items())
+
+
+@pytest.mark.slow
+def test_a_round_zero_cache_without_states_is_refused_by_the_teacher_head(
+        tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Data saved before states were stored loads for the own head, and is named otherwise."""
+    rng = np.random.default_rng(0)
+    n = 41
+    cache = tmp_path / 'round0.npz'
+    np.savez(cache, lengths=np.array([n]),
+             frames=rng.integers(0, 255, (n, 3, 84, 84), dtype=np.uint8),
+             applied=np.zeros((n, 6), np.float32), reward=np.zeros(n, np.float32),
+             teacher_action=np.zeros((n, 6), np.float32),
+             teacher_psi=rng.standard_normal((n, 10)).astype(np.float32),
+             context=np.zeros((n, 1)))
+    store = EpisodeStore(1000)
+    store.load(cache)
+    assert store.episodes[0].state.shape == (n, 0)
+    code = main(['--task', TASK, '--teacher', str(TEACHER), '--config', str(tiny),
+                 '--out', str(tmp_path / 'run'), '--rounds', '1', '--updates', '1',
+                 '--window', '8', '--head', 'teacher', '--data-cache', str(cache),
+                 '--no-progress'])
+    err = capsys.readouterr().err
+    assert code == 2 and 'holds no states' in err and str(cache) in err

@@ -54,8 +54,12 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.learning.config import load_config
 
     torch.set_num_threads(args.threads)
-    settings = DistillSettings(**{name: getattr(args, name)
-                                  for name in DistillSettings.__dataclass_fields__})
+    try:
+        settings = DistillSettings(**{name: getattr(args, name)
+                                      for name in DistillSettings.__dataclass_fields__})
+    except ConfigError as error:
+        print(f'zeus distill: {error}', file=sys.stderr)
+        return 2
     if settings.rounds < 1 or settings.first_steps < 1 or settings.window < 1:
         print('zeus distill: --rounds, --first-steps and --window must be >= 1', file=sys.stderr)
         return 2

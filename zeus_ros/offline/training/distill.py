@@ -12,7 +12,12 @@ transitions, actor on [phi(o), psi]) trained by regression instead of RL:
 
     loss = MSE(a_student, a_teacher) + psi_weight * MSE(psi_student, psi_teacher) / var(psi_t)
 
-on the same step; the teacher sees the state and its own state history. Frames get one random
+on the same step; the teacher sees the state and its own state history. Two heads: `own` (the
+student learns its own psi and actor on [phi(o), psi]) or `teacher` (RMA's reuse of the base
+policy: the student's phi is regressed on the teacher's state features phi_T(s), with the
+teacher's psi and actor copied and frozen on top, so beyond the training range the student acts
+as the teacher's psi and actor extrapolate; loss + feature_weight * MSE(phi(o), phi_T(s))).
+Frames get one random
 shift per window (DrQ, Kostrikov et al. 2020). Round 0: the teacher acts with a little noise;
 later rounds: the student acts. The result is a deployment checkpoint that every consumer of
 pixel checkpoints loads unchanged (InferenceAgent, zeus eval, zeus adaptation, the live nodes).
@@ -72,15 +77,33 @@ class DistillSettings:
     """Stored observations at most (about 21 kB each)."""
     no_context: bool = False
     """A student without psi (the pixel `no_context` reference)."""
+    head: str = 'own'
+    """'own': the student's psi and actor are learnt; 'teacher': the teacher's, frozen."""
+    feature_weight: float = 1.0
+    """Weight of the phi(o) -> phi_T(s) regression (teacher head only)."""
+
+    def __post_init__(self) -> None:
+        if self.head not in HEADS:
+            raise _fail(f"head must be one of {', '.join(HEADS)}, not {self.head!r}")
+        if self.head == 'teacher' and self.no_context:
+            raise _fail('the teacher head acts on psi: it cannot be a no_context student')
+
+
+HEADS = ('own', 'teacher')
+"""Who owns psi and the actor of the student (DistillSettings.head)."""
 
 
 def _fail(message: str) -> ConfigError:
     return ConfigError(message)
 
 
-def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: bool = False
-                 ) -> Any:
-    """A fresh pixel ZeusAgent whose psi has the teacher's k and context size."""
+def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: bool = False,
+                 head: str = 'own') -> Any:
+    """A fresh pixel ZeusAgent whose psi has the teacher's k and context size.
+
+    head 'teacher': the teacher's own networks (its config) with config's conv phi in front,
+    phi sized to the teacher's features; psi and actor are copies of the teacher's, frozen.
+    """
     from zeus_ros.learning.agent import make_agent
     from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
 
@@ -97,6 +120,8 @@ def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: boo
                            obs_shape=PIXEL_SHAPE, action_dim=spec.action_dim,
                            action_low=spec.action_low, action_high=spec.action_high)
     psi_teacher = 'psi' in teacher.agent.modules
+    if head == 'teacher':
+        return _teacher_head_student(config, teacher, pixel_spec, psi_teacher)
     if no_context or not psi_teacher:
         changes: dict[str, Any] = {'method': 'no_context'}
     else:
@@ -105,12 +130,34 @@ def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: boo
                       device='cpu')
 
 
+def _teacher_head_student(config: ZeusConfig, teacher: Any, pixel_spec: Any,
+                          psi_teacher: bool) -> Any:
+    from zeus_ros.learning.agent import make_agent
+
+    if not psi_teacher:
+        raise _fail(f'the teacher head needs a teacher with psi; this one is {teacher.method!r}')
+    own = teacher.agent.config
+    student = make_agent(own.replace(
+        obs_kind='pixels', num_conv_layers=config.num_conv_layers,
+        num_filters=config.num_filters, batch_size=config.batch_size,
+        encoder_lr=config.encoder_lr, augment_shift=config.augment_shift, seed=config.seed,
+        device='cpu'), pixel_spec, device='cpu')
+    for name in ('psi', 'actor', 'context_norm'):
+        if name in teacher.agent.modules:
+            student.modules[name].load_state_dict(teacher.agent.modules[name].state_dict())
+            student.modules[name].requires_grad_(False)
+    return student
+
+
 def distill_loss(student: Any, batch: WindowBatch, k: int, psi_scale: torch.Tensor,
-                 psi_weight: float) -> tuple[torch.Tensor, dict[str, float]]:
+                 psi_weight: float, teacher_feat: torch.Tensor | None = None,
+                 feature_weight: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
     """Action MSE (in [-1, 1] units) + weighted psi MSE over every labelled position.
 
     Each frame stack is encoded once; position p's history is the k positions before it
     (AgentPolicy's: transition j = (o_j, a applied at j + 1, r at j + 1, o_{j + 1})).
+    With `teacher_feat` (E, k + L, F), the teacher's phi_T(s) of every position: plus
+    feature_weight * MSE(phi(o), phi_T(s)) over the valid positions.
     """
     m = student.modules
     e, n = batch.valid.shape
@@ -137,6 +184,12 @@ def distill_loss(student: Any, batch: WindowBatch, k: int, psi_scale: torch.Tens
         psi_loss = (((psi - batch.teacher_psi.flatten(0, 1)) / psi_scale) ** 2).mean()
         total = total + psi_weight * psi_loss
         metrics['loss/psi'] = float(psi_loss.detach())
+    if teacher_feat is not None:
+        mask = batch.valid.unsqueeze(-1).float()
+        feature_loss = (((feat - teacher_feat) ** 2) * mask).sum() / (
+            mask.sum() * feat.shape[-1]).clamp(min=1.0)
+        total = total + feature_weight * feature_loss
+        metrics['loss/feature'] = float(feature_loss.detach())
     return total, metrics
 
 
@@ -152,13 +205,16 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
     from zeus_ros.offline.rollout import parse_schedule
 
     teacher = InferenceAgent.from_checkpoint(teacher_path)
-    student = make_student(config, teacher, task, no_context=settings.no_context)
+    student = make_student(config, teacher, task, no_context=settings.no_context,
+                           head=settings.head)
     k = student.config.k
     m = student.modules
-    params = [{'params': m['encoder'].parameters(), 'lr': config.encoder_lr},
-              {'params': m['actor'].parameters(), 'lr': config.actor_lr}]
-    if 'psi' in m:
-        params.append({'params': m['psi'].parameters(), 'lr': config.context_lr})
+    params = [{'params': m['encoder'].parameters(), 'lr': config.encoder_lr}]
+    if settings.head == 'own':
+        params.append({'params': m['actor'].parameters(), 'lr': config.actor_lr})
+        if 'psi' in m:
+            params.append({'params': m['psi'].parameters(), 'lr': config.context_lr})
+    teacher_phi = teacher.agent.modules['encoder'] if settings.head == 'teacher' else None
     optimizer = torch.optim.Adam(params)
     store = EpisodeStore(settings.max_steps)
     rng = np.random.default_rng(config.seed)
@@ -188,13 +244,23 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
             raise ValueError('no complete episode collected: give more steps per round')
         collect_s = time.perf_counter() - started
         psi_scale = torch.from_numpy(store.psi_scale())
+        if teacher_phi is not None and store.episodes[0].state.shape[-1] == 0:
+            raise ValueError(f'the round-0 data {data_cache} holds no states (saved before '
+                             'they were stored): the teacher head needs them; delete it or '
+                             'give another --data-cache')
         started = time.perf_counter()
         sums: dict[str, float] = {}
         for _ in tqdm(range(settings.updates), desc=f'round {round_}', unit='upd',
                       disable=not progress, leave=False):
             batch = store.sample(rng, windows, settings.window, k)
             batch.stacks = random_shift(batch.stacks, settings.shift, rng)
-            loss, metrics = distill_loss(student, batch, k, psi_scale, settings.psi_weight)
+            target = None
+            if teacher_phi is not None:
+                with torch.no_grad():
+                    target = teacher_phi(batch.state.flatten(0, 1)).view(
+                        *batch.state.shape[:2], -1)
+            loss, metrics = distill_loss(student, batch, k, psi_scale, settings.psi_weight,
+                                         target, settings.feature_weight)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

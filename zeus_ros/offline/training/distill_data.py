@@ -39,6 +39,9 @@ class Episode:
     """(N, C) float32: the teacher's context at observation i (C = 0 without one)."""
     context: np.ndarray
     """(N, P) float64: the true context (for diagnostics only)."""
+    state: np.ndarray
+    """(N, S) float32: the simulator state the teacher saw (S = 0 in data saved before it was
+    stored); the target of a teacher-head student's phi."""
 
     def __len__(self) -> int:
         return len(self.frames)
@@ -60,6 +63,8 @@ class WindowBatch:
     """(E, L, A) float32 labels of the last L positions (task bounds)."""
     teacher_psi: torch.Tensor
     """(E, L, C) float32 labels of the last L positions."""
+    state: torch.Tensor
+    """(E, k + L, S) float32 states (S = 0 when the data has none)."""
 
 
 class EpisodeStore:
@@ -90,7 +95,7 @@ class EpisodeStore:
             raise ValueError(f'no stored episode holds {window} observations')
         chosen = [pool[i] for i in rng.integers(len(pool), size=episodes)]
         parts: dict[str, list[np.ndarray]] = {name: [] for name in (
-            'stacks', 'valid', 'applied', 'reward', 'teacher_action', 'teacher_psi')}
+            'stacks', 'valid', 'applied', 'reward', 'teacher_action', 'teacher_psi', 'state')}
         for ep in chosen:
             start = int(rng.integers(len(ep) - window + 1))
             idx = np.arange(start - k, start + window)
@@ -104,6 +109,7 @@ class EpisodeStore:
             parts['reward'].append(ep.reward[safe])
             parts['teacher_action'].append(ep.teacher_action[start:start + window])
             parts['teacher_psi'].append(ep.teacher_psi[start:start + window])
+            parts['state'].append(ep.state[safe])
         return WindowBatch(**{name: torch.from_numpy(np.stack(arrays))
                               for name, arrays in parts.items()})
 
@@ -118,7 +124,9 @@ class EpisodeStore:
         """Add the episodes saved by `save`."""
         with np.load(path) as data:
             bounds = np.cumsum([0, *data['lengths']])
-            arrays = {name: data[name] for name in Episode.__dataclass_fields__}
+            arrays = {name: data[name] for name in Episode.__dataclass_fields__
+                      if name in data.files}
+        arrays.setdefault('state', np.zeros((int(bounds[-1]), 0), np.float32))
         for a, b in itertools.pairwise(bounds):
             self.add(Episode(**{name: value[a:b] for name, value in arrays.items()}))
 
@@ -161,6 +169,7 @@ def collect_round(task_name: str, schedule: dict[str, Any], teacher: Any, studen
             cols['teacher_psi'].append(np.zeros(0, np.float32) if label.context is None
                                        else label.context)
             cols['context'].append(rec.context_values)
+            cols['state'].append(np.asarray(rec.state, np.float32))
             if actor is not None:
                 action = actor(es, rec).action
             else:
@@ -176,4 +185,5 @@ def collect_round(task_name: str, schedule: dict[str, Any], teacher: Any, studen
 
 
 _DTYPES = {'frames': np.uint8, 'applied': np.float32, 'reward': np.float32,
-           'teacher_action': np.float32, 'teacher_psi': np.float32, 'context': np.float64}
+           'teacher_action': np.float32, 'teacher_psi': np.float32, 'context': np.float64,
+           'state': np.float32}
