@@ -131,7 +131,7 @@ def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
     (['--teacher', str(TEACHER), '--config', str(REPO / 'params' / 'train' / 'state_cpu.yaml')],
      "obs_kind 'state'"),
     (['--teacher', str(REPO / 'nowhere.pt')], 'no such file'),
-    (['--teacher', str(TEACHER), '--head', 'mine'], "head must be one of own, teacher"),
+    (['--teacher', str(TEACHER), '--head', 'mine'], 'head must be one of own, teacher'),
     (['--teacher', str(TEACHER), '--head', 'teacher', '--no-context'],
      'cannot be a no_context student'),
 ])
@@ -159,9 +159,7 @@ def test_the_context_sensitivity_of_a_pixel_agent_is_not_measured_from_states(
 @pytest.mark.slow
 def test_the_teacher_head_trains_phi_only_under_the_teachers_frozen_psi_and_actor(
         tiny: Path) -> None:
-    """head 'teacher': psi and actor are the teacher's and stay so; phi(o) learns phi_T(s)."""
-    from zeus_ros.offline.training.distill import distill
-
+    """Head 'teacher': psi and actor are the teacher's and stay so; phi(o) learns phi_T(s)."""
     teacher = InferenceAgent.from_checkpoint(TEACHER)
     student = make_student(load_config(tiny), teacher, TASK, head='teacher')
     assert student.config.feature_dim == teacher.agent.config.feature_dim
