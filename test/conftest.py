@@ -131,15 +131,15 @@ def _starts_ros(item: pytest.Item) -> bool:
 @pytest.fixture(autouse=True)
 def _alone_when_marked(request: pytest.FixtureRequest,
                        tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
-    """Under pytest-xdist: two ROS systems never run at once; an `alone` test runs by itself.
+    """Under pytest-xdist: `alone` tests run by themselves, `ros_quiet` ones beside no ROS system.
 
-    Every test holds a shared lock on `alone.lock`, an `alone` test holds it exclusively; a test
-    that starts ROS processes also holds `ros.lock` exclusively. So a ROS test runs beside at
-    most a library test (training, evaluation, bags): two ROS systems side by side on two
-    cores missed discovery and pairing deadlines (a restarted policy not re-paired in time,
-    `zeus inspect` without a step view), while the ROS tests' waiting is what the second
-    worker fills. Timing-sensitive tests (a race against a settle time, steps counted against
-    a killed process) keep the quiet machine they were written for.
+    Every test holds a shared lock on `alone.lock`, an `alone` test holds it exclusively. A test
+    that starts ROS processes holds `ros.lock` shared, so two ROS systems may run side by side
+    (each on its own domain id); a `ros_quiet` test holds it exclusively: side by side on two
+    cores, a restarted policy was not re-paired in time and `zeus inspect` saw no step view
+    before their deadlines (fresh-clone run, 2026-12-06). Timing-sensitive tests (a race
+    against a settle time, steps counted against a killed process, a latency health check)
+    are `alone`: they keep the quiet machine they were written for.
     """
     if not os.environ.get('PYTEST_XDIST_WORKER'):
         yield
@@ -151,7 +151,8 @@ def _alone_when_marked(request: pytest.FixtureRequest,
         held = [alone]
         try:
             if not exclusive and _starts_ros(request.node):
-                fcntl.flock(ros, fcntl.LOCK_EX)
+                quiet = request.node.get_closest_marker('ros_quiet') is not None
+                fcntl.flock(ros, fcntl.LOCK_EX if quiet else fcntl.LOCK_SH)
                 held.append(ros)
             yield
         finally:

@@ -20,6 +20,8 @@ import pytest
 from live_fixtures import TASK, tiny_checkpoint
 from ros_harness import REPO, ros_environment
 
+pytestmark = pytest.mark.ros_quiet  # `zeus inspect` waits for discovery against a deadline
+
 # This file's own domain ids (the issue-12 range), so parallel runs do not meet.
 DOMAIN_EMPTY, DOMAIN_LIVE, DOMAIN_QUIET, DOMAIN_CTRL_C = 131, 132, 133, 134
 

@@ -116,6 +116,7 @@ def test_a_flooding_second_publisher_never_drives_the_robot(
           f'{max(np.diff(times)) * 1000:.0f} ms')
 
 
+@pytest.mark.ros_quiet
 def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
     """SIGKILL to the paired policy: safe actions (timeouts), then its restart is re-paired."""
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}',
