@@ -166,6 +166,9 @@ def main() -> None:
     parser.add_argument('--episodes', type=int, default=1, help='episodes per context value')
     parser.add_argument('--students', type=Path, nargs='+', required=True)
     parser.add_argument('--no-context', type=Path, nargs='*', default=[])
+    parser.add_argument('--teacher-head', type=Path, nargs='*', default=[],
+                        help="students of `zeus distill --head teacher` (the teacher's psi and "
+                        'actor, frozen, on a pixel phi)')
     parser.add_argument('--out', type=Path, default=OUT,
                         help=f'folder for table.md and the figure (default {OUT})')
     args = parser.parse_args()
@@ -177,6 +180,9 @@ def main() -> None:
     if args.no_context:
         groups['pixel no_context student'] = [_measure(p, args.episodes)
                                               for p in args.no_context]
+    if args.teacher_head:
+        groups['pixel student, teacher head'] = [_measure(p, args.episodes)
+                                                 for p in args.teacher_head]
     out.mkdir(parents=True, exist_ok=True)
     header = ('| checkpoint | seeds | return train | share of teacher | return beyond range '
               '| share of teacher | adaptation train (per seed) '
@@ -189,6 +195,8 @@ def main() -> None:
     rounds = {'student': [p.parent / 'rounds.csv' for p in args.students]}
     if args.no_context:
         rounds['no_context student'] = [p.parent / 'rounds.csv' for p in args.no_context]
+    if args.teacher_head:
+        rounds['teacher head'] = [p.parent / 'rounds.csv' for p in args.teacher_head]
     _figure(groups, rounds, out / 'returns_and_losses.png')
     print('\n'.join(lines))
 

@@ -81,12 +81,16 @@ class DistillSettings:
     """'own': the student's psi and actor are learnt; 'teacher': the teacher's, frozen."""
     feature_weight: float = 1.0
     """Weight of the phi(o) -> phi_T(s) regression (teacher head only)."""
+    tune_head: float = 0.0
+    """Teacher head: learning-rate factor of the copied psi and actor (0: frozen)."""
 
     def __post_init__(self) -> None:
         if self.head not in HEADS:
             raise _fail(f"head must be one of {', '.join(HEADS)}, not {self.head!r}")
         if self.head == 'teacher' and self.no_context:
             raise _fail('the teacher head acts on psi: it cannot be a no_context student')
+        if self.tune_head and self.head != 'teacher':
+            raise _fail('tune_head tunes the teacher head: give head teacher')
 
 
 HEADS = ('own', 'teacher')
@@ -214,6 +218,10 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
         params.append({'params': m['actor'].parameters(), 'lr': config.actor_lr})
         if 'psi' in m:
             params.append({'params': m['psi'].parameters(), 'lr': config.context_lr})
+    elif settings.tune_head > 0:
+        for name, lr in (('actor', config.actor_lr), ('psi', config.context_lr)):
+            m[name].requires_grad_(True)
+            params.append({'params': m[name].parameters(), 'lr': lr * settings.tune_head})
     teacher_phi = teacher.agent.modules['encoder'] if settings.head == 'teacher' else None
     optimizer = torch.optim.Adam(params)
     store = EpisodeStore(settings.max_steps)
