@@ -132,8 +132,8 @@ def own_splits(folder: Path) -> list[Path]:
     out and named.
     """
     from zeus_ros.bags.errors import IngestError
+    from zeus_ros.bags.recording import closed_splits
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training.continual import closed_splits
 
     kept = []
     for split in closed_splits(folder / 'rec'):
@@ -195,7 +195,7 @@ def busy_intervals(history: Path) -> list[tuple[float, float]]:
     """Epoch intervals in which the trainer ran a round (train + gate before each gate line)."""
     import datetime
 
-    from zeus_ros.offline.training.continual import read_history
+    from zeus_ros.system.continual_settings import read_history
 
     out = []
     for event in read_history(history):
@@ -253,7 +253,7 @@ def main() -> int:
         busy = busy_intervals(folder / 'rec_continual' / 'history.jsonl')
         inside = [ms for t, ms, _ in lat if any(a <= t <= b for a, b in busy)]
         outside = [ms for t, ms, _ in lat if not any(a <= t <= b for a, b in busy)]
-        from zeus_ros.offline.training.continual import read_history
+        from zeus_ros.system.continual_settings import read_history
 
         events = read_history(folder / 'rec_continual' / 'history.jsonl')
         third = [s['return'] for s in segs if s['t_s'] >= 2 * info['wall_s'] / 3 - 10]
