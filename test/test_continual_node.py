@@ -80,3 +80,17 @@ def test_a_shutdown_stops_the_child_sigkill_after_the_grace(
     answer = node.run_child_round(tmp_path, _request(tmp_path), logged.append, stop)
     assert answer == {'status': 'stopped'}
     assert time.monotonic() - begin < 30
+
+
+def test_a_round_that_finished_counts_even_when_the_shutdown_came_late(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """Its gate line is written: the answer counts (SIGTERM ignored, SIGKILL after the grace)."""
+    code = ('import json, signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); '
+            'request = json.load(open(sys.argv[-1])); '
+            f"open(request['result'], 'w').write(json.dumps({ANSWER!r})); "
+            "print('ready', flush=True); time.sleep(60)")
+    node = _child(monkeypatch, code)
+    stop = threading.Event()
+    answer = node.run_child_round(tmp_path, _request(tmp_path),
+                                  lambda line: stop.set(), stop)
+    assert answer == {**ANSWER, 'stderr': []}

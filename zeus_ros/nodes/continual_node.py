@@ -369,9 +369,11 @@ def run_child_round(folder: Path, request: dict[str, Any], log: Callable[[str], 
     Writes `request` to `folder`/request.json; the child's stdout lines go to `log`, its stderr
     to this process's stderr (the last STDERR_LINES kept). While it runs, `stop` is watched:
     once set, the child gets SIGTERM (its training stops at the next check) and SIGKILL after
-    STOP_GRACE_S; the answer is then {'status': 'stopped'}. A child that exits without a
-    readable answer is {'status': 'failed', 'error': 'RoundProcessError', 'reason': ...}; every
-    answer but 'done' and 'stopped' carries `stderr`, the child's last stderr lines.
+    STOP_GRACE_S; the answer is then {'status': 'stopped'}, unless the round had finished
+    (its gate line written): that answer counts, as it did when the round ran in-process. A
+    child that exits without a readable answer, or stopped by a signal from elsewhere, is
+    {'status': 'failed', 'error': 'RoundProcessError', 'reason': ...}; every answer but
+    'stopped' carries `stderr`, the child's last stderr lines.
     """
     folder.mkdir(parents=True, exist_ok=True)
     result = Path(request['result'])
@@ -400,18 +402,23 @@ def run_child_round(folder: Path, request: dict[str, Any], log: Callable[[str], 
                 child.wait()
     for reader in readers:
         reader.join(timeout=2.0)
-    if stopped:
-        return {'status': 'stopped'}
     try:
         answer = json.loads(result.read_text('utf8'))
         if answer.get('status') not in ('done', 'stopped', 'failed'):
             raise ValueError(f'unknown status {answer.get("status")!r}')
     except (OSError, ValueError, AttributeError) as error:
+        if stopped:
+            return {'status': 'stopped'}
         code = child.returncode
         ended = (f'was killed by signal {-code}' if code < 0 else f'exited with code {code}')
         last = f'; last stderr line: {tail[-1]}' if tail else ''
         answer = {'status': 'failed', 'error': 'RoundProcessError',
                   'reason': f'the round process {ended} without an answer ({error}){last}'}
+    if stopped and answer['status'] != 'done':  # a round that finished still counts
+        return {'status': 'stopped'}
+    if answer['status'] == 'stopped':  # not by this node: someone else signalled the child
+        answer = {'status': 'failed', 'error': 'RoundProcessError',
+                  'reason': 'the round process was stopped by a signal from outside the node'}
     return {**answer, 'stderr': list(tail)}
 
 
