@@ -63,8 +63,17 @@ def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
 
 
 def _cpu_seconds(pid: int) -> float:
+    """The trainer's CPU seconds, its rounds' child processes (`zeus continual-round`) included.
+
+    utime + stime + cutime + cstime (the finished rounds), plus the round running now.
+    """
     fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / 100.0  # utime + stime, clock ticks
+    ticks = sum(int(fields[i]) for i in (11, 12, 13, 14))  # clock ticks
+    with contextlib.suppress(OSError, ValueError):
+        for child in Path(f'/proc/{pid}/task/{pid}/children').read_text().split():
+            inner = Path(f'/proc/{child}/stat').read_text().rsplit(')', 1)[1].split()
+            ticks += int(inner[11]) + int(inner[12])
+    return ticks / 100.0
 
 
 def _trainer_pid(root: int) -> int | None:
