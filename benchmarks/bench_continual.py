@@ -63,8 +63,17 @@ def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
 
 
 def _cpu_seconds(pid: int) -> float:
+    """The trainer's CPU seconds, its rounds' child processes (`zeus continual-round`) included.
+
+    utime + stime + cutime + cstime (the finished rounds), plus the round running now.
+    """
     fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / 100.0  # utime + stime, clock ticks
+    ticks = sum(int(fields[i]) for i in (11, 12, 13, 14))  # clock ticks
+    with contextlib.suppress(OSError, ValueError):
+        for child in Path(f'/proc/{pid}/task/{pid}/children').read_text().split():
+            inner = Path(f'/proc/{child}/stat').read_text().rsplit(')', 1)[1].split()
+            ticks += int(inner[11]) + int(inner[12])
+    return ticks / 100.0
 
 
 def _trainer_pid(root: int) -> int | None:
@@ -132,8 +141,8 @@ def own_splits(folder: Path) -> list[Path]:
     out and named.
     """
     from zeus_ros.bags.errors import IngestError
+    from zeus_ros.bags.recording import closed_splits
     from zeus_ros.offline.data.ingest import ingest_bags
-    from zeus_ros.offline.training.continual import closed_splits
 
     kept = []
     for split in closed_splits(folder / 'rec'):
@@ -195,7 +204,7 @@ def busy_intervals(history: Path) -> list[tuple[float, float]]:
     """Epoch intervals in which the trainer ran a round (train + gate before each gate line)."""
     import datetime
 
-    from zeus_ros.offline.training.continual import read_history
+    from zeus_ros.system.continual_settings import read_history
 
     out = []
     for event in read_history(history):
@@ -253,7 +262,7 @@ def main() -> int:
         busy = busy_intervals(folder / 'rec_continual' / 'history.jsonl')
         inside = [ms for t, ms, _ in lat if any(a <= t <= b for a, b in busy)]
         outside = [ms for t, ms, _ in lat if not any(a <= t <= b for a, b in busy)]
-        from zeus_ros.offline.training.continual import read_history
+        from zeus_ros.system.continual_settings import read_history
 
         events = read_history(folder / 'rec_continual' / 'history.jsonl')
         third = [s['return'] for s in segs if s['t_s'] >= 2 * info['wall_s'] / 3 - 10]

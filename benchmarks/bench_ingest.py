@@ -21,9 +21,10 @@ import time
 import numpy as np
 from rosbags.rosbag2 import Reader
 
+from zeus_ros.bags.recording import find_bags
 from zeus_ros.bags.schema import StepFeedbackFields
 from zeus_ros.bags.writer import SimStep, StepBagWriter
-from zeus_ros.offline.data.ingest import find_bags, ingest_bags
+from zeus_ros.offline.data.ingest import ingest_bags
 
 EP_LEN = 500
 INGEST_TARGET = 0.5

@@ -685,10 +685,10 @@ def test_bags_are_found_at_any_depth_as_the_recorder_nests_them(tmp_path: Path,
     whole, hidden folders are skipped; ingest, train and recover share this one search. A
     folder without bags is one error naming where it searched and what a bag is.
     """
+    from zeus_ros.bags.recording import find_bags
     from zeus_ros.cli.ingest import main as ingest_main
     from zeus_ros.cli.recover import main as recover_main
     from zeus_ros.cli.train import main as train_main
-    from zeus_ros.offline.data.ingest import find_bags
 
     bags = tmp_path / 'bags'
     run = bags / 'zeus_20260101_120000'

@@ -15,7 +15,9 @@ from continual_fixtures import WEAK_TASK, record, weak_checkpoint
 import pytest
 import torch
 
+from zeus_ros.bags.recording import closed_splits, split_steps
 from zeus_ros.offline.training import continual as c
+from zeus_ros.system.continual_settings import ContinualSettings, read_history
 from zeus_ros.system.launch_defaults import zoo_checkpoint
 
 BIAS = 'Cheetah-Bias-v0'
@@ -47,20 +49,20 @@ def test_closed_splits_skip_the_bag_being_written(bias_recording: list[Path],
     unfinished = folder / 'run1_004'  # killed before its first metadata
     unfinished.mkdir()
     shutil.copy(next(bias_recording[0].glob('*.mcap')), unfinished / 'run1_004.mcap')
-    splits = c.closed_splits(folder)
+    splits = closed_splits(folder)
     assert [b.name for b in splits] == ['run1_000', 'run1_001', 'run1_002']
-    assert [c.split_steps(b) for b in splits] == [240, 240, 240]
-    assert c.closed_splits(tmp_path / 'nothing_yet') == []
+    assert [split_steps(b) for b in splits] == [240, 240, 240]
+    assert closed_splits(tmp_path / 'nothing_yet') == []
 
 
 @pytest.mark.slow
 def test_replay_mix_is_bounded(bias_recording: list[Path]) -> None:
     new = bias_recording[2:]
-    (old,) = c.replay_mix(bias_recording, new, c.ContinualSettings())  # 240 old for 240 new
+    (old,) = c.replay_mix(bias_recording, new, ContinualSettings())  # 240 old for 240 new
     assert old in bias_recording[:2]
-    half = c.ContinualSettings(old_ratio=0.5)  # 120 old steps allowed: no whole split fits
+    half = ContinualSettings(old_ratio=0.5)  # 120 old steps allowed: no whole split fits
     assert c.replay_mix(bias_recording, new, half) == []
-    capped = c.ContinualSettings(old_ratio=10, max_old_steps=300)
+    capped = ContinualSettings(old_ratio=10, max_old_steps=300)
     assert len(c.replay_mix(bias_recording, bias_recording[2:], capped)) == 1
 
 
@@ -91,8 +93,8 @@ def test_without_context_truth_the_read_out_names_the_seen_contexts(
 def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
         bias_recording: list[Path], tmp_path: Path) -> None:
     zoo = zoo_checkpoint(BIAS)
-    settings = c.ContinualSettings(warmup_updates=50, updates=100, episodes=1,
-                                   max_seen_values=4)
+    settings = ContinualSettings(warmup_updates=50, updates=100, episodes=1,
+                                 max_seen_values=4)
     history = tmp_path / 'history.jsonl'
     result = c.continual_round(zoo, bias_recording[1:], bias_recording, tmp_path / 'bad',
                                history, settings, corrupt_rewards=True)
@@ -102,7 +104,7 @@ def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
     assert result.gate.gain < 0
     assert {v['where'] for v in result.gate.values} == {'seen', 'train'}
     assert len(result.gate.values) == 4 + 8  # seen + every train value of the family
-    (line,) = c.read_history(history)
+    (line,) = read_history(history)
     assert line['decision'] == 'refuse' and line['corrupt_rewards'] is True
     assert line['sha256'] == result.candidate.sha256 and line['reason']
     card = (tmp_path / 'bad' / 'card.json').read_text()
@@ -113,7 +115,7 @@ def test_gate_refuses_a_candidate_trained_on_corrupted_rewards(
     again = c.continual_round(zoo, bias_recording[1:], bias_recording, tmp_path / 'next',
                               history, settings, start=result.candidate.path)
     assert again.candidate.warmup_updates == 0
-    line = c.read_history(history)[-1]
+    line = read_history(history)[-1]
     assert line['started_from'] == str(result.candidate.path) and line['deployed'] == str(zoo)
 
 
@@ -125,12 +127,12 @@ def _round(deploy: bool, gain: float) -> c.RoundResult:
 
 
 def test_only_a_refused_candidate_that_gained_is_continued() -> None:
-    settings = c.ContinualSettings()
+    settings = ContinualSettings()
     assert c.resume_from(_round(False, 8.0), settings) == Path('/runs/round_002/candidate.pt')
     assert c.resume_from(_round(False, -3.0), settings) is None  # no progress: start afresh
     assert c.resume_from(_round(True, 30.0), settings) is None  # deployed: it is the start
     assert c.resume_from(_round(False, 8.0), settings, corrupt_rewards=True) is None
-    off = c.ContinualSettings(resume_refused=False)
+    off = ContinualSettings(resume_refused=False)
     assert c.resume_from(_round(False, 8.0), off) is None
 
 
@@ -139,8 +141,8 @@ def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path
     weak = weak_checkpoint(tmp_path / 'weak.pt')
     bags = record(tmp_path / 'run2', WEAK_TASK, [0.75, 1.25], weak, splits=2, steps=400)
     # bc_weight 0: a weak policy has nothing worth staying near
-    settings = c.ContinualSettings(updates=500, episodes=1, max_seen_values=2,
-                                   max_train_values=2, bc_weight=0.0)
+    settings = ContinualSettings(updates=500, episodes=1, max_seen_values=2,
+                                 max_train_values=2, bc_weight=0.0)
     same = c.gate(weak, weak, [{'torso_length': 1.25}], settings)
     assert same.gain == 0 and not same.deploy  # paired: same initial states, same returns
     history = tmp_path / 'history.jsonl'
@@ -149,11 +151,11 @@ def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path
     assert result.candidate.old_bags == [str(bags[0])]
     assert result.gate.deploy, result.gate.summary()
     assert result.gate.gain >= max(settings.margin, 2 * result.gate.se)
-    assert c.read_history(history)[-1]['decision'] == 'deploy'
+    assert read_history(history)[-1]['decision'] == 'deploy'
 
 
 def test_live_check_pairs_segments_by_context_and_rolls_back_a_loss() -> None:
-    from zeus_ros.offline.training.continual_watch import LiveCheck, SegmentReturns
+    from zeus_ros.system.continual_watch import LiveCheck, SegmentReturns
 
     returns = SegmentReturns()
     # before the swap (in segment 2): context 1.0 earns -1, context 2.0 earns -2 per step;
@@ -176,7 +178,7 @@ def test_live_check_pairs_segments_by_context_and_rolls_back_a_loss() -> None:
 @pytest.mark.slow
 def test_retention_deletes_the_oldest_splits_but_never_the_protected(
         bias_recording: list[Path], tmp_path: Path) -> None:
-    from zeus_ros.offline.training.continual_watch import folder_bytes, prune_recording
+    from zeus_ros.system.continual_watch import folder_bytes, prune_recording
 
     copies = []
     for bag in bias_recording:
@@ -191,7 +193,7 @@ def test_retention_deletes_the_oldest_splits_but_never_the_protected(
 
 
 def test_novelty_alarm_needs_a_full_window_mostly_novel() -> None:
-    from zeus_ros.offline.training.continual_watch import NoveltyAlarm
+    from zeus_ros.system.continual_watch import NoveltyAlarm
 
     alarm = NoveltyAlarm(window=10, fraction=0.5)
     for _ in range(9):
@@ -207,3 +209,29 @@ def test_novelty_alarm_needs_a_full_window_mostly_novel() -> None:
     assert not off.raised
     with pytest.raises(ValueError, match='fraction'):
         NoveltyAlarm(window=10, fraction=0.0)
+
+
+@pytest.mark.slow
+def test_zeus_continual_round_writes_its_answer(tmp_path: Path) -> None:
+    """The node's child process: a request in, an answer out; a failed round says why."""
+    import json
+    import subprocess
+    import sys
+
+    request = {'deployed': str(tmp_path / 'gone.pt'), 'first_checkpoint': str(tmp_path / 'x'),
+               'rehearsal': str(tmp_path / 'rehearsal'), 'new_bags': [], 'splits': [],
+               'out': str(tmp_path / 'round_001'), 'history': str(tmp_path / 'history.jsonl'),
+               'settings': {'rehearsal_steps': 0}, 'corrupt_rewards': False, 'forced': False,
+               'resume_from': None, 'threads': 1, 'result': str(tmp_path / 'result.json')}
+    path = tmp_path / 'request.json'
+    path.write_text(json.dumps(request))
+    command = [sys.executable, '-m', 'zeus_ros.cli', 'continual-round', '--request']
+    done = subprocess.run([*command, str(path)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stderr
+    answer = json.loads((tmp_path / 'result.json').read_text())
+    assert answer['status'] == 'failed' and answer['error'] == 'CheckpointError'
+    assert 'gone.pt' in answer['reason'] and 'CheckpointError' in done.stderr  # the traceback
+    assert read_history(tmp_path / 'history.jsonl') == []  # no gate line
+    bad = subprocess.run([*command, str(tmp_path / 'none.json')], capture_output=True,
+                         text=True, timeout=300)
+    assert bad.returncode == 2 and 'cannot read the request' in bad.stderr

@@ -30,13 +30,16 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'inspect': ('zeus_ros.cli.inspect_topics', 'live view of the context topics (subscribe only)'),
     'recover': ('zeus_ros.cli.recover', 'restore a bag cut off by a crash'),
     'demo': ('zeus_ros.cli.demo', 'the live demo of the README'),
+    'continual-round': ('zeus_ros.cli.continual_round',
+                        "one round of the continual trainer (the node's child process)"),
 }
 
 
 def usage() -> str:
     """The top-level help text."""
     lines = ['usage: zeus <command> [options]', '', 'commands:']
-    lines += [f'  {name:<10} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
+    width = max(10, *map(len, SUBCOMMANDS))
+    lines += [f'  {name:<{width}} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
     lines += ['', "run 'zeus <command> --help' for a command's options"]
     return '\n'.join(lines)
 

@@ -7,15 +7,15 @@ import sqlite3
 import sys
 
 from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.recording import find_bags
 from zeus_ros.bags.recover import recover_bag
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.data.ingest import find_bags
 
 __all__ = ['main']
 
 
 def _bag_dirs(path: Path) -> list[Path]:
-    """The bag folders at or below `path` (ingest.find_bags: a bag, or folders of bags)."""
+    """The bag folders at or below `path` (bags.recording.find_bags: a bag, or folders of bags)."""
     return list(dict.fromkeys(bag.parent if bag.is_file() else bag for bag in find_bags(path)))
 
 

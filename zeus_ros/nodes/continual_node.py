@@ -1,35 +1,48 @@
 """continual_trainer: retrain from the growing recording, gate, swap live, roll back (issue 37).
 
 Its own process, started by `zeus launch --continual` (`continual:=true`): it lowers its own
-priority (`nice`) and runs torch on `threads` threads, so the control loop's processes keep
-their CPU. The main thread waits for `new_steps` closed new steps, trains a candidate and gates
-it (zeus_ros/offline/training/continual.py); a background thread spins the node (step and
-context-truth subscriptions, parameter clients, /diagnostics). A candidate that passes is
-copied to OUT/deployed/ and set as `checkpoint` on context_estimator and then policy (they pair
-by sha256: no mismatched pair ever acts); the previous checkpoint stays on disk and is what a
-failed live check restores. Every decision is one log line, one /diagnostics status and one line
-of OUT/history.jsonl.
+priority (`nice`), so the control loop's processes keep their CPU. The main thread waits for
+`new_steps` closed new steps, then runs the round (train a candidate and gate it) in a child
+process, `zeus continual-round` (zeus_ros/cli/continual_round.py over
+zeus_ros/offline/training/continual.py), which inherits that priority and runs torch on
+`threads` threads: each round's memory goes back to the OS when the child exits, and this
+node never imports torch or the training code (nodes/ import nothing from offline/:
+test/test_import_contract.py). It writes the round's request (JSON) to the round's folder,
+logs the child's output line by line, and reads its answer (candidate, gate decision and
+figures, where the next round starts); a shutdown during a round stops the child (SIGTERM,
+SIGKILL after STOP_GRACE_S), a child that fails is logged and counted as a failed round. A
+background thread spins the node (step and context-truth subscriptions, parameter clients,
+/diagnostics). A candidate that passes is copied to OUT/deployed/ and set as `checkpoint` on
+context_estimator and then policy (they pair by sha256: no mismatched pair ever acts); the
+previous checkpoint stays on disk and is what a failed live check restores. Every decision is
+one log line, one /diagnostics status and one line of OUT/history.jsonl.
 """
 
 from __future__ import annotations
 
-from dataclasses import fields
+from collections import deque
+from collections.abc import Callable
+from dataclasses import asdict, fields
+import json
 import os
 from pathlib import Path
 import shutil
+import signal
+import subprocess
+import sys
 import threading
 import time
-from typing import Any
+from typing import IO, Any
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-# The one node that imports offline/: it is the ROS front end of the training library's
-# continual round (test/test_import_contract.py, CONTINUAL_NODE_IMPORTS).
-from zeus_ros.offline.training import continual as c
-from zeus_ros.offline.training.continual_watch import (
+from zeus_ros.atomic_file import replace_text
+from zeus_ros.bags.recording import closed_splits, split_steps
+from zeus_ros.system.continual_settings import ContinualSettings, append_history
+from zeus_ros.system.continual_watch import (
     LiveCheck,
     NoveltyAlarm,
     SegmentReturns,
@@ -38,12 +51,12 @@ from zeus_ros.offline.training.continual_watch import (
 
 TARGETS = ('context_estimator', 'policy')
 """Set in this order: the policy refuses the estimator's new estimates until it follows."""
-SETTINGS = tuple(f.name for f in fields(c.ContinualSettings)
+SETTINGS = tuple(f.name for f in fields(ContinualSettings)
                  if f.name not in ('eval_seed', 'seed'))
 """What a round does: parameters of the same name, defaults from ContinualSettings."""
 DEFAULTS: dict[str, Any] = {
     'recording': '', 'checkpoint': '', 'out': '', 'task': '',
-    **{name: getattr(c.ContinualSettings(), name) for name in SETTINGS},
+    **{name: getattr(ContinualSettings(), name) for name in SETTINGS},
     'threads': 1, 'nice': 10, 'check_segments': 2, 'keep_recording_mb': 2048,
     'keep_candidates': 5, 'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
     'novelty_window': 200, 'novelty_fraction': 0.5, 'novelty_min_steps': 500,
@@ -53,6 +66,12 @@ that round trains on negated rewards / is swapped in whatever the gate says. A n
 (at least `novelty_fraction` of the last `novelty_window` scored steps outside the
 checkpoint's training contexts; window 0: off) starts a round after `novelty_min_steps` new
 closed steps instead of `new_steps`."""
+ROUND_COMMAND = (sys.executable, '-m', 'zeus_ros.cli', 'continual-round')
+"""The child process of a round (`zeus continual-round --request FILE`)."""
+STOP_GRACE_S = 5.0
+"""How long a round's child gets after SIGTERM (shutdown) before SIGKILL."""
+STDERR_LINES = 10
+"""Last lines of a failed child's stderr kept in its failure line of history.jsonl."""
 
 
 class ContinualTrainer(Node):
@@ -72,8 +91,7 @@ class ContinualTrainer(Node):
         self.history = self.out / 'history.jsonl'
         self.deployed = Path(p['checkpoint']).resolve()
         self.previous: Path | None = None
-        self.last_gate: c.GateResult | None = None
-        self.settings = c.ContinualSettings(**{k: p[k] for k in SETTINGS})
+        self.settings = ContinualSettings(**{k: p[k] for k in SETTINGS})
         self.returns = SegmentReturns()
         self.lock = threading.Lock()
         self.state = 'waiting'
@@ -162,6 +180,7 @@ class Trainer:
         self.since_segment = 0
         """First segment of the deployed checkpoint: its live baseline starts there."""
         self.episode_length = 0
+        """The task's episode length (the live check's scale), from the first round's answer."""
         self.resume: Path | None = None
         """A refused candidate the next round continues (continual.resume_from)."""
 
@@ -171,8 +190,8 @@ class Trainer:
         n.out.mkdir(parents=True, exist_ok=True)
         self.log.info(f'continual: deployed {n.deployed}; recording {n.recording}; history '
                       f'{n.history}; a round every {n.settings.new_steps} new closed steps')
-        c.append_history(n.history, {'event': 'start', 'deployed': str(n.deployed),
-                                     'recording': str(n.recording)})
+        append_history(n.history, {'event': 'start', 'deployed': str(n.deployed),
+                                   'recording': str(n.recording)})
         while not self.stop.wait(float(n.p['poll_s'])):
             self.poll()
 
@@ -180,11 +199,11 @@ class Trainer:
         """Check a swap under watch, then start a round when enough new steps are closed."""
         n = self.node
         self.check_live()
-        splits = c.closed_splits(n.recording)
+        splits = closed_splits(n.recording)
         known = {p.resolve() for p in self.since_swap}
         self.since_swap += [b for b in splits if b.resolve() not in known
                             and b.resolve() not in self.used]
-        total = sum(c.split_steps(b) for b in self.since_swap)
+        total = sum(split_steps(b) for b in self.since_swap)
         with n.lock:
             novel = n.novelty.raised
         needed = min(n.settings.new_steps, int(n.p['novelty_min_steps'])) if novel \
@@ -195,7 +214,7 @@ class Trainer:
                    else 'new steps')
         self.steps_at_round = total
         self.round(splits, trigger)
-        removed = prune_recording(c.closed_splits(n.recording),
+        removed = prune_recording(closed_splits(n.recording),
                                   int(n.p['keep_recording_mb'] * 1e6), self.since_swap)
         if removed:
             self.log.info(f'continual: retention: deleted {len(removed)} oldest split(s) '
@@ -203,81 +222,87 @@ class Trainer:
                           f'{n.p["keep_recording_mb"]} MB')
 
     def round(self, splits: list[Path], trigger: str = 'new steps') -> None:
-        """Train and gate a candidate; swap it in when it passes (or is forced)."""
+        """Train and gate a candidate (a child process); swap it in when it passes or is forced."""
         n = self.node
         n.counts['rounds'] += 1
         number = n.counts['rounds']
         new = self._newest(self.since_swap, 4 * n.settings.new_steps)
         corrupt = number in n.p['corrupt_rounds']
+        forced = number in n.p['force_rounds']
         n.state = 'training'
         n.report('round', f'round {number} ({trigger}): training on {len(new)} new split(s)')
-        c.append_history(n.history, {'event': 'round', 'round': number, 'trigger': trigger,
-                                     'new_splits': len(new)})
+        append_history(n.history, {'event': 'round', 'round': number, 'trigger': trigger,
+                                   'new_splits': len(new)})
         folder = n.out / f'round_{number:03d}'
-        try:
-            rehearsal = c.rehearsal_bag(Path(n.p['checkpoint']), n.out / 'rehearsal',
-                                        n.settings, self.log.info)
-            start = self.resume if self.resume is not None and self.resume.is_file() else None
-            result = c.continual_round(n.deployed, new, splits, folder, n.history, n.settings,
-                                       corrupt_rewards=corrupt, log=self.log.info,
-                                       stop=self.stop.is_set, rehearsal=rehearsal, start=start)
-        except c.RoundStopped:
+        request = {
+            'deployed': str(n.deployed), 'first_checkpoint': str(Path(n.p['checkpoint'])),
+            'rehearsal': str(n.out / 'rehearsal'), 'new_bags': [str(b) for b in new],
+            'splits': [str(b) for b in splits], 'out': str(folder), 'history': str(n.history),
+            'settings': asdict(n.settings), 'corrupt_rewards': corrupt, 'forced': forced,
+            'resume_from': None if self.resume is None else str(self.resume),
+            'threads': max(1, int(n.p['threads'])), 'parent_pid': os.getpid(),
+            'result': str(folder / 'result.json')}
+        answer = run_child_round(folder, request, self.log.info, self.stop)
+        if answer['status'] == 'stopped':
             self.log.info(f'continual: round {number} stopped: shutting down')
             return
-        except Exception as error:  # a bad split, a diverged candidate: the robot runs on
+        if answer['status'] != 'done':  # a bad split, a diverged candidate: the robot runs on
             n.counts['failures'] += 1
             n.state = 'waiting'
-            line = f'continual: round {number} failed: {type(error).__name__}: {error}'
+            line = f'continual: round {number} failed: {answer["error"]}: {answer["reason"]}'
             self.log.error(line)
-            c.append_history(n.history, {'event': 'failure', 'round': number,
-                                         'reason': str(error)})
+            append_history(n.history, {'event': 'failure', 'round': number,
+                                       'reason': answer['reason'],
+                                       **({'stderr': answer['stderr']} if answer['stderr']
+                                          else {})})
             n.report('failure', line, problem=True)
             return
         n.state = 'waiting'
-        forced = number in n.p['force_rounds']
-        self.resume = None if forced else c.resume_from(result, n.settings, corrupt)
-        if not result.gate.deploy and not forced:
+        self.resume = Path(answer['resume_from']) if answer['resume_from'] else None
+        self.episode_length = self.episode_length or int(answer['episode_length'])
+        if not answer['deploy'] and not forced:
             n.counts['refusals'] += 1
-            n.report('refuse', f'round {number}: refused {result.candidate.sha256[:12]}: '
-                     f'{result.gate.reason}')
+            n.report('refuse', f'round {number}: refused {answer["sha256"][:12]}: '
+                     f'{answer["reason"]}')
         else:
-            self.swap(result, number, forced and not result.gate.deploy)
+            self.swap(answer, number, forced and not answer['deploy'])
         self._prune_candidates()
 
-    def swap(self, result: c.RoundResult, number: int, forced: bool) -> None:
+    def swap(self, answer: dict[str, Any], number: int, forced: bool) -> None:
         """Copy the candidate to OUT/deployed, set it on both nodes, start the live watch."""
         n = self.node
-        target = n.out / 'deployed' / f'round_{number:03d}_{result.candidate.sha256[:12]}.pt'
+        sha256 = str(answer['sha256'])
+        target = n.out / 'deployed' / f'round_{number:03d}_{sha256[:12]}.pt'
         target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(result.candidate.path, target)
+        shutil.copy2(answer['candidate'], target)
         why = n.set_checkpoint(target)
         if why is not None:
             n.counts['failures'] += 1
             line = f'continual: swap of round {number} failed ({why}); {n.deployed} runs on'
             self.log.error(line)
-            c.append_history(n.history, {'event': 'swap_failed', 'round': number,
-                                         'reason': why})
+            append_history(n.history, {'event': 'swap_failed', 'round': number,
+                                       'reason': why})
             n.report('swap_failed', line, problem=True)
             return
         n.previous, n.deployed = n.deployed, target
         n.counts['swaps'] += 1
-        gate = result.gate
+        gain = float(answer['gain'])
         with n.lock:
             segment = n.returns.current
-        self.watch = LiveCheck(segment, self.since_segment, gate.gain, n.settings.tolerance,
-                               n.settings.tolerance_floor, self._episode_length(),
+        self.watch = LiveCheck(segment, self.since_segment, gain, n.settings.tolerance,
+                               n.settings.tolerance_floor, self.episode_length,
                                int(n.p['check_segments']))
         self.since_segment = segment + 1
         self.used |= {p.resolve() for p in self.since_swap}
         self.since_swap, self.steps_at_round = [], 0
-        line = (f'continual: SWAPPED in {target.name} ({result.candidate.sha256[:12]})'
+        line = (f'continual: SWAPPED in {target.name} ({sha256[:12]})'
                 f'{" FORCED past the gate" if forced else ""}; previous {n.previous.name} kept; '
                 f'live check over {self.watch.segments} segments paired by context with the '
-                f"previous checkpoint's (gate gain {gate.gain:+.1f} per episode)")
+                f"previous checkpoint's (gate gain {gain:+.1f} per episode)")
         self.log.info(line)
-        c.append_history(n.history, {'event': 'swap', 'round': number, 'checkpoint': str(target),
-                                     'sha256': result.candidate.sha256, 'forced': forced,
-                                     'previous': str(n.previous), 'gate_gain': gate.gain})
+        append_history(n.history, {'event': 'swap', 'round': number, 'checkpoint': str(target),
+                                   'sha256': sha256, 'forced': forced,
+                                   'previous': str(n.previous), 'gate_gain': gain})
         n.report('swap', line)
 
     def check_live(self) -> None:
@@ -298,7 +323,7 @@ class Trainer:
         if decision == 'keep':
             line = f'continual: live check kept {n.deployed.name}: {figures}'
             self.log.info(line)
-            c.append_history(n.history, record)
+            append_history(n.history, record)
             n.report('keep', line)
             return
         assert n.previous is not None
@@ -312,18 +337,9 @@ class Trainer:
         else:
             line = f'continual: rollback of {n.deployed.name} failed: {why}'
         self.log.warning(line)
-        c.append_history(n.history, {**record, 'rolled_back_to': str(n.deployed),
-                                     'error': why})
+        append_history(n.history, {**record, 'rolled_back_to': str(n.deployed),
+                                   'error': why})
         n.report('rollback', line, problem=True)
-
-    def _episode_length(self) -> int:
-        if not self.episode_length:
-            from sim_bridge.registry import task_class
-            from zeus_ros.learning.inference import InferenceAgent
-
-            task = InferenceAgent.from_checkpoint(self.node.deployed).task
-            self.episode_length = int(task_class(task).episode_length)
-        return self.episode_length
 
     @staticmethod
     def _newest(splits: list[Path], steps: int) -> list[Path]:
@@ -331,7 +347,7 @@ class Trainer:
         chosen: list[Path] = []
         total = 0
         for bag in reversed(splits):
-            total += c.split_steps(bag)
+            total += split_steps(bag)
             if chosen and total > steps:
                 break
             chosen.append(bag)
@@ -346,11 +362,85 @@ class Trainer:
             shutil.rmtree(folder, ignore_errors=True)
 
 
+def run_child_round(folder: Path, request: dict[str, Any], log: Callable[[str], None],
+                    stop: threading.Event) -> dict[str, Any]:
+    """Run one round in `zeus continual-round` and return its answer (cli/continual_round.py).
+
+    Writes `request` to `folder`/request.json; the child's stdout lines go to `log`, its stderr
+    to this process's stderr (the last STDERR_LINES kept). While it runs, `stop` is watched:
+    once set, the child gets SIGTERM (its training stops at the next check) and SIGKILL after
+    STOP_GRACE_S; the answer is then {'status': 'stopped'}, unless the round had finished
+    (its gate line written): that answer counts, as it did when the round ran in-process. A
+    child that exits without a readable answer, or stopped by a signal from elsewhere, is
+    {'status': 'failed', 'error': 'RoundProcessError', 'reason': ...}; every answer but
+    'stopped' carries `stderr`, the child's last stderr lines.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    result = Path(request['result'])
+    result.unlink(missing_ok=True)
+    replace_text(folder / 'request.json', json.dumps(request, indent=1) + '\n')
+    env = {**os.environ, 'OMP_NUM_THREADS': str(request['threads']),
+           'MKL_NUM_THREADS': str(request['threads'])}
+    child = subprocess.Popen([*ROUND_COMMAND, '--request', str(folder / 'request.json')],
+                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, env=env, text=True, bufsize=1)
+    tail: deque[str] = deque(maxlen=STDERR_LINES)
+    readers = [threading.Thread(target=_pump, args=(child.stdout, log, None), daemon=True),
+               threading.Thread(target=_pump, args=(child.stderr, _to_stderr, tail),
+                                daemon=True)]
+    for reader in readers:
+        reader.start()
+    stopped = False
+    while child.poll() is None:
+        if stop.wait(0.2):
+            stopped = True
+            child.send_signal(signal.SIGTERM)
+            try:
+                child.wait(timeout=STOP_GRACE_S)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+    for reader in readers:
+        reader.join(timeout=2.0)
+    try:
+        answer = json.loads(result.read_text('utf8'))
+        if answer.get('status') not in ('done', 'stopped', 'failed'):
+            raise ValueError(f'unknown status {answer.get("status")!r}')
+    except (OSError, ValueError, AttributeError) as error:
+        if stopped:
+            return {'status': 'stopped'}
+        code = child.returncode
+        ended = (f'was killed by signal {-code}' if code < 0 else f'exited with code {code}')
+        last = f'; last stderr line: {tail[-1]}' if tail else ''
+        answer = {'status': 'failed', 'error': 'RoundProcessError',
+                  'reason': f'the round process {ended} without an answer ({error}){last}'}
+    if stopped and answer['status'] != 'done':  # a round that finished still counts
+        return {'status': 'stopped'}
+    if answer['status'] == 'stopped':  # not by this node: someone else signalled the child
+        answer = {'status': 'failed', 'error': 'RoundProcessError',
+                  'reason': 'the round process was stopped by a signal from outside the node'}
+    return {**answer, 'stderr': list(tail)}
+
+
+def _pump(stream: IO[str] | None, sink: Callable[[str], None],
+          tail: deque[str] | None) -> None:
+    """Every line of `stream` to `sink` (and `tail`) until the child closes it."""
+    if stream is None:
+        return
+    with stream:
+        for line in stream:
+            line = line.rstrip('\n')
+            if tail is not None:
+                tail.append(line)
+            sink(line)
+
+
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point: `python -m zeus_ros.nodes.continual_node --ros-args -p recording:=...`."""
-    import signal
-    import sys
-
     from rclpy.signals import SignalHandlerOptions
 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -360,10 +450,7 @@ def main(args: list[str] | None = None) -> int:
         print(f'error: {error}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    import torch
-
-    os.nice(int(node.p['nice']))
-    torch.set_num_threads(max(1, int(node.p['threads'])))
+    os.nice(int(node.p['nice']))  # the rounds' child processes inherit it
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

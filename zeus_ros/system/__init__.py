@@ -10,6 +10,10 @@ the nodes through these modules:
   per group), started and stopped one way (SIGINT, then SIGTERM, then SIGKILL);
 - respawn: the restart policy per node (limit, window, back-off);
 - launch_progress: `zeus launch`'s status line (a subscriber to the step topics).
+- continual_settings, continual_watch: what the continual trainer node needs of continual
+  deployment without the training code (its settings, the history file, the live check after
+  a swap, the novelty alarm, the recording's retention); its training round
+  (offline/training/continual.py, in a child process) shares the settings and the history.
 
 The command lines themselves live in zeus_ros/cli/ (launch.py, demo.py); nothing here parses
 a command line.

@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 import gc
 from itertools import compress
 from operator import attrgetter, itemgetter
-import os
 from pathlib import Path
 import re
 import struct
@@ -40,6 +39,7 @@ from rosbags.rosbag2 import Reader
 from zeus_ros.bags.cdr_columns import decode_messages, stack_field
 from zeus_ros.bags.errors import BagError, IngestError
 from zeus_ros.bags.mcap_file import channel_qos, closed_by_writer, qos_text
+from zeus_ros.bags.recording import find_bags
 from zeus_ros.bags.schema import (
     MSGTYPES,
     TOPIC_ACTION,
@@ -54,8 +54,8 @@ from zeus_ros.offline.data.frames import FrameStore
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator, Sequence
 
-__all__ = ['BAG_FILES', 'Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue',
-           'bag_topic', 'find_bags', 'ingest_bags']
+__all__ = ['Dataset', 'Episode', 'IngestReport', 'IngestWarning', 'Issue',
+           'bag_topic', 'ingest_bags']
 
 _STEP_TOPICS = (TOPIC_STATE, TOPIC_STEP, TOPIC_CONTEXT_TRUTH, TOPIC_ACTION)
 _READ_TOPICS = (*_STEP_TOPICS, TOPIC_IMAGE)
@@ -193,65 +193,6 @@ class Dataset:
     def action_dim(self) -> int:
         """Number of actuators."""
         return int(self.episodes[0].action.shape[1])
-
-
-BAG_FILES = ('.mcap', '.db3')
-"""Storage files of rosbag2 bags (mcap, sqlite3)."""
-WHAT_BAGS_ARE = 'rosbag2 bags: folders with metadata.yaml, or .mcap / .db3 files'
-
-
-def find_bags(paths: Path | str | Sequence[Path | str]) -> list[Path]:
-    """Every bag at or below each path: a bag folder, a .mcap/.db3 file, or any folder of bags.
-
-    Folders are searched at any depth (hidden ones skipped), because `zeus launch --record`
-    writes bags/zeus_<date>/zeus_<date>_000/ and a user passes `bags`; a bag folder is taken
-    whole, never searched further. The one place that decides what a bag is (ingest, train,
-    recover).
-    """
-    items = [paths] if isinstance(paths, str | Path) else list(paths)
-    found: list[Path] = []
-    for item in map(Path, items):
-        if not item.exists():
-            raise BagError(item, f'no such file or directory (looked in {Path.cwd()})')
-        if item.is_file():
-            if item.suffix not in BAG_FILES:
-                raise BagError(item, 'not a bag: expected a .mcap or .db3 file or a bag directory')
-            found.append(item)
-            continue
-        below = _bags_below(item)
-        if not below:
-            raise BagError(item, f'no bags found: searched {item.resolve()} and every folder '
-                                 f'below it for {WHAT_BAGS_ARE}')
-        found.extend(below)
-    return found
-
-
-def _is_bag(folder: Path) -> bool:
-    return (folder / 'metadata.yaml').exists() or _holds_storage(folder)
-
-
-def _bags_below(folder: Path) -> list[Path]:
-    """`folder` if it is a bag, else the bags in its subfolders at any depth, sorted."""
-    if _is_bag(folder):
-        return [folder]
-    bags: list[Path] = []
-    for root, dirs, _files in os.walk(folder):
-        dirs.sort()
-        keep = []
-        for name in dirs:
-            child = Path(root) / name
-            if name.startswith('.'):
-                continue
-            if _is_bag(child):
-                bags.append(child)
-            else:
-                keep.append(name)
-        dirs[:] = keep  # a bag is taken whole; other folders are searched further
-    return sorted(bags)
-
-
-def _holds_storage(folder: Path) -> bool:
-    return any(f.suffix in BAG_FILES for f in folder.iterdir() if f.is_file())
 
 
 def bag_topic(topic: str, namespace: str = '') -> str:

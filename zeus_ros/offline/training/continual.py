@@ -1,7 +1,11 @@
 """Continual deployment, the ROS-free half: closed splits -> candidate -> gate -> history.
 
-The live trainer (zeus_ros/nodes/continual_node.py) runs one `continual_round` whenever enough
-new steps are recorded; everything it decides is computed here, so it is tested without ROS.
+The live trainer (zeus_ros/nodes/continual_node.py) runs one round (`run_round`, over
+`continual_round`) whenever enough new steps are recorded, each in a child process
+(`zeus continual-round`, zeus_ros/cli/continual_round.py); everything it decides is computed
+here, so it is tested without ROS. The settings and the history file are shared with the node
+(zeus_ros/system/continual_settings.py), the closed splits come from
+zeus_ros/bags/recording.py.
 
 - **Data.** Only closed splits of the growing recording are read (`closed_splits`: metadata
   says `closed` or `recovered`, or was written at close), never the bag being written.
@@ -43,9 +47,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
-import datetime
 import json
-import os
 from pathlib import Path
 import shutil
 import time
@@ -53,17 +55,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['Candidate', 'ContinualSettings', 'GateResult', 'RoundResult', 'RoundStopped',
-           'append_history',
-           'closed_splits', 'continual_round', 'gate', 'read_history', 'rehearsal_bag',
-           'replay_mix', 'resume_from',
-           'split_steps', 'train_candidate']
+from zeus_ros.bags.recording import split_steps
+from zeus_ros.system.continual_settings import ContinualSettings, append_history
 
-CLOSED_STATES = ('closed', 'recovered', None)
-"""A split in one of these states is complete. None: metadata without a zeus state, written by
-a writer that writes it only at close (`zeus collect`, `ros2 bag record`); 'provisional' (the
-recorder's bag being written) and 'unfinished' (no metadata) may still grow."""
-STEP_TOPIC = '/zeus/step'
+__all__ = ['Candidate', 'GateResult', 'RoundResult', 'RoundStopped', 'continual_round', 'gate',
+           'rehearsal_bag', 'replay_mix', 'resume_from', 'run_round', 'train_candidate']
+
 CORRUPTION = -1.0
 """The drill's corrupted rewards: every reward times this (negated: the opposite task). Scaled
 up (x -10) the TD errors grow so large that a weak policy's round can land anywhere, better
@@ -76,67 +73,6 @@ per episode on Cheetah-Run-v0, and the gate rightly deployed it). A critic learn
 corrupted rewards alone is what a reward bug produces."""
 WARMUP_ACTOR_PERIOD = 10**9
 """actor_update_freq during the critic warm-up: no warm-up update index is a multiple of it."""
-
-
-@dataclass(frozen=True)
-class ContinualSettings:
-    """What one round does; defaults sized for a 2-core robot computer (tests shrink them)."""
-
-    new_steps: int = 2000
-    """Closed new steps that start a round (a novelty alarm may start one earlier)."""
-    warmup_updates: int = 2000
-    """Critic-only updates before the actor moves (deployment exports only): 200 left the
-    critic too rough to steer a working actor (every candidate refused)."""
-    updates: int = 2000
-    """Actor + critic updates of a round."""
-    actor_lr_scale: float = 0.3
-    """The actor's learning rate in a round, as a fraction of its training one: small steps
-    from a policy that works, against a critic that has seen little data."""
-    bc_weight: float = 1.0
-    """The round's actor_bc_weight (TD3+BC): the actor stays near the recorded actions.
-    Measured offline on the zoo's Cheetah-Bias-v0 (6,000 steps at biases 0.6-0.9 + 6,000 at
-    the train values): 0 wrecks the train values (-39 -> -308), 0.4 gains +38 on the new
-    biases but loses up to 8 on train values, 1.0 gains +33 and loses at most 3."""
-    old_ratio: float = 1.0
-    """Old steps kept per new step in the replay mix."""
-    max_old_steps: int = 20000
-    """Cap on old steps in the mix: memory and update cost stay bounded."""
-    rehearsal_steps: int = 8000
-    """Steps at the family's train values, recorded once in-process by the first deployed
-    checkpoint and part of every round (experience replay for continual learning, Rolnick et
-    al. 2019): a recording that never visits the train values otherwise lets the candidate
-    forget them (measured, first round of the drift scenario without it: +55 per episode on
-    the new biases, -44 at train bias -0.3; refused; with 8,000 rehearsal steps the train
-    values lose 1-6). 0: off (no simulator of the task)."""
-    episodes: int = 20
-    """Gate episodes per context value (paired: same initial states for both checkpoints).
-    Measured on the drift scenario's recording: with 10 the stratified s.e. of the gain was
-    8.6-12.8 (required 17-26 per episode, every candidate refused), with 20 it is 6.2-7.1
-    (required 12-14); the gate takes twice as long (a minute at low priority)."""
-    resume_refused: bool = True
-    """Start the next round from a refused candidate that gained on the seen contexts (its
-    critics too: no warm-up). Measured offline on the drift scenario's recording (rounds of
-    2,000 updates, 20 gate episodes): from the deployed checkpoint every round gains about
-    +11.5 per episode; continuing, +23.8 and +21.1 after the second and third round, with
-    smaller losses on the train values. False: every round starts from the deployed one."""
-    eval_seed: int = 300
-    """Gate evaluation seed: initial states no training run chose."""
-    max_seen_values: int = 6
-    """Seen contexts evaluated by the gate (evenly spread over those recorded)."""
-    max_train_values: int = 0
-    """Train values evaluated by the gate, evenly spread (0: every one of the family's)."""
-    margin: float = 1.0
-    """Required mean gain of return per episode on the seen contexts (and >= 2 s.e.: with
-    several episodes per value, the s.e. of the mean over the seen contexts, stratified by
-    context; measured in the drift scenario, the spread across 6 values' means asked for
-    +31 and refused a gain of +27.6 whose stratified 2 s.e. was at most 17.5)."""
-    tolerance: float = 0.10
-    """Allowed loss at any value, as a fraction of |deployed return| there..."""
-    tolerance_floor: float = 2.0
-    """...and at least this much return per episode, and at least 2 s.e. of that value's
-    paired episode differences: a loss within its own noise is not called worse (far beyond
-    the range one 40-step episode may earn -50 or -200 on a fall)."""
-    seed: int = 0
 
 
 class RoundStopped(Exception):  # noqa: N818 - a request, not an error
@@ -197,43 +133,6 @@ class RoundResult:
 
 
 # ---------------------------------------------------------------------- data
-def _metadata(bag: Path) -> dict[str, Any]:
-    import yaml
-
-    text = (bag / 'metadata.yaml').read_text('utf8')
-    return (yaml.safe_load(text) or {}).get('rosbag2_bagfile_information') or {}
-
-
-def closed_splits(recording: Path | str) -> list[Path]:
-    """The complete bags under `recording` that hold steps, oldest first.
-
-    Never the one being written; a split opened before step 0 may hold no step (skipped).
-    """
-    from zeus_ros.bags.errors import BagError
-    from zeus_ros.bags.recover import bag_state
-    from zeus_ros.offline.data.ingest import find_bags
-
-    recording = Path(recording)
-    if not recording.exists():
-        return []
-    try:
-        bags = find_bags(recording)
-    except BagError:  # nothing recorded yet
-        return []
-    return [bag for bag in bags if bag.is_dir() and bag_state(bag) in CLOSED_STATES
-            and split_steps(bag) > 0]
-
-
-def split_steps(bag: Path) -> int:
-    """Steps in a closed split, from its metadata (no message is read)."""
-    try:
-        topics = _metadata(bag).get('topics_with_message_count') or []
-    except (OSError, ValueError):
-        return 0
-    return sum(int(t.get('message_count', 0)) for t in topics
-               if (t.get('topic_metadata') or {}).get('name') == STEP_TOPIC)
-
-
 def replay_mix(splits: Sequence[Path], new: Sequence[Path], settings: ContinualSettings
                ) -> list[Path]:
     """The old splits of a round: a seeded uniform draw over the splits before `new`."""
@@ -484,34 +383,7 @@ def _fmt_context(context: dict[str, float]) -> str:
     return ','.join(f'{k}={v:g}' for k, v in context.items())
 
 
-# ---------------------------------------------------------------------- history
-def append_history(path: Path | str, record: dict[str, Any]) -> dict[str, Any]:
-    """Append one JSON line (with a UTC time) and fsync it: a crash keeps every decision."""
-    record = {'time': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
-              **record}
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open('a', encoding='utf8') as handle:
-        handle.write(json.dumps(record) + '\n')
-        handle.flush()
-        os.fsync(handle.fileno())
-    return record
-
-
-def read_history(path: Path | str) -> list[dict[str, Any]]:
-    """Every record of a history file (a torn last line from a crash is skipped)."""
-    path = Path(path)
-    if not path.is_file():
-        return []
-    records = []
-    for line in path.read_text('utf8').splitlines():
-        try:
-            records.append(json.loads(line))
-        except ValueError:
-            continue
-    return records
-
-
+# ---------------------------------------------------------------------- round
 def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequence[Path],
                     out: Path | str, history: Path | str, settings: ContinualSettings, *,
                     corrupt_rewards: bool = False, log: Callable[[str], None] = print,
@@ -559,3 +431,39 @@ def resume_from(result: RoundResult, settings: ContinualSettings, corrupt_reward
             or not result.gate.gain > 0):
         return None
     return result.candidate.path
+
+
+def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequence[Path | str],
+              out: Path | str, history: Path | str, settings: ContinualSettings, *,
+              first_checkpoint: Path | str, rehearsal_folder: Path | str,
+              corrupt_rewards: bool = False, forced: bool = False,
+              start: Path | str | None = None, log: Callable[[str], None] = print,
+              stop: Callable[[], bool] = lambda: False) -> dict[str, Any]:
+    """One round of the live trainer, as `zeus continual-round` runs it: a JSON-ready answer.
+
+    The rehearsal recording of `first_checkpoint` (made once under `rehearsal_folder`), then
+    `continual_round` from `start` (an earlier refused candidate; ignored when the file is
+    gone) or `deployed`, and where the next round starts (`resume_from`; None when the round
+    is `forced` past the gate). The answer holds what the node needs to swap and watch: the
+    candidate's path and sha256, the gate's decision, figures and summary, `resume_from`, and
+    the task's episode length (the live check's scale). Raises what `continual_round` raises
+    (RoundStopped when `stop` answers True).
+    """
+    rehearsal = rehearsal_bag(Path(first_checkpoint), rehearsal_folder, settings, log)
+    begin = Path(start) if start is not None and Path(start).is_file() else None
+    result = continual_round(Path(deployed), [Path(b) for b in new_bags],
+                             [Path(b) for b in splits], out, history, settings,
+                             corrupt_rewards=corrupt_rewards, log=log, stop=stop,
+                             rehearsal=rehearsal, start=begin)
+    resume = None if forced else resume_from(result, settings, corrupt_rewards)
+    from sim_bridge.registry import task_class
+    from zeus_ros.learning.inference import InferenceAgent
+
+    task = InferenceAgent.from_checkpoint(deployed).task
+    gate_result = result.gate
+    return {'candidate': str(result.candidate.path), 'sha256': result.candidate.sha256,
+            'deploy': gate_result.deploy, 'reason': gate_result.reason,
+            'gain': gate_result.gain, 'se': gate_result.se, 'required': gate_result.required,
+            'summary': gate_result.summary(),
+            'resume_from': None if resume is None else str(resume),
+            'episode_length': int(task_class(task).episode_length)}

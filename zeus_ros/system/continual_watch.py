@@ -145,7 +145,7 @@ def prune_recording(splits: Sequence[Path], keep_bytes: int, protect: Sequence[P
                     ) -> list[Path]:
     """Delete the oldest closed `splits` until they fit `keep_bytes`; returns those deleted.
 
-    `splits` are closed (continual.closed_splits: the one being written is never among them);
+    `splits` are closed (bags.recording.closed_splits: the one being written is never among them);
     `protect` (the splits since the last swap, the next round's new data) are never deleted.
     """
     if keep_bytes <= 0:

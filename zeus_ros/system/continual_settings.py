@@ -1,0 +1,108 @@
+"""Continual deployment, what the live trainer and the training round share: settings, history.
+
+`ContinualSettings` is what one round does (the continual_trainer node's parameters of the
+same names take their defaults from it); `append_history` / `read_history` write and read
+OUT/history.jsonl, one JSON line per decision. The node (zeus_ros/nodes/continual_node.py)
+imports these and never the training library: it runs each round in a child process
+(`zeus continual-round`, zeus_ros/cli/continual_round.py over
+zeus_ros/offline/training/continual.py), which imports them too. No ROS, no torch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import datetime
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+__all__ = ['ContinualSettings', 'append_history', 'read_history']
+
+
+@dataclass(frozen=True)
+class ContinualSettings:
+    """What one round does; defaults sized for a 2-core robot computer (tests shrink them)."""
+
+    new_steps: int = 2000
+    """Closed new steps that start a round (a novelty alarm may start one earlier)."""
+    warmup_updates: int = 2000
+    """Critic-only updates before the actor moves (deployment exports only): 200 left the
+    critic too rough to steer a working actor (every candidate refused)."""
+    updates: int = 2000
+    """Actor + critic updates of a round."""
+    actor_lr_scale: float = 0.3
+    """The actor's learning rate in a round, as a fraction of its training one: small steps
+    from a policy that works, against a critic that has seen little data."""
+    bc_weight: float = 1.0
+    """The round's actor_bc_weight (TD3+BC): the actor stays near the recorded actions.
+    Measured offline on the zoo's Cheetah-Bias-v0 (6,000 steps at biases 0.6-0.9 + 6,000 at
+    the train values): 0 wrecks the train values (-39 -> -308), 0.4 gains +38 on the new
+    biases but loses up to 8 on train values, 1.0 gains +33 and loses at most 3."""
+    old_ratio: float = 1.0
+    """Old steps kept per new step in the replay mix."""
+    max_old_steps: int = 20000
+    """Cap on old steps in the mix: memory and update cost stay bounded."""
+    rehearsal_steps: int = 8000
+    """Steps at the family's train values, recorded once in-process by the first deployed
+    checkpoint and part of every round (experience replay for continual learning, Rolnick et
+    al. 2019): a recording that never visits the train values otherwise lets the candidate
+    forget them (measured, first round of the drift scenario without it: +55 per episode on
+    the new biases, -44 at train bias -0.3; refused; with 8,000 rehearsal steps the train
+    values lose 1-6). 0: off (no simulator of the task)."""
+    episodes: int = 20
+    """Gate episodes per context value (paired: same initial states for both checkpoints).
+    Measured on the drift scenario's recording: with 10 the stratified s.e. of the gain was
+    8.6-12.8 (required 17-26 per episode, every candidate refused), with 20 it is 6.2-7.1
+    (required 12-14); the gate takes twice as long (a minute at low priority)."""
+    resume_refused: bool = True
+    """Start the next round from a refused candidate that gained on the seen contexts (its
+    critics too: no warm-up). Measured offline on the drift scenario's recording (rounds of
+    2,000 updates, 20 gate episodes): from the deployed checkpoint every round gains about
+    +11.5 per episode; continuing, +23.8 and +21.1 after the second and third round, with
+    smaller losses on the train values. False: every round starts from the deployed one."""
+    eval_seed: int = 300
+    """Gate evaluation seed: initial states no training run chose."""
+    max_seen_values: int = 6
+    """Seen contexts evaluated by the gate (evenly spread over those recorded)."""
+    max_train_values: int = 0
+    """Train values evaluated by the gate, evenly spread (0: every one of the family's)."""
+    margin: float = 1.0
+    """Required mean gain of return per episode on the seen contexts (and >= 2 s.e.: with
+    several episodes per value, the s.e. of the mean over the seen contexts, stratified by
+    context; measured in the drift scenario, the spread across 6 values' means asked for
+    +31 and refused a gain of +27.6 whose stratified 2 s.e. was at most 17.5)."""
+    tolerance: float = 0.10
+    """Allowed loss at any value, as a fraction of |deployed return| there..."""
+    tolerance_floor: float = 2.0
+    """...and at least this much return per episode, and at least 2 s.e. of that value's
+    paired episode differences: a loss within its own noise is not called worse (far beyond
+    the range one 40-step episode may earn -50 or -200 on a fall)."""
+    seed: int = 0
+
+
+def append_history(path: Path | str, record: dict[str, Any]) -> dict[str, Any]:
+    """Append one JSON line (with a UTC time) and fsync it: a crash keeps every decision."""
+    record = {'time': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds'),
+              **record}
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open('a', encoding='utf8') as handle:
+        handle.write(json.dumps(record) + '\n')
+        handle.flush()
+        os.fsync(handle.fileno())
+    return record
+
+
+def read_history(path: Path | str) -> list[dict[str, Any]]:
+    """Every record of a history file (a torn last line from a crash is skipped)."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    records = []
+    for line in path.read_text('utf8').splitlines():
+        try:
+            records.append(json.loads(line))
+        except ValueError:
+            continue
+    return records
