@@ -22,7 +22,6 @@ Exit code: 0 done, 1 failed, 2 a bad request, 3 stopped.
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 from pathlib import Path
@@ -34,6 +33,7 @@ from typing import Any
 
 from zeus_ros.atomic_file import replace_text
 from zeus_ros.cli_args import ZeusArgumentParser
+from zeus_ros.system.processes import die_with_parent
 
 __all__ = ['main']
 
@@ -44,9 +44,7 @@ def _die_with(parent: int | None) -> None:
     """SIGKILL when `parent` (the node) dies, as the round did when it ran inside the node."""
     if parent is None:
         return
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):  # not Linux: the node terminates it on shutdown
+    if not die_with_parent(signal.SIGKILL):  # not Linux: the node terminates it on shutdown
         return
     if os.getppid() != int(parent):  # it died before the line above
         os._exit(1)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 import contextlib
+import ctypes
 import os
 from pathlib import Path
 import random
@@ -19,7 +20,8 @@ import subprocess
 import time
 from typing import IO, Any
 
-__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'domain_range', 'fresh_domain_id',
+__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'die_with_parent', 'domain_range',
+           'fresh_domain_id',
            'group_domain_id',
            'ros_context', 'ros_env', 'start_node', 'stop_nodes']
 
@@ -144,3 +146,26 @@ def stop_nodes(processes: Sequence[subprocess.Popen[bytes]], *, deadline: float,
                 continue
         _signal(process, signal.SIGKILL)
         process.wait(timeout=KILL_WAIT_S)
+
+
+def _prctl() -> Any:
+    """The C library's prctl, looked up at import (no dlopen between fork and exec)."""
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (AttributeError, OSError):  # not Linux
+        return None
+
+
+_PRCTL = _prctl()
+
+
+def die_with_parent(sig: int = signal.SIGTERM) -> bool:
+    """In a child (or a preexec_fn): get `sig` when the parent dies (PR_SET_PDEATHSIG).
+
+    So no training outlives the worker or node that started it. False where prctl is missing
+    (not Linux): the parent's own shutdown has to stop the child then.
+    """
+    if _PRCTL is None:
+        return False
+    _PRCTL(1, sig)
+    return True

@@ -19,7 +19,6 @@ steps are skipped, so running a trial again resumes it (`zeus loop --resume`).
 from __future__ import annotations
 
 from collections.abc import Callable
-import ctypes
 from dataclasses import asdict, dataclass, field
 import datetime
 from functools import partial
@@ -35,6 +34,7 @@ from typing import Any
 import yaml
 
 from zeus_ros.offline.runs import mark_evaluated, mark_trained, read_state
+from zeus_ros.system.processes import die_with_parent
 
 __all__ = ['LoopProtocol', 'Trial', 'TrialError', 'default_schedule', 'recorded_differences',
            'run_trial', 'trial_done', 'trial_steps']
@@ -120,23 +120,6 @@ def trial_done(trial: Trial) -> bool:
     return read_state(trial.folder).done(trial.splits)
 
 
-def _prctl() -> Any:
-    """The C library's prctl, looked up in the parent (no dlopen between fork and exec)."""
-    try:
-        return ctypes.CDLL(None, use_errno=True).prctl
-    except (AttributeError, OSError):
-        return None
-
-
-_PRCTL = _prctl()
-
-
-def _die_with_parent() -> None:
-    """In the child: SIGTERM when the worker that started it dies (no orphaned training)."""
-    if _PRCTL is not None:
-        _PRCTL(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-
-
 def _ended(code: int) -> str:
     if code < 0:
         try:
@@ -156,7 +139,7 @@ def _run_step(trial: Trial, what: str, args: list[str], threads: int) -> float:
         log.flush()
         child = subprocess.Popen([sys.executable, '-m', 'zeus_ros.cli', *args], stdout=log,
                                  stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                                 preexec_fn=_die_with_parent)
+                                 preexec_fn=die_with_parent)
         pid_file.write_text(f'{child.pid}\n')
         try:
             code = child.wait()
