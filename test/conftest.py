@@ -139,7 +139,9 @@ def _alone_when_marked(request: pytest.FixtureRequest,
     cores, a restarted policy was not re-paired in time and `zeus inspect` saw no step view
     before their deadlines (fresh-clone run, 2026-12-06). Timing-sensitive tests (a race
     against a settle time, steps counted against a killed process, a latency health check)
-    are `alone`: they keep the quiet machine they were written for.
+    are `alone`: they keep the quiet machine they were written for. `make test` runs the `alone`
+    tests in a second phase without xdist (the wait for the other worker's current test to end
+    left one worker idle); the lock serves a plain `pytest -n 2`.
     """
     if not os.environ.get('PYTEST_XDIST_WORKER'):
         yield
