@@ -134,6 +134,7 @@ def test_the_losses_fall_on_a_fixed_synthetic_batch(tiny: Path) -> None:
     (['--teacher', str(TEACHER), '--head', 'mine'], 'head must be one of own, teacher'),
     (['--teacher', str(TEACHER), '--head', 'teacher', '--no-context'],
      'cannot be a no_context student'),
+    (['--teacher', str(TEACHER), '--resume'], 'holds no stopped run (resume.pt is missing)'),
 ])
 def test_bad_input_is_one_clear_line(args: list[str], message: str, tmp_path: Path,
                                      capsys: pytest.CaptureFixture[str]) -> None:
@@ -218,3 +219,50 @@ def test_a_round_zero_cache_without_states_is_refused_by_the_teacher_head(
                  '--no-progress'])
     err = capsys.readouterr().err
     assert code == 2 and 'holds no states' in err and str(cache) in err
+
+
+@pytest.mark.slow
+def test_a_run_stopped_mid_round_resumes_to_the_same_student(
+        tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C in round 2's collection, then --resume: the student of a run that never stopped."""
+    from zeus_ros.offline.training import distill as library
+
+    def run(out: Path, *extra: str) -> int:
+        return main(['--task', TASK, '--teacher', str(TEACHER), '--config', str(tiny),
+                     '--out', str(out), '--rounds', '3', '--first-steps', '45',
+                     '--round-steps', '42', '--updates', '3', '--window', '8',
+                     '--no-progress', *extra])
+
+    assert run(tmp_path / 'whole') == 0
+    real = library.collect_round
+    calls = []
+
+    def stopped_in_round_two(*args: object, **kwargs: object) -> object:
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(library, 'collect_round', stopped_in_round_two)
+    out = tmp_path / 'stopped'
+    with pytest.raises(KeyboardInterrupt):
+        run(out)
+    monkeypatch.setattr(library, 'collect_round', real)
+    assert (out / 'resume.pt').is_file() and not (out / 'student.pt').exists()
+    capsys.readouterr()
+    assert run(out) == 2
+    assert 'holds a stopped run' in capsys.readouterr().err
+    assert run(out, '--updates', '4', '--resume') == 2
+    assert 'updates (3, now 4)' in capsys.readouterr().err
+    assert run(out, '--resume') == 0
+    assert 'resumed after round 1' in capsys.readouterr().out
+    assert not (out / 'resume.pt').exists() and not (out / 'rounds').exists()
+    whole = torch.load(tmp_path / 'whole' / 'student.pt', weights_only=False)['state']['modules']
+    resumed = torch.load(out / 'student.pt', weights_only=False)['state']['modules']
+    assert whole.keys() == resumed.keys()
+    for name, state in whole.items():
+        for key, value in state.items():
+            assert torch.equal(value, resumed[name][key]), (name, key)
+    rounds = [row.split(',')[:2] for row in (out / 'rounds.csv').read_text().splitlines()[1:]]
+    assert rounds == [['0', 'teacher'], ['1', 'student'], ['2', 'student']]

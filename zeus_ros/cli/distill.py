@@ -43,6 +43,9 @@ def _build_parser() -> argparse.ArgumentParser:
         else:
             parser.add_argument(flag, type=type(value), default=value,
                                 help=f'(default: {value})')
+    parser.add_argument('--resume', action='store_true',
+                        help='continue the stopped run in --out after its last finished round '
+                        '(same arguments; --rounds may grow)')
     parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
     parser.add_argument('--no-progress', action='store_true')
     return parser
@@ -68,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.seed is not None:
             config = config.replace(seed=args.seed)
         path = distill(args.task, args.teacher, config, settings, args.out,
-                       data_cache=args.data_cache, progress=not args.no_progress)
+                       data_cache=args.data_cache, progress=not args.no_progress,
+                       resume=args.resume)
     except (CheckpointError, ConfigError, ValueError) as error:
         print(f'zeus distill: {error}', file=sys.stderr)
         return 2

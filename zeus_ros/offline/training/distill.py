@@ -43,7 +43,20 @@ from zeus_ros.learning.augment import random_shift
 from zeus_ros.learning.config import ZeusConfig
 from zeus_ros.learning.context import HistoryFeatures
 from zeus_ros.learning.errors import ConfigError
-from zeus_ros.offline.training.distill_data import EpisodeStore, WindowBatch, collect_round
+from zeus_ros.offline.training.distill_data import (
+    EpisodeStore,
+    WindowBatch,
+    collect_round,
+    save_episodes,
+)
+from zeus_ros.offline.training.distill_resume import (
+    RESUME_FILE,
+    ResumePoint,
+    clear_resume,
+    load_resume,
+    round_data_path,
+    save_resume,
+)
 
 __all__ = ['DistillSettings', 'distill', 'distill_loss', 'make_student',
            'random_shift']
@@ -202,8 +215,13 @@ def _sha256(path: Path) -> str:
 
 
 def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: DistillSettings,
-            out: Path, *, data_cache: Path | None = None, progress: bool = True) -> Path:
-    """Run the DAgger rounds; write out/student.pt (deployment export) and out/rounds.csv."""
+            out: Path, *, data_cache: Path | None = None, progress: bool = True,
+            resume: bool = False) -> Path:
+    """Run the DAgger rounds; write out/student.pt (deployment export) and out/rounds.csv.
+
+    After every round a resume point is written (distill_resume.py); `resume` continues a
+    stopped run from it. Without `resume`, an `out` holding a stopped run is refused.
+    """
     from zeus_ros.learning.checkpoint import export_for_deployment, save_checkpoint
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.rollout import parse_schedule
@@ -230,8 +248,23 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     windows = max(1, config.batch_size // settings.window)
-    step = 0
-    for round_ in range(settings.rounds):
+    step = first_round = 0
+    fingerprint = {'task': task, 'teacher_sha256': _sha256(teacher_path), **asdict(settings),
+                   **{f'config.{key}': value for key, value in config.to_dict().items()},
+                   'data_cache': None if data_cache is None else str(data_cache)}
+    if resume:
+        point = load_resume(out, fingerprint, store, data_cache)
+        for name, state in point.modules.items():
+            m[name].load_state_dict(state)
+        optimizer.load_state_dict(point.optimizer)
+        rng.bit_generator.state = point.numpy_rng
+        torch.set_rng_state(point.torch_rng)
+        rows, step, first_round = point.rows, point.step, point.round_ + 1
+        print(f'resumed after round {point.round_} ({step} updates)', flush=True)
+    elif (out / RESUME_FILE).is_file():
+        raise ConfigError(f'{out} holds a stopped run ({out / RESUME_FILE}): pass --resume to '
+                          'continue it, or give another --out')
+    for round_ in range(first_round, settings.rounds):
         started = time.perf_counter()
         cached = round_ == 0 and data_cache is not None and data_cache.is_file()
         returns: list[float] = []
@@ -248,6 +281,8 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
                 store.add(episode)
             if round_ == 0 and data_cache is not None:
                 store.save(data_cache)
+            elif episodes:
+                save_episodes(round_data_path(out, round_), episodes)
         if not store.episodes:
             raise ValueError('no complete episode collected: give more steps per round')
         collect_s = time.perf_counter() - started
@@ -285,6 +320,11 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
         print(f'round {round_}: ' + ', '.join(
             f'{key} {value:.4g}' if isinstance(value, float) else f'{key} {value}'
             for key, value in row.items() if key != 'round'), flush=True)
+        save_resume(out, ResumePoint(
+            round_=round_, step=step, rows=rows, optimizer=optimizer.state_dict(),
+            modules={name: module.state_dict() for name, module in m.items()},
+            numpy_rng=dict(rng.bit_generator.state), torch_rng=torch.get_rng_state(),
+            fingerprint=fingerprint))
     _write_rows(out / 'rounds.csv', rows)
     extra = {'distill': {'teacher': str(teacher_path), 'teacher_sha256': _sha256(teacher_path),
                          'teacher_method': teacher.method, 'settings': asdict(settings),
@@ -292,6 +332,7 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
     full = save_checkpoint(out / 'student_full.pt', student, step=step, extra=extra)
     target = export_for_deployment(full, out / 'student.pt')
     full.unlink()
+    clear_resume(out)
     return target
 
 

@@ -20,7 +20,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-__all__ = ['Episode', 'EpisodeStore', 'WindowBatch', 'collect_round']
+from zeus_ros.atomic_file import atomic_write
+
+__all__ = ['Episode', 'EpisodeStore', 'WindowBatch', 'collect_round', 'save_episodes']
 
 
 @dataclass
@@ -115,10 +117,7 @@ class EpisodeStore:
 
     def save(self, path: Path) -> None:
         """All episodes in one .npz (the round-0 data, shared by the seeds of a comparison)."""
-        eps = list(self.episodes)
-        np.savez(path, lengths=np.array([len(e) for e in eps]),
-                 **{name: np.concatenate([getattr(e, name) for e in eps])
-                    for name in Episode.__dataclass_fields__})
+        save_episodes(path, list(self.episodes))
 
     def load(self, path: Path) -> None:
         """Add the episodes saved by `save`."""
@@ -129,6 +128,14 @@ class EpisodeStore:
         arrays.setdefault('state', np.zeros((int(bounds[-1]), 0), np.float32))
         for a, b in itertools.pairwise(bounds):
             self.add(Episode(**{name: value[a:b] for name, value in arrays.items()}))
+
+
+def save_episodes(path: Path, episodes: list[Episode]) -> None:
+    """`episodes` in one .npz that `EpisodeStore.load` reads, written atomically."""
+    with atomic_write(path, 'wb') as handle:
+        np.savez(handle, lengths=np.array([len(e) for e in episodes]),
+                 **{name: np.concatenate([getattr(e, name) for e in episodes])
+                    for name in Episode.__dataclass_fields__})
 
 
 def collect_round(task_name: str, schedule: dict[str, Any], teacher: Any, student: Any | None,
