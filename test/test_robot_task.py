@@ -177,3 +177,18 @@ def test_both_launchers_put_robot_bridge_in_sim_bridges_place(tmp_path: Path) ->
     assert first.nodes[0].parameters['min_observers'] == 2
     assert first.nodes[1].parameters['expected_subscribers'] == 2  # robot_bridge + recorder
     assert first.nodes[1].parameters['task'] == str(PARAMS)
+
+
+def test_obs_pixels_on_a_robot_deploys_its_tasks_pixel_checkpoint() -> None:
+    """--robot --obs pixels: the robot task's zoo pixel pair; a robot without a camera refused."""
+    from zeus_ros.system.launch_defaults import plan
+
+    cheetah = REPO / 'test' / 'fake_cheetah.yaml'
+    launch = plan(robot=True, params_file=cheetah, obs='pixels')
+    nodes = {node.name: node.parameters for node in launch.nodes}
+    assert list(nodes) == ['robot_bridge', 'context_estimator', 'policy']
+    assert {nodes[n]['checkpoint'] for n in ('context_estimator', 'policy')} == {
+        str(REPO / 'checkpoints' / 'cheetah_motor_v0' / 'pixels_student.pt')}
+    assert 'pixels' not in nodes['robot_bridge']  # sim_bridge's parameter, not the robot's
+    with pytest.raises(ValueError, match='sets no robot_bridge image_topic'):
+        plan(robot=True, params_file=PARAMS, obs='pixels')

@@ -372,9 +372,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="checkpoint for context_estimator and policy (default: the params "
                         "file's, or the --task family's zoo checkpoint)")
     parser.add_argument('--obs', default='', choices=[o for o in launch_defaults.OBS_CHOICES if o],
-                        help='what the agent sees: pixels (sim_bridge renders frames; without '
-                        "--checkpoint the task's zoo pixel checkpoint, experimental) or state "
-                        "(default: the params file's)")
+                        help='what the agent sees: pixels (sim_bridge renders frames, with '
+                        "--robot the robot's camera; without --checkpoint the task's zoo pixel "
+                        "checkpoint, experimental) or state (default: the params file's)")
     parser.add_argument('--log-level', default='info', choices=launch_defaults.LOG_LEVELS,
                         help='log level of every node')
     parser.add_argument('--domain-id', type=at_least(0, int, 232), default=None,

@@ -134,7 +134,8 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    "the one in the params file, or the task's zoo checkpoint)"),
     LaunchArgument('obs', '', 'what the agent sees: pixels (sim_bridge renders 84x84 frames '
                    "and, without a checkpoint, the task's zoo pixel checkpoint acts: "
-                   "experimental) or state (empty: the params file's)"),
+                   "experimental; with robot: the robot's camera, image_topic) or state (empty: "
+                   "the params file's)"),
     LaunchArgument('record', 'false', 'also start the recorder (sim_bridge waits for it too)'),
     LaunchArgument('continual', 'false', 'record, and retrain from the closed splits in the '
                    'background (continual_trainer, niced, 1 torch thread): gate each candidate '
@@ -326,12 +327,24 @@ def pixel_checkpoint(task: str) -> Path:
                          '(zeus distill)') from None
 
 
-def _params_task(params: Mapping[str, Any], path: Path) -> str:
-    """sim_bridge's task in the params file (what runs when no task is given)."""
-    tasks = [s['task'] for s in _node_sections(params, 'sim_bridge') if s.get('task')]
+def _params_task(params: Mapping[str, Any], path: Path, bridge: str = 'sim_bridge') -> str:
+    """The bridge's task in the params file (what runs, or the robot is, when none is given)."""
+    tasks = [s['task'] for s in _node_sections(params, bridge) if s.get('task')]
     if not tasks:
-        raise ValueError(f'{path} names no sim_bridge task: pass task:= / --task')
+        raise ValueError(f'{path} names no {bridge} task: pass task:= / --task')
     return str(tasks[-1])
+
+
+def _robot_pixel_checkpoint(params: Mapping[str, Any], path: Path, checkpoint: str) -> str:
+    """Pixels on a robot: its camera must be set; without `checkpoint`, its task's zoo one.
+
+    robot_bridge republishes the camera per step (`image_topic`); sim_bridge's `pixels` does
+    not apply, so a robot without a camera would leave a pixel policy waiting for frames.
+    """
+    if not any(s.get('image_topic') for s in _node_sections(params, 'robot_bridge')):
+        raise ValueError(f'obs pixels with robot: {path} sets no robot_bridge image_topic '
+                         '(the camera the pixel agents see)')
+    return checkpoint or str(pixel_checkpoint(_params_task(params, path, 'robot_bridge')))
 
 
 def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
@@ -541,7 +554,8 @@ def plan(
     continual trainer, pointed at the recorder's output and the agents' checkpoint. `clock`
     moves the simulation clock of every node (`clock_topic`). Each node is told whom it pairs
     with (`pairing_parameters`) unless the params file names one. `obs` 'pixels' turns on
-    sim_bridge's frames and, without `checkpoint`, deploys the family's zoo pixel checkpoint.
+    sim_bridge's frames and, without `checkpoint`, deploys the family's zoo pixel checkpoint
+    (with `robot`: the robot's camera, `image_topic`, must be set; the robot task's checkpoint).
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -561,17 +575,19 @@ def plan(
     given = str(params_file) if params_file not in (None, '') else ''
     path = Path(os.path.abspath(os.path.expanduser(given))) if given else default_params_file()
     params = read_params(path)
+    if obs not in OBS_CHOICES:
+        raise ValueError(f'obs {obs!r}: choose one of {", ".join(o for o in OBS_CHOICES if o)}')
+    if obs == 'pixels' and robot:
+        checkpoint = _robot_pixel_checkpoint(params, path, checkpoint)
+    elif obs == 'pixels' and not checkpoint:
+        checkpoint = str(pixel_checkpoint(task or _params_task(params, path)))
     random_robot = robot and not checkpoint and not any(
         section.get('checkpoint') for node in AGENT_NODES
         for section in _node_sections(params, node))
     if random_robot:
         names = [name for name in names if name != 'context_estimator']
-    if obs not in OBS_CHOICES:
-        raise ValueError(f'obs {obs!r}: choose one of {", ".join(o for o in OBS_CHOICES if o)}')
-    if obs == 'pixels' and not checkpoint:
-        checkpoint = str(pixel_checkpoint(task or _params_task(params, path)))
     family_overrides = task_overrides(task, checkpoint) if task else {}
-    if obs:
+    if obs and not robot:
         family_overrides.setdefault('sim_bridge', {})['pixels'] = obs == 'pixels'
     if task and not checkpoint:
         checkpoint = str(family_overrides.pop('checkpoint'))
