@@ -57,7 +57,7 @@ def test_the_zoo_pixel_checkpoint_drives_a_robot_through_the_camera_path(
 
     params = yaml.safe_load(PARAMS.read_text())
     params['/**/robot_bridge']['ros__parameters']['max_steps'] = STEPS
-    params['/**/recorder']['ros__parameters']['output'] = str(tmp_path / 'bag')
+    params['/**/recorder'] = {'ros__parameters': {'output': str(tmp_path / 'bag')}}
     (tmp_path / 'cheetah.yaml').write_text(yaml.safe_dump(params))
     out = tmp_path / 'cheetah.json'
     fake = ros_processes.start('fake_cheetah', [sys.executable,

@@ -192,3 +192,25 @@ def test_obs_pixels_on_a_robot_deploys_its_tasks_pixel_checkpoint() -> None:
     assert 'pixels' not in nodes['robot_bridge']  # sim_bridge's parameter, not the robot's
     with pytest.raises(ValueError, match='sets no robot_bridge image_topic'):
         plan(robot=True, params_file=PARAMS, obs='pixels')
+
+
+def test_a_recorder_of_realtime_frames_subscribes_to_them_best_effort(tmp_path: Path) -> None:
+    """Realtime frames are sensor data; a reliable recorder would match none and record none.
+
+    robot_bridge is always realtime; sim_bridge when its params say so; the params file wins.
+    """
+    from zeus_ros.system.launch_defaults import plan
+
+    def recorder(params_file: Path, **args: object) -> dict[str, object]:
+        launch = plan(params_file=params_file, record=True, **args)
+        return next(n.parameters for n in launch.nodes if n.name == 'recorder')
+
+    cheetah = REPO / 'test' / 'fake_cheetah.yaml'
+    assert recorder(cheetah, robot=True, obs='pixels')['image_best_effort'] is True
+    assert 'image_best_effort' not in recorder(REPO / 'params' / 'zeus.yaml')  # lockstep
+    realtime = tmp_path / 'realtime.yaml'
+    realtime.write_text('/**/sim_bridge:\n  ros__parameters:\n    mode: realtime\n')
+    assert recorder(realtime)['image_best_effort'] is True
+    realtime.write_text(realtime.read_text() + '/**/recorder:\n  ros__parameters:\n'
+                        '    image_best_effort: false\n')
+    assert 'image_best_effort' not in recorder(realtime)

@@ -610,6 +610,9 @@ def plan(
                 overrides[key] = str(resolve_path(str(values[-1]), path.parent,
                                                   f'{name} {key} (params file {path})'))
         overrides.update(family_overrides.get(name, {}))
+        if name == 'recorder' and _frames_best_effort(params, robot) and not any(
+                'image_best_effort' in s for s in _node_sections(params, name)):
+            overrides['image_best_effort'] = True
         if random_robot and name == 'policy':
             overrides['task'] = str(path)  # the robot's params file declares its task
         if use_sim_time:
@@ -621,6 +624,18 @@ def plan(
                       log_level=log_level.lower(), nodes=tuple(planned),
                       single_process=single_process, intra_process=intra_process,
                       clock=clock_to)
+
+
+def _frames_best_effort(params: Mapping[str, Any], robot: bool) -> bool:
+    """Whether the step source publishes frames best effort (realtime: topics.image_qos).
+
+    A reliable subscription never matches a best-effort publisher, so a recorder left at its
+    default would record no frame at all; robot_bridge always runs in realtime.
+    """
+    if robot:
+        return True
+    modes = [s['mode'] for s in _node_sections(params, 'sim_bridge') if 'mode' in s]
+    return bool(modes) and modes[-1] == 'realtime'
 
 
 def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: str
