@@ -22,15 +22,16 @@ demo: setup
 	@$(ENV) && python -m zeus_ros.cli demo $(DEMO_ARGS)
 
 # --durations: the 20 slowest tests close every run, so the suite's cost stays visible.
-# Two phases. First, two pytest-xdist workers, one test file each at a time: most tests wait on
-# ROS processes rather than compute, so two side by side halve the waiting (two ROS systems may
-# run at once, each on its own domain id; `ros_quiet` tests keep the ROS graph to themselves:
-# test/conftest.py). Then the `alone` tests (timing-sensitive, or using both cores) in one
-# process: run among the others, each waited for the other worker's current test to end while
-# that worker waited for it. A phase that selects no test (exit 5, e.g. PYTEST_ARGS naming one
+# Two phases. First, three pytest-xdist workers on the two cores, one test file each at a time:
+# most tests wait on ROS processes rather than compute (ROS systems run side by side, each on
+# its own domain id; `ros_quiet` tests keep the ROS graph to themselves: test/conftest.py).
+# Same commit, idle 2-core machine: this phase took 793 s in one process, 453 s on two
+# workers, 394 s on three. Then the `alone` tests (timing-sensitive, or using both cores) in one
+# process (265 s): run among the others, each first waited for the other workers' current
+# tests to end, and they for it. A phase that selects no test (exit 5, e.g. PYTEST_ARGS naming one
 # file) is not a failure unless both select none.
 # TEST_WORKERS=0 runs the first phase in one process too.
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 PYTEST := python -m pytest -q --durations=20
 test: setup
 	@$(ENV) && ruff check . && mypy && \
