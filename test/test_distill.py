@@ -11,6 +11,7 @@ import yaml
 
 from zeus_ros.cli.distill import main
 from zeus_ros.learning.config import load_config
+from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.frames import FrameStack
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.offline.rollout import parse_schedule
@@ -168,6 +169,8 @@ def test_the_teacher_head_trains_phi_only_under_the_teachers_frozen_psi_and_acto
         mine, theirs = student.modules[name].state_dict(), teacher.agent.modules[name].state_dict()
         assert all(torch.equal(mine[key], theirs[key]) for key in theirs)
         assert not any(p.requires_grad for p in student.modules[name].parameters())
+    with pytest.raises(ConfigError, match='cannot be a no_context student'):
+        make_student(load_config(tiny), teacher, TASK, head='teacher', no_context=True)
 
     rng = np.random.default_rng(1)
     n = 24

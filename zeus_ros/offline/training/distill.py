@@ -101,13 +101,14 @@ class DistillSettings:
         if self.head not in HEADS:
             raise _fail(f"head must be one of {', '.join(HEADS)}, not {self.head!r}")
         if self.head == 'teacher' and self.no_context:
-            raise _fail('the teacher head acts on psi: it cannot be a no_context student')
+            raise _fail(TEACHER_HEAD_WITHOUT_PSI)
         if self.tune_head and self.head != 'teacher':
             raise _fail('tune_head tunes the teacher head: give head teacher')
 
 
 HEADS = ('own', 'teacher')
 """Who owns psi and the actor of the student (DistillSettings.head)."""
+TEACHER_HEAD_WITHOUT_PSI = 'the teacher head acts on psi: it cannot be a no_context student'
 
 
 def _fail(message: str) -> ConfigError:
@@ -138,6 +139,8 @@ def make_student(config: ZeusConfig, teacher: Any, task: str, *, no_context: boo
                            action_low=spec.action_low, action_high=spec.action_high)
     psi_teacher = 'psi' in teacher.agent.modules
     if head == 'teacher':
+        if no_context:
+            raise _fail(TEACHER_HEAD_WITHOUT_PSI)
         return _teacher_head_student(config, teacher, pixel_spec, psi_teacher)
     if no_context or not psi_teacher:
         changes: dict[str, Any] = {'method': 'no_context'}
