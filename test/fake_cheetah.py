@@ -20,7 +20,6 @@ commands it received (arrival order) and rootx after every tick since the start 
 from __future__ import annotations
 
 import json
-import signal
 import sys
 
 import numpy as np
@@ -34,6 +33,8 @@ from std_msgs.msg import Float64MultiArray
 from sim_bridge.dmc_base import DmcTask
 from sim_bridge.registry import task_class
 from zeus_ros.nodes.messages import image_from_array
+
+from fake_robot import spin_until_signal
 
 TASK = 'Cheetah-Motor-v0'
 FRAME_SIZE = 84
@@ -121,12 +122,7 @@ def main() -> None:
     seed = int(sys.argv[4]) if len(sys.argv) > 4 else 0
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     robot = FakeCheetah(rate, motor_gain, seed)
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
-    print('fake cheetah up', flush=True)
-    while not stop:
-        rclpy.spin_once(robot, timeout_sec=0.05)
+    spin_until_signal(robot, 'fake cheetah up')
     with open(out, 'w') as handle:
         json.dump({'commands': robot.received, 'rootx': robot.rootx}, handle)
     robot.plant.task.close()

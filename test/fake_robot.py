@@ -74,6 +74,19 @@ class FakeRobot(Node):
                                       step=64 * 3, data=frame.tobytes()))
 
 
+def spin_until_signal(node: Node, banner: str) -> None:
+    """Print `banner` (what the tests wait for), then spin `node` until SIGINT or SIGTERM.
+
+    The fake robots (this one, fake_cheetah.py) write what they received after this returns.
+    """
+    stop: list[bool] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.append(True))
+    print(banner, flush=True)
+    while not stop:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
 def main() -> None:
     """Run until SIGINT/SIGTERM, then write the received commands."""
     out = sys.argv[1]
@@ -81,12 +94,7 @@ def main() -> None:
     payload = float(sys.argv[3]) if len(sys.argv) > 3 else 0.5
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     robot = FakeRobot(rate, payload)
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
-    print('fake robot up', flush=True)
-    while not stop:
-        rclpy.spin_once(robot, timeout_sec=0.05)
+    spin_until_signal(robot, 'fake robot up')
     with open(out, 'w') as handle:
         json.dump({'commands': robot.received, 'time': time.time()}, handle)
     robot.destroy_node()

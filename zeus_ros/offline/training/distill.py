@@ -252,7 +252,8 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
     rows: list[dict[str, Any]] = []
     windows = max(1, config.batch_size // settings.window)
     step = first_round = 0
-    fingerprint = {'task': task, 'teacher_sha256': _sha256(teacher_path), **asdict(settings),
+    teacher_sha256 = _sha256(teacher_path)
+    fingerprint = {'task': task, 'teacher_sha256': teacher_sha256, **asdict(settings),
                    **{f'config.{key}': value for key, value in config.to_dict().items()},
                    'data_cache': None if data_cache is None else str(data_cache)}
     if resume:
@@ -329,7 +330,7 @@ def distill(task: str, teacher_path: Path, config: ZeusConfig, settings: Distill
             numpy_rng=dict(rng.bit_generator.state), torch_rng=torch.get_rng_state(),
             fingerprint=fingerprint))
     _write_rows(out / 'rounds.csv', rows)
-    extra = {'distill': {'teacher': str(teacher_path), 'teacher_sha256': _sha256(teacher_path),
+    extra = {'distill': {'teacher': str(teacher_path), 'teacher_sha256': teacher_sha256,
                          'teacher_method': teacher.method, 'settings': asdict(settings),
                          'schedule': SCHEDULE, 'rounds': rows}}
     full = save_checkpoint(out / 'student_full.pt', student, step=step, extra=extra)
