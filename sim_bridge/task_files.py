@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 
 from sim_bridge.core import ContextualTask
+from zeus_ros.yaml_text import safe_load_params
 
 __all__ = ['DeclaredTask', 'TaskFactory', 'load_task_file', 'read_yaml']
 
@@ -59,7 +60,7 @@ def read_yaml(path: Path, what: str = 'task file') -> Any:
     except (OSError, UnicodeDecodeError) as error:
         raise ValueError(f'{what} {path}: cannot read it as UTF-8 text ({error})') from None
     try:
-        return yaml.safe_load(text)
+        return safe_load_params(text)  # a robot's params file, as rcl reads it
     except yaml.YAMLError as error:
         mark = getattr(error, 'problem_mark', None)
         where = f' line {mark.line + 1}' if mark is not None else ''

@@ -227,16 +227,19 @@ def params_file_errors(args: Sequence[str]) -> list[str]:
 
     rcl reads these files inside rclpy.init and fails with a long RCLError traceback; read here
     first, a missing file, bad YAML or a file not shaped `<node>: ros__parameters: {...}` is
-    one line naming the file and the fix.
+    one line naming the file and the fix. Read as rcl reads it (ParamsLoader): the files
+    launch_ros writes tag every list `!!python/tuple`, and rcl accepts them.
     """
     import yaml
+
+    from zeus_ros.yaml_text import safe_load_params
 
     errors = []
     paths = [args[i + 1] for i, arg in enumerate(args[:-1]) if arg == '--params-file']
     for path in paths:
         where = f'--params-file {path}'
         try:
-            data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+            data = safe_load_params(Path(path).read_text(encoding='utf-8'))
         except OSError as error:
             errors.append(f'{where}: cannot read it ({error.strerror})')
             continue
