@@ -12,56 +12,82 @@ Runs from any folder with only the installed files: the params file defaults to
 share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's
 folder, then the package share. Arguments, defaults and parameter overrides come from
 `zeus_ros.system.launch_defaults`, which `zeus launch` uses too: the two cannot drift apart.
-`ros2 launch zeus_ros zeus.launch.py --show-args` lists the arguments. Any node but the recorder
-and the continual trainer exiting shuts the whole launch down. Discovery scope and domain come
-from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID before launching).
+`ros2 launch zeus_ros zeus.launch.py --show-args` lists the arguments. A dead node is restarted
+as the params file's `/**/zeus_launch` respawn: section says (launch_ros `respawn`,
+`respawn_delay`, `respawn_max_retries`; defaults as `zeus launch`: context_estimator, policy
+and recorder 3 times, 1 s / 0.5 s apart, the bridges never); past that, any node but the
+recorder and the continual trainer ends the launch, and a node that died for good (or refused
+its parameters, exit 2) makes `ros2 launch` exit 1, as `zeus launch` does. Discovery scope and
+domain come from the environment (export ROS_AUTOMATIC_DISCOVERY_RANGE and ROS_DOMAIN_ID before
+launching).
 Every node gets the launch's pairing key ($ZEUS_PAIRING_KEY, kept if already set): a restarted
 peer is re-paired only when its start hello proves it (docs/security.md).
 """
 
+from functools import partial
+from typing import Any
+
 from launch import LaunchContext, LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from zeus_ros.system import launch_defaults
+from zeus_ros.system.respawn import LaunchExits
+
+
+class NodeDiedError(RuntimeError):
+    """Raised in an exit handler: launch's one way to end a launch with a non-zero status.
+
+    LaunchService.run_async catches an exception from an event handler, shuts the launch down
+    with its message as the reason and returns 1 (`ros2 launch` exits with it); a Shutdown
+    event alone ends the launch with 0.
+    """
 
 
 def launch_nodes(context: LaunchContext) -> list:
-    """The planned nodes for the given arguments, and a shutdown when a non-recorder exits."""
+    """The planned nodes for the given arguments, each with its respawn and exit handling."""
     values = {argument.name: LaunchConfiguration(argument.name).perform(context)
               for argument in launch_defaults.ARGUMENTS}
     plan = launch_defaults.plan_from_arguments(values)
+    exits = launch_defaults.launch_exits(plan)
     env = {**dds_env(), **launch_defaults.launch_env()}
     actions = []
     if plan.contained:
         # No name, namespace or parameters on the container itself: each node inside gets its
         # own --ros-args (container_args), a process-wide remap would rename all of them.
+        watch = exits[launch_defaults.CONTAINER]
         container = Node(package=launch_defaults.PACKAGE,
                          executable=launch_defaults.CONTAINER_EXECUTABLE,
                          arguments=plan.container_args(), output='screen',
-                         additional_env=env)
-        actions += [container, _shutdown_on_exit(container, launch_defaults.CONTAINER)]
+                         additional_env=env, **watch.respawn.kwargs())
+        actions += [container, _on_exit(container, watch)]
     for spec in plan.separate:
+        watch = exits[spec.name]
         if spec.name == launch_defaults.TRAINER:  # no console script: run its module
-            actions.append(_trainer_process(plan, spec, env))
+            trainer = _trainer_process(plan, spec, env)
+            actions += [trainer, _on_exit(trainer, watch)]
             continue
         node = Node(package=launch_defaults.PACKAGE, executable=spec.executable,
                     name=spec.name, namespace=plan.namespace or None,
                     parameters=[str(plan.params_file), spec.parameters],
                     remappings=plan.remappings,
                     ros_arguments=['--log-level', plan.log_level], output='screen',
-                    additional_env=env)
-        actions.append(node)
-        if not spec.records_others:
-            actions.append(_shutdown_on_exit(node, spec.name))
+                    additional_env=env, **watch.respawn.kwargs())
+        actions += [node, _on_exit(node, watch)]
     return actions
 
 
 def _trainer_process(plan: launch_defaults.LaunchPlan, spec: launch_defaults.NodePlan,
-                     env: dict[str, str]) -> object:
+                     env: dict[str, str]) -> Any:
     """The continual trainer, as `zeus launch` starts it; its exit does not stop the loop."""
     import sys
 
@@ -84,10 +110,26 @@ def dds_env() -> dict[str, str]:
     return {'FASTRTPS_DEFAULT_PROFILES_FILE': str(profile)}
 
 
-def _shutdown_on_exit(node: Node, name: str) -> RegisterEventHandler:
-    """Any node of the control loop exiting ends the launch."""
-    return RegisterEventHandler(OnProcessExit(
-        target_action=node, on_exit=[EmitEvent(event=Shutdown(reason=f'{name} exited'))]))
+def _on_exit(process: Any, watch: LaunchExits) -> RegisterEventHandler:
+    """Handle every exit of `process` (launch_ros may have restarted it: same action)."""
+    return RegisterEventHandler(OnProcessExit(target_action=process,
+                                              on_exit=partial(after_exit, watch)))
+
+
+def after_exit(watch: LaunchExits, event: Any, context: LaunchContext) -> list | None:
+    """Say what an exit means; stop the launch, or fail it (NodeDiedError), if it must.
+
+    Exits while the launch shuts down are its own doing. A restart is launch_ros's (it
+    decides on the same counts, `LaunchExits`); this only names it.
+    """
+    if context.is_shutdown:
+        return None
+    verdict = watch.after_exit(int(event.returncode))
+    if verdict.action == 'fail':
+        raise NodeDiedError(verdict.message)
+    if verdict.action == 'stop':
+        return [EmitEvent(event=Shutdown(reason=verdict.message))]
+    return [LogInfo(msg=verdict.message)]
 
 
 def generate_launch_description() -> LaunchDescription:

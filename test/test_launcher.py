@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 import subprocess
 import sys
-import types
 from typing import Any
 
 import pytest
 
+from launch_stubs import installed_launch_description
 from ros_harness import REPO, fresh_domain_id, ros_environment
 
 pytestmark = pytest.mark.ros
@@ -171,45 +170,6 @@ def test_relative_checkpoint_resolves_next_to_the_params_file(tmp_path: Path,
         d.plan(params_file=tmp_path / 'none.yaml')
 
 
-def _stub_launch_modules(monkeypatch: Any) -> None:
-    """Minimal stand-ins for launch and launch_ros (not installable here): record the calls."""
-    class Recorded:
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            self.args, self.kwargs = args, kwargs
-
-    class LaunchConfiguration(Recorded):
-        def perform(self, context: dict[str, str]) -> str:
-            return context[self.args[0]]
-
-    modules = {
-        'launch': {'LaunchContext': dict, 'LaunchDescription': lambda entities: entities},
-        'launch.actions': {name: type(name, (Recorded,), {}) for name in (
-            'DeclareLaunchArgument', 'EmitEvent', 'OpaqueFunction', 'RegisterEventHandler')},
-        'launch.event_handlers': {'OnProcessExit': Recorded},
-        'launch.events': {'Shutdown': Recorded},
-        'launch.substitutions': {'LaunchConfiguration': LaunchConfiguration},
-        'launch_ros': {},
-        'launch_ros.actions': {'Node': type('Node', (Recorded,), {})},
-    }
-    for name, attributes in modules.items():
-        module = types.ModuleType(name)
-        module.__dict__.update(attributes)
-        monkeypatch.setitem(sys.modules, name, module)
-
-
-def _installed_launch_description(monkeypatch: Any) -> list[Any]:
-    """The actions of the installed zeus.launch.py (launch modules stubbed: not on PyPI)."""
-    from zeus_ros.system import launch_defaults as d
-
-    _stub_launch_modules(monkeypatch)
-    installed = d.share_dir() / 'launch' / 'zeus.launch.py'
-    spec = importlib.util.spec_from_file_location('zeus_launch_file', installed)
-    assert spec is not None and spec.loader is not None
-    launch_file = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch_file)
-    return list(launch_file.generate_launch_description())
-
-
 def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     """The installed zeus.launch.py starts the nodes `zeus launch` starts, with the same args.
 
@@ -219,7 +179,7 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     from zeus_ros.cli.launch import plan_processes
     from zeus_ros.system import launch_defaults as d
 
-    *declared, opaque = _installed_launch_description(monkeypatch)
+    *declared, opaque = installed_launch_description(monkeypatch)
     defaults = {a.args[0]: a.kwargs['default_value'] for a in declared}
     assert list(defaults) == [a.name for a in d.ARGUMENTS]
     assert defaults['params_file'] == str(d.default_params_file())
@@ -229,7 +189,7 @@ def test_launch_file_starts_what_zeus_launch_starts(monkeypatch: Any) -> None:
     nodes = [a for a in actions if type(a).__name__ == 'Node']
     stops = [a for a in actions if type(a).__name__ == 'RegisterEventHandler']
     plan = d.plan(record=True, namespace='r1', use_sim_time=True, clock='namespace')
-    assert len(stops) == 3 and len(nodes) == 4
+    assert len(stops) == 4 and len(nodes) == 4  # every process's exits are handled
     children = plan_processes(plan)
     for node, planned, child in zip(nodes, plan.nodes, children, strict=True):
         kwargs = node.kwargs
@@ -303,7 +263,7 @@ def test_container_arguments_give_each_node_its_own(monkeypatch: Any) -> None:
     from zeus_ros.nodes.container import parse_container_args
     from zeus_ros.system import launch_defaults as d
 
-    *declared, opaque = _installed_launch_description(monkeypatch)
+    *declared, opaque = installed_launch_description(monkeypatch)
     context = {**{a.args[0]: a.kwargs['default_value'] for a in declared},
                'record': 'true', 'namespace': 'r1', 'single_process': 'true'}
     nodes = [a for a in opaque.kwargs['function'](context) if type(a).__name__ == 'Node']

@@ -41,6 +41,7 @@ from zeus_ros.system.launch_defaults import (
 )
 from zeus_ros.system.processes import ros_env, start_node, stop_nodes
 from zeus_ros.system.respawn import (
+    BAD_PARAMETERS,
     DEFAULT_POLICIES,
     RespawnPolicy,
     RespawnState,
@@ -48,8 +49,6 @@ from zeus_ros.system.respawn import (
     policies_from_params,
 )
 
-BAD_PARAMETERS = 2
-"""A node's exit status for parameters it refused at start (run_node)."""
 RECORDING_GAPS = 3
 """Exit status of a run whose control loop ran to its end degraded: a node was restarted or the
 recording has gaps."""

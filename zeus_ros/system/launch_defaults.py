@@ -17,6 +17,7 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.system.respawn import LaunchExits, LaunchRespawn, policies_from_params
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = [
@@ -40,6 +41,8 @@ __all__ = [
     'clock_topic',
     'default_params_file',
     'launch_env',
+    'launch_exits',
+    'launch_respawns',
     'pairing_parameters',
     'param_args',
     'parse_bool',
@@ -515,6 +518,34 @@ def launch_env() -> dict[str, str]:
     from zeus_ros.nodes.handshake import KEY_ENV, new_key
 
     return {KEY_ENV: os.environ.get(KEY_ENV) or new_key()}
+
+
+def launch_respawns(plan: LaunchPlan) -> dict[str, LaunchRespawn]:
+    """launch_ros's respawn arguments per process of `ros2 launch` (nodes, the container).
+
+    From the params file's `/**/zeus_launch` respawn: section, as `zeus launch` reads it
+    (system/respawn.py). Not restarted there: the trainer (`zeus launch` does not either) and
+    a recorder with a set `output` (launch_ros restarts it with the same one, which it then
+    refuses as not empty: `zeus launch` gives the restart a new folder).
+    """
+    params = read_params(plan.params_file)
+    policies = policies_from_params(params, [*NODES, CONTAINER])
+    names = [CONTAINER] if plan.contained else []
+    names += [node.name for node in plan.separate]
+    respawns = {name: LaunchRespawn.from_policy(policies[name]) if name in policies
+                else LaunchRespawn() for name in names}
+    respawns[TRAINER] = LaunchRespawn()
+    recorder = next((node for node in plan.separate if node.name in RECORDS_OTHERS), None)
+    if recorder is not None and (recorder.parameters.get('output') or any(
+            s.get('output') for s in _node_sections(params, recorder.name))):
+        respawns[recorder.name] = LaunchRespawn()
+    return {name: respawns[name] for name in names}
+
+
+def launch_exits(plan: LaunchPlan) -> dict[str, LaunchExits]:
+    """Per process of `ros2 launch`, the exit bookkeeping its OnProcessExit handler uses."""
+    return {name: LaunchExits(name, respawn, background=name in BACKGROUND)
+            for name, respawn in launch_respawns(plan).items()}
 
 
 def start_args(name: str, group: Sequence[str]) -> list[str]:

@@ -16,6 +16,10 @@ still goes to every node):
           sim_bridge: {limit: 0}        # 0: never restarted (the default for the bridges)
 
 or on the command line: `zeus launch --respawn policy=3/60/1 --respawn recorder=0`.
+
+`ros2 launch zeus_ros zeus.launch.py` reads the same section (`LaunchRespawn`, `LaunchExits`):
+launch_ros restarts a process `limit` times in all, `backoff_s` after each exit (it has no
+window and no doubling), and the launch exits non-zero when a node of the loop died for good.
 """
 
 from __future__ import annotations
@@ -25,13 +29,17 @@ from dataclasses import dataclass, field, replace
 import math
 from typing import Any
 
-__all__ = ['DEFAULT_POLICIES', 'LAUNCH_SECTION', 'RespawnPolicy', 'RespawnState',
-           'parse_cli', 'policies_from_params']
+__all__ = ['BAD_PARAMETERS', 'DEFAULT_POLICIES', 'LAUNCH_SECTION', 'ExitVerdict', 'LaunchExits',
+           'LaunchRespawn', 'RespawnPolicy', 'RespawnState', 'parse_cli',
+           'policies_from_params']
 
 LAUNCH_SECTION = 'zeus_launch'
 """The params file section `zeus launch` reads its own settings from (no node has this name)."""
 MAX_BACKOFF_S = 30.0
 """The delay before a restart doubles per restart in the window, up to this."""
+BAD_PARAMETERS = 2
+"""A node's exit status for parameters it refused at start (run_node): a restart would refuse
+them again, so no launcher restarts it."""
 
 
 @dataclass(frozen=True)
@@ -132,3 +140,81 @@ def parse_cli(values: Sequence[str], nodes: Sequence[str],
         except ValueError as error:
             raise ValueError(f'{where}: {error}') from None
     return policies
+
+
+@dataclass(frozen=True)
+class LaunchRespawn:
+    """launch_ros's respawn arguments for one process of `ros2 launch` (its Node keywords).
+
+    launch_ros restarts a process after any exit while retries are left, `respawn_delay` s
+    later; the retries count over the whole launch (`zeus launch` counts them in a window).
+    """
+
+    respawn: bool = False
+    respawn_delay: float = 0.0
+    respawn_max_retries: int = 0
+
+    @classmethod
+    def from_policy(cls, policy: RespawnPolicy) -> LaunchRespawn:
+        """The closest launch_ros settings: `limit` restarts in all, `backoff_s` apart."""
+        if not policy.limit:
+            return cls()
+        return cls(True, float(policy.backoff_s), policy.limit)
+
+    def kwargs(self) -> dict[str, Any]:
+        """Keyword arguments for launch_ros.actions.Node / launch.actions.ExecuteProcess."""
+        if not self.respawn:
+            return {'respawn': False}
+        return {'respawn': True, 'respawn_delay': self.respawn_delay,
+                'respawn_max_retries': self.respawn_max_retries}
+
+
+@dataclass(frozen=True)
+class ExitVerdict:
+    """What `ros2 launch` does after a process exit: `action` and the line it logs.
+
+    restart: launch_ros starts it again; go_on: the launch runs on without it; stop: the
+    launch ends cleanly; fail: the launch ends and exits non-zero (a node died for good).
+    """
+
+    action: str
+    message: str
+
+
+@dataclass
+class LaunchExits:
+    """One process of `ros2 launch`: counts its exits and says what each one means.
+
+    Mirrors `zeus launch`: a dead node of the control loop is restarted while its policy
+    allows (the bridge applies its safe action meanwhile), then ends the launch with a
+    failure; a refused configuration (exit 2) ends it at once; the recorder and the trainer
+    (`background`) never stop the loop.
+    """
+
+    name: str
+    respawn: LaunchRespawn = field(default_factory=LaunchRespawn)
+    background: bool = False
+    exits: int = 0
+
+    def after_exit(self, code: int) -> ExitVerdict:
+        """The verdict on one exit with status `code` (launch_ros has decided the same)."""
+        self.exits += 1
+        died = f'{self.name} exited with code {code}'
+        retries = self.respawn.respawn_max_retries if self.respawn.respawn else 0
+        if code == BAD_PARAMETERS and not self.background:
+            return ExitVerdict('fail', f'{died}: it refused its parameters (see its error '
+                               'line); a restart would refuse them too, the launch stops')
+        if self.exits <= retries:
+            meanwhile = '' if self.background else '; the loop runs on the safe action'
+            return ExitVerdict('restart', f'{died}; restarting it in '
+                               f'{self.respawn.respawn_delay:g} s (restart {self.exits} of '
+                               f'{retries}{meanwhile})')
+        after = f' after {retries} restart(s)' if retries else ''
+        if self.background:
+            rest = ('the rest of the run is not recorded' if self.name != 'continual_trainer'
+                    else 'the loop runs on the checkpoint deployed last')
+            return ExitVerdict('go_on', f'{died}{after}, not restarted again: {rest}')
+        if code == 0:
+            return ExitVerdict('stop', f'{died}{after}: the launch stops')
+        why = after or ' (never restarted: its respawn policy)'
+        return ExitVerdict('fail', f'{died}{why}: it died for good, the launch stops')
