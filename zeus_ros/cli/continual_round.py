@@ -63,6 +63,7 @@ def _round(request: dict[str, Any], stop: threading.Event) -> dict[str, Any]:
             request['history'], ContinualSettings(**request['settings']),
             first_checkpoint=request['first_checkpoint'], rehearsal_folder=request['rehearsal'],
             corrupt_rewards=bool(request['corrupt_rewards']), forced=bool(request['forced']),
+            round_number=int(request.get('round', 0)),
             start=request.get('resume_from'), log=lambda line: print(line, flush=True),
             stop=stop.is_set)
     except RoundStopped:

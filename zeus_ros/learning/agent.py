@@ -38,6 +38,7 @@ from zeus_ros.learning.batch import HistoryBatch
 from zeus_ros.learning.config import ZeusConfig, resolve_config
 from zeus_ros.learning.context import ContextEncoder, ContextNormalizer, HistoryFeatures
 from zeus_ros.learning.encoders import PixelDecoder, PixelEncoder, StateEncoder
+from zeus_ros.learning.gated_actor import GatedActor
 from zeus_ros.learning.methods import METHOD_REGISTRY, method_objective
 from zeus_ros.learning.models import RewardModel, TransitionModel
 from zeus_ros.learning.sac import Actor, Critic, squashed_sample
@@ -130,6 +131,8 @@ class ZeusAgent:
         self.modules['actor'], self.modules['critic'] = actor, critic
         for module in self.modules.values():
             module.apply(weight_init)
+        if cfg.actor_gate > 0:  # a continual round's candidate: learning/gated_actor.py
+            self.modules['actor'] = GatedActor(actor, self.context_dim, cfg.actor_gate)
         if cfg.context_input_init == 'zero' and self.context_dim > 0:
             context_inputs = slice(cfg.feature_dim, policy_in)  # input order: [phi, psi, (a)]
             for net in (actor.net, critic.q1, critic.q2):
@@ -163,7 +166,8 @@ class ZeusAgent:
         cfg, m = self.config, self.modules
         betas = (float(cfg.adam_beta1), 0.999)
         opts: dict[str, torch.optim.Optimizer] = {
-            'actor': _adam(m['actor'].parameters(), lr=cfg.actor_lr, betas=betas),
+            'actor': _adam([p for p in m['actor'].parameters() if p.requires_grad],
+                           lr=cfg.actor_lr, betas=betas),
             'critic': _adam(
                 [*m['critic'].parameters(), *m['encoder'].parameters()], lr=cfg.critic_lr,
                 betas=betas),
@@ -181,6 +185,21 @@ class ZeusAgent:
         if models:
             opts['model'] = _adam(models, lr=cfg.model_lr)
         return opts
+
+    def gate_actor(self, centroids: Any, scale: float, low: float, high: float) -> None:
+        """Wrap the actor in a GatedActor (learning/gated_actor.py).
+
+        It acts as now at the contexts near `centroids`; only its adapted copy trains.
+        """
+        if isinstance(self.modules['actor'], GatedActor):
+            raise ValueError('the actor is gated already')
+        gated = GatedActor(cast(Actor, self.modules['actor']), self.context_dim, len(centroids))
+        gated.set_gate(centroids, scale, low, high)
+        self.modules['actor'] = gated.to(self.device)
+        self.config = self.config.replace(actor_gate=len(centroids))
+        if self.optimizers:
+            self.optimizers['actor'] = _adam(gated.adapted.parameters(), lr=self.config.actor_lr,
+                                             betas=(float(self.config.adam_beta1), 0.999))
 
     # ------------------------------------------------------------------ properties / helpers
     @property
@@ -454,11 +473,15 @@ class ZeusAgent:
         sample = squashed_sample(out)
         actor_q = m['critic'](x, sample.action).min()
         actor_loss = (self.alpha.detach() * sample.log_prob - actor_q).mean()
-        if self.config.actor_bc_weight > 0:  # TD3+BC: Q on a unit scale, stay near the data
+        if self.config.actor_bc_weight > 0 or batch.anchor is not None:
+            # TD3+BC: Q on a unit scale, stay near the data (per sample when weighted)
             actor_loss = actor_loss / actor_q.abs().mean().detach().clamp_min(1e-6)
             mode = torch.tanh(out.mu)
-            bc = F.mse_loss(mode, self.normalize_action(batch.action))
-            actor_loss = actor_loss + self.config.actor_bc_weight * bc
+            squared = (mode - self.normalize_action(batch.action)).square().mean(-1, True)
+            bc = squared.mean()
+            weighted = (self.config.actor_bc_weight * bc if batch.anchor is None
+                        else (batch.anchor * squared).mean())
+            actor_loss = actor_loss + weighted
             metrics['loss/actor_bc'] = bc
         self.optimizers['actor'].zero_grad(set_to_none=True)
         actor_loss.backward()

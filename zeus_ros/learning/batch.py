@@ -51,6 +51,10 @@ class HistoryBatch:
     """r_{u+1}: (B, 1), with model_obs."""
     model_next_obs: torch.Tensor | None = None
     """o_{u+1}: (B, *obs_shape), with model_obs."""
+    anchor: torch.Tensor | None = None
+    """(B, 1) float32: each sample's behaviour-cloning weight (a continual round anchors the
+    actor strongly where it must not forget, weakly where the context is new); None: the
+    config's actor_bc_weight for every sample."""
 
     @property
     def batch_size(self) -> int:

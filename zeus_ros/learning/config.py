@@ -209,6 +209,10 @@ class ZeusConfig:
     to the batch's actions. 0 (training from scratch): plain SAC. Continual rounds fine-tune a
     working policy on a few thousand steps; without it the actor climbs the fresh critic's
     errors (measured: train-value returns -39 -> -308 after 1,000 updates)."""
+    actor_gate: int = 0
+    """Centroids of a novelty-gated actor (learning/gated_actor.py): > 0, the actor is the
+    deployed one wherever the policy's context is near one of these training contexts and an
+    adapted copy where it is new (continual rounds set it). 0: one actor."""
     critic_lr: float = 3e-4
     """Adam learning rate of the Q functions (and of phi through the critic loss)."""
     encoder_lr: float = 1e-3
@@ -294,6 +298,10 @@ class ZeusConfig:
         if isinstance(self.seed_steps, bool) or not isinstance(self.seed_steps, int) \
                 or self.seed_steps < 0:
             raise ConfigError(f'seed_steps must be an integer >= 0, got {self.seed_steps!r}')
+        if isinstance(self.actor_gate, bool) or not isinstance(self.actor_gate, int) \
+                or self.actor_gate < 0:
+            raise ConfigError(f'actor_gate must be an integer >= 0 (0: one actor), got '
+                              f'{self.actor_gate!r}')
         for name in ('actor_lr', 'critic_lr', 'encoder_lr', 'decoder_lr', 'context_lr',
                      'model_lr', 'alpha_lr', 'init_temperature'):
             _check_float(name, getattr(self, name), low=0.0, low_open=True)

@@ -1,7 +1,9 @@
 """continual_trainer: retrain from the growing recording, gate, swap live, roll back (issue 37).
 
-Its own process, started by `zeus launch --continual` (`continual:=true`): it lowers its own
-priority (`nice`), so the control loop's processes keep their CPU. The main thread waits for
+Its own process, started by `zeus launch --continual` (`continual:=true`): background work by
+design (`sched_batch`: Linux SCHED_BATCH at `nice` 0), so it keeps a fair share of the CPU on a
+busy machine while the control loop's processes still run first whenever they wake. The main
+thread waits for
 `new_steps` closed new steps, then runs the round (train a candidate and gate it) in a child
 process, `zeus continual-round` (zeus_ros/cli/continual_round.py over
 zeus_ros/offline/training/continual.py), which inherits that priority and runs torch on
@@ -48,6 +50,7 @@ from zeus_ros.system.continual_watch import (
     SegmentReturns,
     prune_recording,
 )
+from zeus_ros.system.processes import background_priority
 
 TARGETS = ('context_estimator', 'policy')
 """Set in this order: the policy refuses the estimator's new estimates until it follows."""
@@ -57,7 +60,7 @@ SETTINGS = tuple(f.name for f in fields(ContinualSettings)
 DEFAULTS: dict[str, Any] = {
     'recording': '', 'checkpoint': '', 'out': '', 'task': '',
     **{name: getattr(ContinualSettings(), name) for name in SETTINGS},
-    'threads': 1, 'nice': 10, 'check_segments': 2, 'keep_recording_mb': 2048,
+    'threads': 1, 'nice': 0, 'sched_batch': True, 'check_segments': 2, 'keep_recording_mb': 2048,
     'keep_candidates': 5, 'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
     'novelty_window': 200, 'novelty_fraction': 0.5, 'novelty_min_steps': 500,
 }
@@ -240,7 +243,7 @@ class Trainer:
             'splits': [str(b) for b in splits], 'out': str(folder), 'history': str(n.history),
             'settings': asdict(n.settings), 'corrupt_rewards': corrupt, 'forced': forced,
             'resume_from': None if self.resume is None else str(self.resume),
-            'threads': max(1, int(n.p['threads'])), 'parent_pid': os.getpid(),
+            'threads': max(1, int(n.p['threads'])), 'parent_pid': os.getpid(), 'round': number,
             'result': str(folder / 'result.json')}
         answer = run_child_round(folder, request, self.log.info, self.stop)
         if answer['status'] == 'stopped':
@@ -450,7 +453,9 @@ def main(args: list[str] | None = None) -> int:
         print(f'error: {error}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    os.nice(int(node.p['nice']))  # the rounds' child processes inherit it
+    # The rounds' child processes inherit it (system/processes.background_priority).
+    priority = background_priority(int(node.p['nice']), bool(node.p['sched_batch']))
+    node.get_logger().info(f'continual: trainer priority: {priority}')
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

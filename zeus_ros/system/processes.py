@@ -20,7 +20,8 @@ import subprocess
 import time
 from typing import IO, Any
 
-__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'die_with_parent', 'domain_range',
+__all__ = ['DOMAIN_RANGE_ENV', 'KILL_WAIT_S', 'TERM_GRACE_S', 'background_priority',
+           'die_with_parent', 'domain_range',
            'fresh_domain_id',
            'group_domain_id',
            'ros_context', 'ros_env', 'start_node', 'stop_nodes']
@@ -169,3 +170,25 @@ def die_with_parent(sig: int = signal.SIGTERM) -> bool:
         return False
     _PRCTL(1, sig)
     return True
+
+
+def background_priority(nice: int, batch: bool) -> str:
+    """Make this process (and what it starts) background work; what was applied, in words.
+
+    `batch`: Linux SCHED_BATCH (no root needed). The process keeps its fair share of the CPU
+    beside other work at the same nice (a trainer at nice 10 beside two busy processes got
+    about a tenth of a core and took 11-17 minutes to its first decision), but is never
+    favoured on a wake-up, so the control loop's processes, which sleep between steps and
+    wake for each, still run first when they wake. `nice` lowers its share further.
+    """
+    applied = []
+    if nice:
+        os.nice(int(nice))
+        applied.append(f'nice {os.nice(0)}')
+    if batch and hasattr(os, 'sched_setscheduler') and hasattr(os, 'SCHED_BATCH'):
+        try:
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+            applied.append('SCHED_BATCH')
+        except OSError as error:
+            applied.append(f'no SCHED_BATCH ({error.strerror})')
+    return ', '.join(applied) or 'normal priority'

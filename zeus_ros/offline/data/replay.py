@@ -20,7 +20,7 @@ import torch
 from zeus_ros.learning.batch import HistoryBatch
 
 if TYPE_CHECKING:
-    from collections.abc import Iterable
+    from collections.abc import Callable, Iterable
 
     from zeus_ros.offline.data.ingest import Dataset, Episode
 
@@ -65,6 +65,8 @@ class ReplayBuffer:
         model_horizon: > 1: each batch also carries a transition u drawn uniformly from
             t .. t + model_horizon - 1 of the same episode (clamped to its last transition),
             the one the context-conditioned models predict (ZeusConfig.model_horizon).
+        anchor: each episode's behaviour-cloning weight (batches then carry `anchor`): a
+            continual round anchors rehearsal strongly and new contexts weakly.
     """
 
     def __init__(
@@ -76,6 +78,7 @@ class ReplayBuffer:
         device: torch.device | str = 'cpu',
         seed: int = 0,
         model_horizon: int = 1,
+        anchor: Callable[[Episode], float] | None = None,
     ) -> None:
         if history < 1:
             raise ValueError(f'history (k) must be >= 1, got {history}')
@@ -100,6 +103,8 @@ class ReplayBuffer:
         self._ep_start = _Column((), np.int64)
         self._ep_last = _Column((), np.int64)  # the episode's last valid transition index
         self._valid = _Column((), np.int64)
+        self._anchor_of = anchor
+        self._anchor = _Column((), np.float32) if anchor is not None else None
         self._sum = np.zeros(ep0.obs.shape[1], np.float64)
         self._sumsq = np.zeros(ep0.obs.shape[1], np.float64)
         self.num_episodes = 0
@@ -131,6 +136,8 @@ class ReplayBuffer:
             self._ep_start.extend(np.full(n, start, np.int64))
             self._ep_last.extend(np.full(n, start + n - 2, np.int64))
             self._valid.extend(np.arange(start, start + n - 1, dtype=np.int64))
+            if self._anchor is not None and self._anchor_of is not None:
+                self._anchor.extend(np.full(n, self._anchor_of(ep), np.float32))
             self._sum += ep.obs.sum(0)
             self._sumsq += np.square(ep.obs).sum(0)
             self.num_episodes += 1
@@ -205,6 +212,8 @@ class ReplayBuffer:
             hist_next_obs=self._tensor(hist_next),
             hist_mask=self._tensor(mask),
             context=self._tensor(self._context.view[t + 1]),
+            anchor=(None if self._anchor is None
+                    else self._tensor(self._anchor.view[t][:, None])),
             **model,
         )
 

@@ -56,7 +56,12 @@ from typing import Any
 import numpy as np
 
 from zeus_ros.bags.recording import split_steps
-from zeus_ros.system.continual_settings import ContinualSettings, append_history
+from zeus_ros.system.continual_settings import (
+    PROGRESS_FILE,
+    ContinualSettings,
+    RoundProgress,
+    append_history,
+)
 
 __all__ = ['Candidate', 'GateResult', 'RoundResult', 'RoundStopped', 'continual_round', 'gate',
            'rehearsal_bag', 'replay_mix', 'resume_from', 'run_round', 'train_candidate']
@@ -71,6 +76,11 @@ so an actor trained against it keeps improving on the true task whatever the rew
 (measured: a negated-reward round of 800 updates continuing a competent critic earned +31.5
 per episode on Cheetah-Run-v0, and the gate rightly deployed it). A critic learned from the
 corrupted rewards alone is what a reward bug produces."""
+CONFIRM_SEED = 500
+"""Offset of the confirmation's evaluation seed from the round's gate seed."""
+ROUND_SEED = 1000
+"""Offset of each round's gate seed: a chain of candidates is never selected on the same
+initial states again and again (round r evaluates on eval_seed + r x ROUND_SEED)."""
 WARMUP_ACTOR_PERIOD = 10**9
 """actor_update_freq during the critic warm-up: no warm-up update index is a multiple of it."""
 
@@ -235,13 +245,17 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
                     out: Path | str, settings: ContinualSettings, *,
                     corrupt_rewards: bool = False, log: Callable[[str], None] = print,
                     stop: Callable[[], bool] = lambda: False,
-                    readout_from: Path | str | None = None) -> Candidate:
+                    readout_from: Path | str | None = None,
+                    rehearsal: Path | None = None,
+                    progress: RoundProgress | None = None) -> Candidate:
     """Continue `deployed` (or an earlier candidate) on new + old bags; write `out`/candidate.pt.
 
     `corrupt_rewards` multiplies every reward by CORRUPTION: the deliberately bad candidate
     the gate must refuse. `stop` is asked every 50 updates (a shutdown: RoundStopped).
     `readout_from`: the checkpoint whose read-out names the seen contexts of a recording
-    without context truth (continual_seen.py; default `deployed`).
+    without context truth (continual_seen.py; default `deployed`). `rehearsal`: the
+    rehearsal bag among `old_bags` (anchored with `bc_weight`, the rest with
+    `bc_weight_new`).
     Raises TrainError (bad data, another task, non-finite training).
     """
     from zeus_ros.learning.checkpoint import save_checkpoint
@@ -267,11 +281,14 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
             f'{seen.source} ({seen.detail})')
     if corrupt_rewards:
         dataset.episodes = [replace(ep, reward=CORRUPTION * ep.reward) for ep in dataset.episodes]
+    if settings.gate_actor and rehearsal is not None and not agent.config.actor_gate:
+        _gate(agent, ingest_bags([rehearsal]), settings, log)
     config = agent.config
     for group in agent.optimizers['actor'].param_groups:
         group['lr'] = config.actor_lr * settings.actor_lr_scale
     replay = ReplayBuffer(dataset, history=config.k, pixels=config.obs_kind == 'pixels',
-                          seed=settings.seed, model_horizon=config.model_horizon)
+                          seed=settings.seed, model_horizon=config.model_horizon,
+                          anchor=_anchor(settings, rehearsal))
     if len(replay) < config.batch_size:
         raise TrainError(f'{len(replay)} transitions, fewer than one batch '
                          f'({config.batch_size}); wait for more steps')
@@ -284,8 +301,12 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
     for phase_config, count in phases:
         agent.config = phase_config
         for index in range(count):
-            if index % 50 == 0 and stop():
-                raise RoundStopped(f'stopped at update {step}')
+            if index % 50 == 0:
+                if stop():
+                    raise RoundStopped(f'stopped at update {step}')
+                if progress is not None:
+                    progress.update('training', step - start, warmup + settings.updates,
+                                    warmup_updates=warmup)
             pair = replay.sample(config.batch_size) if needs_pair else None
             agent.update(replay.sample(config.batch_size), pair, step)
             step += 1
@@ -313,6 +334,58 @@ def train_candidate(deployed: Path | str, new_bags: Sequence[Path], old_bags: Se
     return candidate
 
 
+GATE_SAMPLES = 8192
+"""Rehearsal steps whose policy context fits the actor's novelty gate."""
+
+
+def _gate(agent: Any, rehearsal: Any, settings: ContinualSettings,
+          log: Callable[[str], None]) -> None:
+    """Gate the agent's actor (learning/gated_actor.py) on the rehearsal's train contexts."""
+    import torch
+
+    from zeus_ros.learning.gated_actor import fit_gate
+    from zeus_ros.offline.data.replay import ReplayBuffer
+
+    replay = ReplayBuffer(rehearsal, history=agent.config.k, seed=settings.seed,
+                          pixels=agent.config.obs_kind == 'pixels')
+    batch = replay.sample(GATE_SAMPLES).to(agent.device)
+    with torch.no_grad():
+        history, _ = agent.history_features(batch.hist_obs, batch.hist_action,
+                                            batch.hist_reward, batch.hist_next_obs,
+                                            batch.hist_mask)
+        psi = agent.modules['psi'](history)
+        context = agent.policy_context(psi, torch.zeros_like(psi))
+    # One centroid per train value and history length: an episode's first k steps carry a
+    # partial history whose psi sits apart from the settled one (it cannot know the context
+    # yet), and there the deployed actor must act too.
+    length = batch.hist_mask.sum(1).cpu().numpy()
+    values = np.unique(batch.context.cpu().numpy().round(6), axis=0, return_inverse=True)[1]
+    labels = values.ravel() * (agent.config.k + 1) + length
+    centroids, scale, low, high = fit_gate(context.cpu().numpy(), labels)
+    agent.gate_actor(centroids, scale, low, high)
+    log(f'continual: actor gated on {len(centroids)} train contexts x history lengths (the '
+        f'deployed actor below novelty {low:.2f}, the adapted one above {high:.2f}; '
+        f'{len(labels)} rehearsal steps)')
+
+
+def _anchor(settings: ContinualSettings, rehearsal: Path | None
+            ) -> Callable[[Any], float] | None:
+    """Per-episode behaviour-cloning weights (None: one weight for all).
+
+    `bc_weight` on the rehearsal, `bc_weight_new` on the recording; None when `bc_weight_new`
+    is negative.
+    """
+    if settings.bc_weight_new < 0:
+        return None
+    root = None if rehearsal is None else Path(rehearsal).resolve()
+
+    def weight(episode: Any) -> float:
+        source = Path(episode.source).resolve()
+        kept = root is not None and (source == root or root in source.parents)
+        return settings.bc_weight if kept else settings.bc_weight_new
+    return weight
+
+
 def agent_step(path: Path) -> int:
     """The update count stored in a checkpoint (0 when it has none)."""
     from zeus_ros.offline.training.train import checkpoint_step
@@ -321,17 +394,35 @@ def agent_step(path: Path) -> int:
 
 
 # ---------------------------------------------------------------------- gate
-def _per_value(agent: Any, values: Sequence[dict[str, float]], settings: ContinualSettings
-               ) -> np.ndarray:
+def _paired_returns(old: Any, new: Any, values: Sequence[dict[str, float]], seen: int,
+                    settings: ContinualSettings, progress: RoundProgress | None, phase: str
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(values, episodes) returns of both checkpoints, value by value on the same seeds.
+
+    Value i runs on seed eval_seed + i for both (evaluate_contexts' own pairing); after
+    each value the progress shows the running gain over the seen values done so far.
+    """
     from zeus_ros.offline.evaluation.evaluate import evaluate_contexts
 
-    rows = evaluate_contexts(agent, values, episodes=settings.episodes,
-                             seed=settings.eval_seed, progress=False)
-    return np.array([r['return'] for r in rows], float).reshape(-1, settings.episodes)
+    before, after = [], []
+    for index, value in enumerate(values):
+        for agent, out in ((old, before), (new, after)):
+            rows = evaluate_contexts(agent, [value], episodes=settings.episodes,
+                                     seed=settings.eval_seed + index, progress=False)
+            out.append([r['return'] for r in rows])
+        if progress is not None:
+            diff = np.asarray(after[:seen], float) - np.asarray(before[:seen], float)
+            gain = float(diff.mean()) if len(diff) else None
+            se = (float(np.sqrt(np.sum(diff.std(1, ddof=1) ** 2 / diff.shape[1])) / len(diff))
+                  if len(diff) and diff.shape[1] > 1 else None)
+            progress.update(phase, (index + 1) * settings.episodes,
+                            len(values) * settings.episodes, gain=gain, gain_se=se)
+    return np.asarray(before, float), np.asarray(after, float)
 
 
 def gate(deployed: Path | str, candidate: Path | str, seen: Sequence[dict[str, float]],
-         settings: ContinualSettings) -> GateResult:
+         settings: ContinualSettings, progress: RoundProgress | None = None,
+         phase: str = 'gate') -> GateResult:
     """Paired evaluation of both checkpoints on the seen contexts and the train values."""
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.evaluate import split_values
@@ -345,8 +436,8 @@ def gate(deployed: Path | str, candidate: Path | str, seen: Sequence[dict[str, f
         train = [train[int(i)] for i in picks]
     values = [*seen, *train]
     where = ['seen'] * len(seen) + ['train'] * len(train)
-    episodes_before, episodes_after = _per_value(old, values, settings), _per_value(
-        new, values, settings)  # (values, episodes), paired episode by episode
+    episodes_before, episodes_after = _paired_returns(  # paired episode by episode
+        old, new, values, len(seen), settings, progress, phase)
     before, after = episodes_before.mean(1), episodes_after.mean(1)
     value_se = ((episodes_after - episodes_before).std(1, ddof=1) / np.sqrt(settings.episodes)
                 if settings.episodes > 1 else np.zeros(len(values)))
@@ -365,7 +456,10 @@ def gate(deployed: Path | str, candidate: Path | str, seen: Sequence[dict[str, f
     else:  # one episode per value: only the spread across values tells the noise
         se = float(seen_diff.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
     required = max(settings.margin, 2 * se)
-    worse = [r for r in rows if r['diff'] < -r['allowed']]
+    # One decision where the robot runs (the mean over the seen contexts, above), and the
+    # forgetting budget value by value where it was trained (no train value worse than
+    # allowed). When no truth was recorded the train values are the seen ones, checked both.
+    worse = [r for r in rows if r['where'] == 'train' and r['diff'] < -r['allowed']]
     if gain < required:
         reason = f'gain {gain:+.2f} below the required {required:.2f}'
     elif worse:
@@ -397,10 +491,20 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
     `deployed`.
     """
     old = [*replay_mix(splits, new_bags, settings), *([rehearsal] if rehearsal else [])]
+    progress = RoundProgress(Path(out) / PROGRESS_FILE)
     candidate = train_candidate(start or deployed, new_bags, old, out, settings,
                                 corrupt_rewards=corrupt_rewards, log=log, stop=stop,
-                                readout_from=deployed)
-    result = gate(deployed, candidate.path, candidate.seen, settings)
+                                readout_from=deployed, rehearsal=rehearsal, progress=progress)
+    result = gate(deployed, candidate.path, candidate.seen, settings, progress)
+    confirmation = None
+    if result.deploy:  # held-out confirmation: the same decision on initial states not used
+        confirmation = gate(deployed, candidate.path, candidate.seen,
+                            replace(settings, eval_seed=settings.eval_seed + CONFIRM_SEED),
+                            progress, 'confirmation')
+        if not confirmation.deploy:
+            result = replace(result, deploy=False, reason=(
+                f'{result.reason}, but not confirmed on fresh initial states: '
+                f'{confirmation.reason}'))
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 
     record = append_history(history, {
@@ -414,7 +518,13 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
         'gain': result.gain, 'se': result.se,
         'required': result.required, 'deployed_seen': result.deployed_seen,
         'candidate_seen': result.candidate_seen, 'gate_s': round(result.seconds, 2),
-        'values': result.values, 'decision': 'deploy' if result.deploy else 'refuse',
+        'values': result.values, 'eval_seed': settings.eval_seed,
+        'confirmation': None if confirmation is None else {
+            'eval_seed': settings.eval_seed + CONFIRM_SEED, 'gain': confirmation.gain,
+            'se': confirmation.se, 'required': confirmation.required,
+            'deploy': confirmation.deploy, 'reason': confirmation.reason,
+            'gate_s': round(confirmation.seconds, 2), 'values': confirmation.values},
+        'decision': 'deploy' if result.deploy else 'refuse',
         'reason': result.reason})
     log(f'continual: {"DEPLOY" if result.deploy else "REFUSE"} {candidate.path.name} '
         f'({candidate.sha256[:12]}): {result.summary()}; {result.reason}')
@@ -438,7 +548,8 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
               first_checkpoint: Path | str, rehearsal_folder: Path | str,
               corrupt_rewards: bool = False, forced: bool = False,
               start: Path | str | None = None, log: Callable[[str], None] = print,
-              stop: Callable[[], bool] = lambda: False) -> dict[str, Any]:
+              stop: Callable[[], bool] = lambda: False, round_number: int = 0
+              ) -> dict[str, Any]:
     """One round of the live trainer, as `zeus continual-round` runs it: a JSON-ready answer.
 
     The rehearsal recording of `first_checkpoint` (made once under `rehearsal_folder`), then
@@ -447,8 +558,10 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
     is `forced` past the gate). The answer holds what the node needs to swap and watch: the
     candidate's path and sha256, the gate's decision, figures and summary, `resume_from`, and
     the task's episode length (the live check's scale). Raises what `continual_round` raises
-    (RoundStopped when `stop` answers True).
+    (RoundStopped when `stop` answers True). Round `round_number` gates on evaluation seeds
+    of its own (eval_seed + round_number x ROUND_SEED).
     """
+    settings = replace(settings, eval_seed=settings.eval_seed + round_number * ROUND_SEED)
     rehearsal = rehearsal_bag(Path(first_checkpoint), rehearsal_folder, settings, log)
     begin = Path(start) if start is not None and Path(start).is_file() else None
     result = continual_round(Path(deployed), [Path(b) for b in new_bags],
