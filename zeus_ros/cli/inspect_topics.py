@@ -300,7 +300,10 @@ class Inspector:
             # A node's rate is 0.0 until its window holds two events: not shown until then.
             shown = ', '.join(f'{k}={v}' for k, v in values.items()
                               if k in ('rate_hz', 'timeouts', 'rejected', 'stale', 'safe',
-                                       'gaps', 'drops', 'dropped', 'novel_steps')
+                                       'gaps', 'drops', 'dropped', 'novel_steps', 'state',
+                                       'round_phase', 'round_progress', 'round_gain',
+                                       'round_phase_eta_s', 'swaps', 'refusals',
+                                       'rollbacks')
                               and not (k == 'rate_hz' and _is_zero(v)))
             if shown:
                 lines.append(f'          {name}: {shown}')

@@ -43,7 +43,11 @@ from rclpy.parameter import Parameter
 
 from zeus_ros.atomic_file import replace_text
 from zeus_ros.bags.recording import closed_splits, split_steps
-from zeus_ros.system.continual_settings import ContinualSettings, append_history
+from zeus_ros.system.continual_settings import (
+    ContinualSettings,
+    append_history,
+    read_progress,
+)
 from zeus_ros.system.continual_watch import (
     LiveCheck,
     NoveltyAlarm,
@@ -73,6 +77,8 @@ ROUND_COMMAND = (sys.executable, '-m', 'zeus_ros.cli', 'continual-round')
 """The child process of a round (`zeus continual-round --request FILE`)."""
 STOP_GRACE_S = 5.0
 """How long a round's child gets after SIGTERM (shutdown) before SIGKILL."""
+TICK_S = 2.0
+"""How often a running round's progress is published on /diagnostics."""
 STDERR_LINES = 10
 """Last lines of a failed child's stderr kept in its failure line of history.jsonl."""
 
@@ -98,6 +104,8 @@ class ContinualTrainer(Node):
         self.returns = SegmentReturns()
         self.lock = threading.Lock()
         self.state = 'waiting'
+        self.progress: dict[str, str] = {}
+        """The running round's progress (round_progress_values), shown on /diagnostics."""
         self.counts = {'rounds': 0, 'swaps': 0, 'refusals': 0, 'rollbacks': 0, 'failures': 0}
         from diagnostic_msgs.msg import DiagnosticArray
         from zeus_msgs.msg import ContextTruth, StepFeedback
@@ -137,7 +145,7 @@ class ContinualTrainer(Node):
 
         values = {'event': event, 'state': self.state, 'deployed': str(self.deployed),
                   'previous': str(self.previous or ''), 'history': str(self.history),
-                  **self.counts}
+                  **self.counts, **self.progress}
         if message:
             values['decision'] = message
         self.diagnostics.publish(diagnostics_message(self, 'continual', values,
@@ -245,9 +253,16 @@ class Trainer:
             'resume_from': None if self.resume is None else str(self.resume),
             'threads': max(1, int(n.p['threads'])), 'parent_pid': os.getpid(), 'round': number,
             'result': str(folder / 'result.json')}
-        answer = run_child_round(folder, request, self.log.info, self.stop)
+        def tick() -> None:
+            n.progress = round_progress_values(read_progress(folder))
+            n.report('progress')
+
+        answer = run_child_round(folder, request, self.log.info, self.stop, tick)
+        n.progress = {}
         if answer['status'] == 'stopped':
             self.log.info(f'continual: round {number} stopped: shutting down')
+            append_history(n.history, {'event': 'stopped', 'round': number,
+                                       'progress': read_progress(folder)})
             return
         if answer['status'] != 'done':  # a bad split, a diverged candidate: the robot runs on
             n.counts['failures'] += 1
@@ -365,8 +380,24 @@ class Trainer:
             shutil.rmtree(folder, ignore_errors=True)
 
 
+def round_progress_values(progress: dict[str, Any] | None) -> dict[str, str]:
+    """A round's progress file (RoundProgress) as /diagnostics values (strings)."""
+    if not progress:
+        return {}
+    values = {'round_phase': str(progress.get('phase', '')),
+              'round_progress': f"{progress.get('done', 0)}/{progress.get('total', 0)}"}
+    if progress.get('gain') is not None:
+        se = progress.get('gain_se')
+        values['round_gain'] = (f"{progress['gain']:+.1f}"
+                                + (f' ± {se:.1f}' if se is not None else ''))
+    if progress.get('phase_eta_s') is not None:
+        values['round_phase_eta_s'] = f"{progress['phase_eta_s']:.0f}"
+    return values
+
+
 def run_child_round(folder: Path, request: dict[str, Any], log: Callable[[str], None],
-                    stop: threading.Event) -> dict[str, Any]:
+                    stop: threading.Event, tick: Callable[[], None] | None = None
+                    ) -> dict[str, Any]:
     """Run one round in `zeus continual-round` and return its answer (cli/continual_round.py).
 
     Writes `request` to `folder`/request.json; the child's stdout lines go to `log`, its stderr
@@ -394,7 +425,11 @@ def run_child_round(folder: Path, request: dict[str, Any], log: Callable[[str], 
     for reader in readers:
         reader.start()
     stopped = False
+    ticked = time.monotonic()
     while child.poll() is None:
+        if tick is not None and time.monotonic() - ticked >= TICK_S:
+            ticked = time.monotonic()
+            tick()
         if stop.wait(0.2):
             stopped = True
             child.send_signal(signal.SIGTERM)

@@ -43,7 +43,7 @@ class ContinualSettings:
     Measured offline on the zoo's Cheetah-Bias-v0 (6,000 steps at biases 0.6-0.9 + 6,000 at
     the train values): 0 wrecks the train values (-39 -> -308), 0.4 gains +38 on the new
     biases but loses up to 8 on train values, 1.0 gains +33 and loses at most 3."""
-    bc_weight_new: float = -1.0
+    bc_weight_new: float = 0.25
     """The anchor on the recorded steps (new contexts), per sample; `bc_weight` stays on the
     rehearsal (the train contexts). Strong where the robot must not forget, weak where the
     data is new (the spirit of CLEAR's replay + cloning, Rolnick et al. 2019, and of SPIBB,

@@ -91,9 +91,13 @@ TRAINER = 'continual_trainer'
 """continual: retrains, gates and swaps in the background; its exit does not end the launch."""
 BACKGROUND = RECORDS_OTHERS | {TRAINER}
 """Nodes outside the control loop: never in the container, never waited for at step 0."""
-CONTINUAL_SPLIT_S = 60.0
+CONTINUAL_SPLIT_S = 20.0
 """continual: the recorder's split period unless the params file sets one (a round reads only
-closed splits, so this is the delay before new steps can be trained on)."""
+closed splits, so this is the delay before new steps can be trained on: 1,000 steps at 50 Hz)."""
+CONTINUAL_NOISE = 0.1
+"""continual: the policy's exploration noise unless the params file sets a nonzero one. The
+critic of a round compares actions, so the recording needs some variety; a deployment with
+noise 0 gives it none. The continual results are measured with it, and so pay its cost."""
 CONTAINER = 'container'
 CONTAINER_MODULE = 'zeus_ros.nodes.container'
 CONTAINER_EXECUTABLE = 'loop_container'
@@ -674,7 +678,8 @@ def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: st
     """Point the recorder at a known folder with splits and the trainer at it and the agents.
 
     The recorder's `output` and `split_duration_s` from the params file win; otherwise a new
-    bags/continual_<date> folder split every CONTINUAL_SPLIT_S seconds.
+    bags/continual_<date> folder split every CONTINUAL_SPLIT_S seconds. The policy explores
+    with CONTINUAL_NOISE unless its parameters set a nonzero noise.
     """
     import time
 
@@ -690,6 +695,8 @@ def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: st
     split = next((s['split_duration_s'] for s in reversed(recorder)
                   if s.get('split_duration_s')), CONTINUAL_SPLIT_S)
     output = os.path.abspath(os.path.expanduser(str(output)))
+    noise = next((s['noise'] for s in reversed(_node_sections(params, 'policy'))
+                  if s.get('noise')), agents['policy'].parameters.get('noise'))
     result = []
     for node in planned:
         extra: dict[str, Any] = {}
@@ -698,6 +705,8 @@ def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: st
         elif node.name == TRAINER:
             extra = {'recording': output, 'checkpoint': checkpoint,
                      **({'task': task} if task else {})}
+        elif node.name == 'policy' and not noise:
+            extra = {'noise': CONTINUAL_NOISE}
         result.append(NodePlan(node.name, {**node.parameters, **extra}))
     return result
 
