@@ -17,7 +17,7 @@ only publishers of its sender's DDS participant (a GID is a 12-byte participant 
 hellos it hears (another nonce, another sha256) or claims another node's GIDs changes nothing
 a pairing reads: the pair's reference is only ever written by the paired node's own process.
 Each refused hello is counted and its sender named (full GID, the node the graph gives it, the
-pid its hello claims) in the log and, for `WINDOW_S`, as an ERROR on /diagnostics.
+pid its hello claims) in the log and, for 5 s, as an ERROR on /diagnostics.
 
 Without a key ('unkeyed', said once as a WARN at start and on /diagnostics) this stops
 mistakes and stray processes (a test script, a node started by hand under a taken name), not
