@@ -61,6 +61,7 @@ _PREFIX = 12  # bytes of a DDS GUID (the rmw's GID) that name the participant
 _NAME_WAIT_S = 2.0  # how long a refusal's log line waits for the graph to name its sender
 _REPEAT_S = 30.0  # a sender that goes on: one line per this many seconds with its count
 _UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
+_warned_unkeyed = False  # the unkeyed WARN is said once per process
 
 
 def participant(gid: bytes) -> bytes:
@@ -163,7 +164,9 @@ class Handshake:
         self._pub = node.create_publisher(String, PAIRING_TOPIC, _QOS)
         self._sub = SenderSubscription(node, String, PAIRING_TOPIC, _QOS, self._on_hello,
                                        admit=lambda _gid: True, with_sender=True)
-        if not self.key:
+        global _warned_unkeyed
+        if not self.key and not _warned_unkeyed:  # once per process (a container: per group)
+            _warned_unkeyed = True
             node.get_logger().warning(
                 f'unkeyed pairing (${KEY_ENV} is blank): a restarted peer is re-paired only '
                 'after its old publisher has left the ROS graph, and after a peer died any '
