@@ -66,10 +66,10 @@ def test_a_restart_is_believed_only_through_its_hello() -> None:
             handshake = handshake_of(node)
             assert handshake_of(node) is handshake
             new_gid = bytes.fromhex('02' * 16)
-            assert 'no hello' in handshake.introduces(new_gid, '/policy', agreed)
+            assert 'no valid hello' in handshake.introduces(new_gid, '/policy', agreed)
 
             def heard(hello: Hello) -> str | None:
-                handshake._on_hello(String(data=hello.to_text()))
+                handshake._on_hello(String(data=hello.to_text()), new_gid)
                 return handshake.introduces(new_gid, '/policy', agreed)
 
             gids = frozenset({new_gid.hex()})
@@ -78,11 +78,63 @@ def test_a_restart_is_believed_only_through_its_hello() -> None:
             assert 'names /other' in heard(Hello('/other', 'n2', 'abc', gids))
             assert heard(Hello('/policy', 'n2', 'abc', gids)) is None
             handshake.key = b'launch key'
-            assert 'proof' in heard(Hello('/policy', 'n2', 'abc', gids))
-            assert 'proof' in heard(Hello('/policy', 'n2', 'abc', gids).signed(b'other'))
+            handshake._by_gid.clear()
+            assert 'no valid hello' in heard(Hello('/policy', 'n2', 'abc', gids))
+            assert 'no valid hello' in heard(
+                Hello('/policy', 'n2', 'abc', gids).signed(b'other'))
             assert heard(Hello('/policy', 'n2', 'abc', gids).signed(b'launch key')) is None
-            handshake._on_hello(String(data='{not json'))
+            assert handshake.refused == 2, 'the two unproven hellos were refused on receipt'
+            handshake._on_hello(String(data='{not json'), new_gid)
             assert handshake.malformed == 1
+        finally:
+            node.destroy_node()
+
+
+def test_hellos_are_checked_on_receipt_and_their_senders_named() -> None:
+    """Relayed, claiming another process's publishers, unproven: refused on receipt.
+
+    Counted, never stored (the pair's hello stays the genuine one), the sender named in full.
+    """
+    import rclpy
+    from std_msgs.msg import String
+
+    from zeus_ros.nodes.handshake import Hello, handshake_of, pairing_diagnostics
+
+    from ros_harness import fresh_domain_id, ros_context
+
+    key = b'launch key'
+    policy = bytes.fromhex('aa' * 12 + '00001303')  # the policy's process, one publisher
+    poisoner = bytes.fromhex('bb' * 12 + '00001303')  # the same entity id, another process
+    genuine = Hello('/policy', 'n1', 'abc', frozenset({policy.hex()}), pid=42).signed(key)
+    with ros_context(fresh_domain_id()) as context:
+        node = rclpy.create_node('sim_bridge', context=context)
+        try:
+            handshake = handshake_of(node)
+            handshake.key = key
+            handshake._on_hello(String(data=genuine.to_text()), policy)
+            assert handshake.hello_of(policy) == genuine
+            relayed = Hello('/policy', 'n9', 'f' * 64, genuine.gids, genuine.proof, 42)
+            claiming = Hello('/policy', 'n9', 'f' * 64, frozenset({policy.hex(),
+                                                                  poisoner.hex()})).signed(key)
+            unproven = Hello('/policy', 'n9', 'f' * 64, frozenset({poisoner.hex()}), pid=7)
+            for hello in (relayed, claiming, unproven):
+                handshake._on_hello(String(data=hello.to_text()), poisoner)
+            assert handshake.hello_of(policy) == genuine, 'a refused hello overwrote the pair'
+            assert handshake.hello_of(poisoner) is None
+            assert handshake.refused == 3
+            why = handshake.check(relayed, poisoner)
+            assert why is not None and 'relayed' in why
+            why = handshake.check(claiming, poisoner)
+            assert why is not None and 'another process' in why
+            why = handshake.check(unproven, poisoner)
+            assert why is not None and 'proof' in why
+            values, errors = pairing_diagnostics(node)
+            assert values == {'pairing': 'keyed', 'hellos_refused': 3}
+            assert len(errors) == 1 and poisoner.hex() in errors[0], errors
+            assert 'its hello claims to be /policy pid 7' in errors[0], errors
+            handshake.key = b''
+            assert pairing_diagnostics(node)[0]['pairing'] == 'unkeyed'
+            assert handshake.check(unproven, poisoner) is None, 'unkeyed: its own GIDs only'
         finally:
             node.destroy_node()
 

@@ -6,17 +6,22 @@ what KIND says (once a subscriber has matched), each value MARK so a use of it i
 recognisable:
 action (for the awaited step), context (for the current step, stamped with SHA256: a copy
 of the real pair's hash), observation (state vectors and step feedback for steps far ahead,
-INJECTED_STEP + n, so any action answering one is recognisable). It prints `posing` once
-its publisher exists and `published N` at the end.
+INJECTED_STEP + n, so any action answering one is recognisable). With KIND `action+hello` it
+also sends a start hello as a restart of NODE_NAME would (its own publishers' GIDs, a fresh
+nonce, SHA256 as the checkpoint's, no key: the unkeyed stall takeover of issue 49). It prints
+`posing` once its publisher exists and `published N` at the end.
 """
 
 from __future__ import annotations
 
+import os
+import secrets
 import sys
 import time
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from zeus_msgs.msg import Action, ContextEstimate, StateVector, StepFeedback
 
 from zeus_ros.nodes.topics import TOPICS, step_qos
@@ -35,6 +40,8 @@ def main(name: str, kind: str, seconds: float, sha256: str = '') -> int:
                              lambda m: newest.__setitem__('step', max(m.step, newest['step'])
                                                           if m.step < INJECTED_STEP
                                                           else newest['step']), step_qos())
+    hello = kind.endswith('+hello')
+    kind = kind.removesuffix('+hello')
     data = [MARK] * SIZES[kind]
     if kind == 'action':
         publishers = [(node.create_publisher(Action, TOPICS.ACTION, step_qos()),
@@ -49,6 +56,8 @@ def main(name: str, kind: str, seconds: float, sha256: str = '') -> int:
                                                  first=False, applied_action=[0.0] * 6)),
                       (node.create_publisher(StateVector, TOPICS.STATE, step_qos()),
                        lambda step: StateVector(step=INJECTED_STEP + step, data=data))]
+    if hello:
+        _send_hello(node, sha256)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     matched = time.monotonic() + 20  # the victims hear it first (a loaded machine is slow)
@@ -67,6 +76,24 @@ def main(name: str, kind: str, seconds: float, sha256: str = '') -> int:
     node.destroy_node()
     rclpy.try_shutdown()
     return 0
+
+
+def _send_hello(node: Node, sha256: str) -> None:
+    """Announce `node` as a restart of its name would: a checked hello, only the key missing."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    from zeus_ros.nodes.handshake import PAIRING_TOPIC, Hello
+    from zeus_ros.nodes.rcl_bindings import publisher_gid
+
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    publisher = node.create_publisher(String, PAIRING_TOPIC, qos)
+    gids = frozenset(publisher_gid(p).hex() for p in node.publishers)
+    forged = Hello(node.get_fully_qualified_name(), secrets.token_hex(8), sha256, gids,
+                   pid=os.getpid())
+    publisher.publish(String(data=forged.to_text()))
 
 
 if __name__ == '__main__':

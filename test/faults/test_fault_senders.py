@@ -118,7 +118,11 @@ def test_a_flooding_second_publisher_never_drives_the_robot(
 
 @pytest.mark.ros_quiet
 def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
-    """SIGKILL to the paired policy: safe actions (timeouts), then its restart is re-paired."""
+    """SIGKILL to the paired policy: safe actions (timeouts), then its restart is re-paired.
+
+    Unkeyed (no $ZEUS_PAIRING_KEY here): only once the killed publisher has left the graph
+    (its DDS lease, ~20 s), never merely because it fell silent (issue 49).
+    """
     ros_processes.start('sim_bridge', node('sim_bridge', f'task:={TASK}',
                                            'action_timeout:=0.2'))
     policy = ros_processes.start('policy', node('policy', f'task:={TASK}'))
@@ -133,6 +137,7 @@ def test_a_restarted_policy_drives_again(ros_processes: ProcessGroup) -> None:
             ros_processes.log_text('sim_bridge')[-2000:]
     log = ros_processes.log_text('sim_bridge')
     assert '/policy restarted' in log and 'a second publisher' not in log, log[-2000:]
+    assert 'left the graph)' in log and 'waits to drive' in log, log[-2000:]
 
 
 def _status(diagnostics: list[Any], node_name: str) -> Any:

@@ -121,7 +121,7 @@ class ClockWatch:
             gid = bytes(info.endpoint_gid)[:16]
             if gid != own:
                 names.append(f'{info.node_namespace.rstrip("/")}/{info.node_name} '
-                             f'(gid {gid.hex()[-8:]})')
+                             f'(gid {gid.hex()})')
         limit = 0 if own is not None else 1
         if len(names) <= limit:
             return []

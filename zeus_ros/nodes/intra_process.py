@@ -174,7 +174,7 @@ class IntraProcessBus:
                     subscription = endpoint.subscription
                     if subscription.admit(gid):
                         self.delivered += 1
-                        subscription.callback(msg)
+                        subscription.deliver(msg, gid)
                 if time.monotonic() >= deadline:
                     break
         finally:

@@ -75,8 +75,15 @@ def diagnostics_message(
 ) -> DiagnosticArray:
     """One DiagnosticStatus (ERROR with `errors`, WARN with `problems`, else OK) in an array.
 
-    `problems` are faults the node covers and counts; `errors` need someone to act.
+    `problems` are faults the node covers and counts; `errors` need someone to act. A node
+    with a start handshake also reports its pairing mode ('keyed' / 'unkeyed'), the hellos it
+    refused, and an ERROR naming their senders (handshake.py): the same in every node.
     """
+    from zeus_ros.nodes.handshake import pairing_diagnostics
+
+    pairing_values, pairing_errors = pairing_diagnostics(node)
+    values = {**values, **pairing_values}
+    errors = [*errors, *pairing_errors]
     status = DiagnosticStatus()
     status.name = f'{node.get_fully_qualified_name()}: {name}'
     status.hardware_id = 'zeus_ros'

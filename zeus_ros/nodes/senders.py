@@ -12,9 +12,10 @@ through the explicit handshake of handshake.py (a new start nonce, the same chec
 launch key's proof), never by its name alone.
 
 This is a guard against mistakes and stray processes, not access control: without a launch
-key, a process running our own node code under the paired node's name after it died is
-believed. The real answer is SROS2 (enclaves and a permissions file that lets only the policy
-publish `zeus/action`): docs/security.md.
+key ('unkeyed'), a process running our own node code under the paired node's name after it
+died is believed; a stalled paired node (its publisher still in the graph) is never replaced
+without a key, whatever the newcomer's hello says. The real answer is SROS2 (enclaves and a
+permissions file that lets only the policy publish `zeus/action`): docs/security.md.
 """
 
 from __future__ import annotations
@@ -65,13 +66,16 @@ class SenderSubscription(Waitable):
     In a node of the single-process container (`node.intra_process`, nodes/intra_process.py)
     it also receives the messages of the container's publishers as Python objects, through the
     container's bus, and drops their DDS copies here, unread. `event_callbacks` adds rclpy's
-    QoS event handlers (as `create_subscription` does; None: none).
+    QoS event handlers (as `create_subscription` does; None: none). `with_sender`: the
+    callback gets `(msg, gid)`, for a consumer that must know who sent each message (the
+    start hellos: handshake.py).
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str, qos: QoSProfile,
-                 callback: Callable[[Any], None], admit: Callable[[bytes], bool], *,
+                 callback: Callable[..., None], admit: Callable[[bytes], bool], *,
                  callback_group: CallbackGroup | None = None,
-                 event_callbacks: SubscriptionEventCallbacks | None = None) -> None:
+                 event_callbacks: SubscriptionEventCallbacks | None = None,
+                 with_sender: bool = False) -> None:
         check_is_valid_msg_type(msg_type)
         with node.handle:
             self._handle = _rclpy.Subscription(node.handle, msg_type, topic,
@@ -82,6 +86,7 @@ class SenderSubscription(Waitable):
         self.qos = qos
         self.callback = callback
         self.admit = admit
+        self.with_sender = with_sender
         self._index: int | None = None
         self._destroyed = False
         self._buffer = Bytes()
@@ -134,8 +139,15 @@ class SenderSubscription(Waitable):
         """True when the wait set says a message is waiting."""
         return self._index is not None and wait_set.is_ready('subscription', self._index)
 
-    def take_data(self) -> list[Any]:
-        """Take what is waiting (at most _MAX_TAKE); keep the admitted messages."""
+    def deliver(self, msg: Any, gid: bytes) -> None:
+        """Hand one admitted message (sent by publisher `gid`) to the callback."""
+        if self.with_sender:
+            self.callback(msg, gid)
+        else:
+            self.callback(msg)
+
+    def take_data(self) -> list[tuple[Any, bytes]]:
+        """Take what is waiting (at most _MAX_TAKE); keep the admitted messages and senders."""
         taken = []
         info = MessageInfo()
         for _ in range(_MAX_TAKE):
@@ -150,13 +162,13 @@ class SenderSubscription(Waitable):
             gid = bytes(info.publisher_gid.data)
             if gid not in self._local and self.admit(gid):  # the bus delivered a local one
                 data = ctypes.string_at(self._buffer.buffer, self._buffer.buffer_length)
-                taken.append(deserialize_message(data, self.msg_type))
+                taken.append((deserialize_message(data, self.msg_type), gid))
         return taken
 
-    async def execute(self, taken_data: list[Any]) -> None:
+    async def execute(self, taken_data: list[tuple[Any, bytes]]) -> None:
         """Hand each admitted message to the callback."""
-        for msg in taken_data:
-            self.callback(msg)
+        for msg, gid in taken_data:
+            self.deliver(msg, gid)
 
     def get_num_entities(self) -> NumberOfEntities:
         """One subscription."""
@@ -175,7 +187,8 @@ class Sender:
     node: str  # '' while the graph knows the endpoint but not yet its node
 
     def __str__(self) -> str:
-        return f'{self.node or "a node not yet named"} (gid {self.gid.hex()[-8:]})'
+        # The whole GID: its last 8 hex digits (the entity id) are the same in every process.
+        return f'{self.node or "a node not yet named"} (gid {self.gid.hex()})'
 
 
 class SenderPairing:
@@ -187,10 +200,13 @@ class SenderPairing:
     (start-up); `setting` names the parameter that sets it, for messages ('' when the node
     has none). The pair is agreed by publisher GID and node name, and with the hello the node
     sent at its start (handshake.py). A paired node that restarts publishes under a new GID:
-    its new publisher (same node name) is paired once the old one has left the graph or has
-    been silent for `takeover_after` seconds (a killed process stays in the graph until its
-    DDS lease ends), and only when its hello passes `Handshake.introduces`. Everything else
-    is refused (`refused` counts it) and named once.
+    its new publisher (same node name) is paired only when its hello passes
+    `Handshake.introduces`, and once the old one has left the graph or, with the launch key
+    only, has been silent for `takeover_after` seconds (a killed process stays in the graph
+    until its DDS lease ends, 20 s with Fast DDS's defaults). Unkeyed, a newcomer under the
+    paired name waits, named once as a WARN, until the old publisher has left the graph: a
+    stalled paired node is never replaced by whoever sends a hello. Everything else is
+    refused (`refused` counts it) and named once.
     """
 
     def __init__(self, node: Node, topic: str, expected: str = '', what: str = 'messages',
@@ -213,6 +229,7 @@ class SenderPairing:
         self._graph_at = -1.0
         self._named: set[bytes] = set()
         self._newcomers: dict[bytes, float] = {}  # same-name GIDs: first seen (monotonic)
+        self._waiting: set[bytes] = set()  # unkeyed newcomers named as waiting (WARN, once)
         self._settling: tuple[frozenset[bytes], float] = (frozenset(), 0.0)
 
     @property
@@ -225,10 +242,16 @@ class SenderPairing:
         return ''
 
     def agreed(self) -> Hello | None:
-        """The hello of the paired node (its newest: a live redeploy updates its sha256)."""
+        """The hello of the paired node (its newest: a live redeploy updates its sha256).
+
+        Only a checked hello (handshake.py: sent by the paired node's own process, with the
+        key's proof where there is a key) is ever read here, and once agreed, only one of
+        the same start (nonce) updates it.
+        """
         if self.paired is not None:
             hello = self._handshake.hello_of(self.paired.gid)
-            if hello is not None:
+            if hello is not None and hello.node == self.paired.node and (
+                    self._agreed is None or hello.nonce == self._agreed.nonce):
                 self._agreed = hello
         return self._agreed
 
@@ -295,14 +318,26 @@ class SenderPairing:
             if old is not None:
                 self._retired.add(old.gid)
                 self._agreed = self._handshake.hello_of(sender.gid)
+                how = ("the launch key's proof" if self._handshake.key else
+                       f'unkeyed: its old publisher (gid {old.gid.hex()}) left the graph')
                 self._node.get_logger().warning(
                     f'{sender} now drives {self.topic}: {old.node} restarted (handshake: new '
-                    f'start nonce, checkpoint sha256 {self._agreed.sha256[:12] or "(none)"})'
+                    f'start nonce, checkpoint sha256 {self._agreed.sha256 or "(none)"}, '
+                    f'pid {self._agreed.pid or "?"}, {how})'
                     if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
         self.refused += 1
         if sender is not None and not self._introducing(sender, graph):
             self._name_once(sender, graph)
+        elif sender is not None and sender.node and sender.gid not in self._waiting and \
+                self._restart_state(sender, graph) == 'waiting':
+            self._waiting.add(sender.gid)
+            self._node.get_logger().warning(
+                f'{sender} under the paired name waits to drive {self.topic}: unkeyed, a '
+                f'restart is believed only once the paired publisher (gid '
+                f'{self.paired.gid.hex() if self.paired else "?"}) has left the ROS graph '
+                '(a killed process: its DDS lease, ~20 s); set $ZEUS_PAIRING_KEY to re-pair '
+                'at once by proof (docs/security.md)')
         return False
 
     def _may_take_over(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
@@ -313,31 +348,43 @@ class SenderPairing:
         return self._successor(sender, graph)
 
     def _successor(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
-        """The paired node under a new GID, its old publisher gone or silent, introduced."""
-        if not self._may_be_restart(sender, graph):
+        """The paired node under a new GID, its old one gone (or keyed: silent), introduced."""
+        if self._restart_state(sender, graph) != 'possible':
             return False
         return self._handshake.introduces(sender.gid, sender.node, self.agreed()) is None
 
-    def _may_be_restart(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
-        """Same name as the paired node, which is silent or gone: perhaps its restart.
+    def _restart_state(self, sender: Sender, graph: dict[bytes, Sender]) -> str:
+        """Whether `sender` may be the paired node's restart: 'possible', 'waiting' or 'no'.
 
-        Beside a paired node that talks, a same-name publisher is a second publisher at once.
-        Its handshake's grace (INTRODUCTION_S) starts when it is first seen so.
+        'possible': same name as the paired node, which is gone (or, keyed, silent);
+        'waiting': so, but unkeyed and the paired publisher is silent and still in the graph;
+        'no': anything else. Beside a paired node that talks, a same-name publisher is a
+        second publisher at once. Unkeyed, a hello proves nothing an impostor could not
+        write, so a stalled paired node stays paired until its publisher leaves the graph.
+        A possible restart's handshake grace (INTRODUCTION_S) starts when it is first seen
+        so.
         """
         if self.paired is None or sender.node != self.paired.node or \
                 sender.gid in self._retired:
-            return False
-        silent = time.monotonic() - self._heard >= self.takeover_after
-        if self.paired.gid in graph and not silent:
-            return False
+            return 'no'
+        if self.paired.gid in graph:
+            if time.monotonic() - self._heard < self.takeover_after:
+                return 'no'
+            if not self._handshake.key:
+                return 'waiting'
         self._newcomers.setdefault(sender.gid, time.monotonic())
-        return True
+        return 'possible'
 
     def _introducing(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
-        """A possible restart still within INTRODUCTION_S of its handshake: not named yet."""
-        if not self._may_be_restart(sender, graph):
-            return False
-        return time.monotonic() - self._newcomers[sender.gid] < INTRODUCTION_S
+        """A restart that may still introduce itself: not named as a second publisher yet.
+
+        That is one within INTRODUCTION_S of its handshake, or (unkeyed) one waiting for the
+        paired publisher to leave the graph.
+        """
+        state = self._restart_state(sender, graph)
+        if state == 'possible':
+            return time.monotonic() - self._newcomers[sender.gid] < INTRODUCTION_S
+        return state == 'waiting'
 
     def others(self) -> list[Sender]:
         """Publishers on the topic besides the paired one (each is named once in the log)."""
@@ -365,8 +412,11 @@ class SenderPairing:
         """Why a publisher under the paired node's name is not its restart ('' otherwise)."""
         if self.paired is None or sender.node != self.paired.node:
             return ''
-        if not self._may_be_restart(sender, graph):
+        state = self._restart_state(sender, graph)
+        if state == 'no':
             return 'the paired publisher is alive'
+        if state == 'waiting':
+            return 'unkeyed: the paired publisher is still in the graph'
         why = self._handshake.introduces(sender.gid, sender.node, self.agreed())
         return why or 'its restart is pending its first message'
 
