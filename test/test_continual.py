@@ -8,6 +8,7 @@ line. Tiny budgets: the whole file takes about a minute on two shared cores.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 import shutil
 
@@ -142,7 +143,7 @@ def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path
     bags = record(tmp_path / 'run2', WEAK_TASK, [0.75, 1.25], weak, splits=2, steps=400)
     # bc_weight 0: a weak policy has nothing worth staying near
     settings = ContinualSettings(updates=500, episodes=1, max_seen_values=2,
-                                 max_train_values=2, bc_weight=0.0)
+                                 max_train_values=2, bc_weight=0.0, bc_weight_new=-1.0)
     same = c.gate(weak, weak, [{'torso_length': 1.25}], settings)
     assert same.gain == 0 and not same.deploy  # paired: same initial states, same returns
     history = tmp_path / 'history.jsonl'
@@ -152,6 +153,37 @@ def test_gate_deploys_a_better_candidate_paired_on_the_same_seeds(tmp_path: Path
     assert result.gate.deploy, result.gate.summary()
     assert result.gate.gain >= max(settings.margin, 2 * result.gate.se)
     assert read_history(history)[-1]['decision'] == 'deploy'
+
+
+@pytest.mark.slow
+def test_a_rehearsed_round_keeps_the_deployed_actor_at_the_train_values(
+        bias_recording: list[Path], tmp_path: Path) -> None:
+    """With a rehearsal the candidate's actor is gated: the deployed one at train contexts.
+
+    So the gate's forgetting budget at the train values measures next to nothing.
+    """
+    from zeus_ros.learning.checkpoint import load_checkpoint
+    from zeus_ros.learning.gated_actor import GatedActor
+
+    zoo = zoo_checkpoint(BIAS)
+    settings = ContinualSettings(warmup_updates=50, updates=200, episodes=2,
+                                 max_seen_values=2, rehearsal_steps=1600)
+    rehearsal = c.rehearsal_bag(zoo, tmp_path / 'rehearsal', settings)
+    assert rehearsal is not None and c.rehearsal_bag(zoo, tmp_path / 'rehearsal',
+                                                     settings) == rehearsal  # made once
+    lines: list[str] = []
+    result = c.continual_round(zoo, bias_recording[1:], bias_recording, tmp_path / 'round',
+                               tmp_path / 'history.jsonl', settings, rehearsal=rehearsal,
+                               log=lines.append)
+    assert any('actor gated on' in line for line in lines)
+    loaded = load_checkpoint(result.candidate.path, load_optimizers=False)
+    assert isinstance(loaded.agent.modules['actor'], GatedActor)
+    assert loaded.config.actor_gate > 0
+    train = [v for v in result.gate.values if v['where'] == 'train']
+    assert len(train) == 8
+    assert max(abs(v['diff']) for v in train) < 1.0, train
+    progress = json.loads((tmp_path / 'round' / 'progress.json').read_text())
+    assert progress['phase'] == 'gate' and progress['done'] == progress['total']
 
 
 def test_live_check_pairs_segments_by_context_and_rolls_back_a_loss() -> None:

@@ -25,6 +25,7 @@ import yaml
 from ros_harness import REPO, fresh_domain_id, require_ros, ros_environment
 
 TRAINER = {'new_steps': 300, 'updates': 800, 'actor_lr_scale': 1.0, 'bc_weight': 0.0,
+           'bc_weight_new': -1.0,
            'rehearsal_steps': 0,
            'episodes': 2, 'max_seen_values': 3, 'max_train_values': 1, 'corrupt_rounds': [2],
            'check_segments': 3, 'tolerance_floor': 4.0, 'warmup_updates': 300, 'margin': 0.5,
