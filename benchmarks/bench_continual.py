@@ -379,6 +379,7 @@ def main() -> int:
     parser.add_argument('--no-references', action='store_true')
     parser.add_argument('--out', type=Path, default=REPO / 'benchmarks' / 'results' / 'continual')
     args = parser.parse_args()
+    args.out = args.out.resolve()  # the launches run in their own folders
     args.out.mkdir(parents=True, exist_ok=True)
     modes = args.modes.split(',')
     task = SCENARIOS[args.scenario][0]

@@ -267,3 +267,33 @@ def test_zeus_continual_round_writes_its_answer(tmp_path: Path) -> None:
     bad = subprocess.run([*command, str(tmp_path / 'none.json')], capture_output=True,
                          text=True, timeout=300)
     assert bad.returncode == 2 and 'cannot read the request' in bad.stderr
+
+
+def test_a_restart_resumes_from_the_history(tmp_path: Path) -> None:
+    """The last swap (unless rolled back), the refused chain and the counts come back."""
+    from zeus_ros.system.continual_settings import append_history, resume_point
+
+    first, second, chain = (tmp_path / f'{n}.pt' for n in ('first', 'second', 'chain'))
+    for path in (first, second, chain):
+        path.write_bytes(b'x')
+    history = tmp_path / 'history.jsonl'
+    assert resume_point(read_history(history)).rounds == 0  # nothing to resume
+    for line in (
+            {'event': 'start'}, {'event': 'round', 'round': 1},
+            {'event': 'gate', 'round': 1, 'decision': 'deploy'},
+            {'event': 'swap', 'round': 1, 'checkpoint': str(first)},
+            {'event': 'live_check', 'decision': 'keep'},
+            {'event': 'round', 'round': 2}, {'event': 'gate', 'decision': 'refuse'},
+            {'event': 'chain', 'round': 2, 'resume_from': str(chain)},
+            {'event': 'round', 'round': 3}, {'event': 'stopped', 'round': 3}):
+        append_history(history, line)
+    point = resume_point(read_history(history))
+    assert (point.deployed, point.resume, point.rounds) == (first, chain, 3)
+    assert point.counts == {'swaps': 1, 'refusals': 1, 'rollbacks': 0, 'failures': 0}
+    append_history(history, {'event': 'swap', 'round': 4, 'checkpoint': str(second)})
+    append_history(history, {'event': 'live_check', 'decision': 'rollback',
+                             'rolled_back_to': str(first), 'error': None})
+    point = resume_point(read_history(history))
+    assert (point.deployed, point.resume, point.rounds) == (first, None, 4)
+    first.unlink()  # a file gone from disk is not resumed from
+    assert resume_point(read_history(history)).deployed is None

@@ -46,7 +46,9 @@ from zeus_ros.bags.recording import closed_splits, split_steps
 from zeus_ros.system.continual_settings import (
     ContinualSettings,
     append_history,
+    read_history,
     read_progress,
+    resume_point,
 )
 from zeus_ros.system.continual_watch import (
     LiveCheck,
@@ -77,6 +79,8 @@ ROUND_COMMAND = (sys.executable, '-m', 'zeus_ros.cli', 'continual-round')
 """The child process of a round (`zeus continual-round --request FILE`)."""
 STOP_GRACE_S = 5.0
 """How long a round's child gets after SIGTERM (shutdown) before SIGKILL."""
+REHEARSAL_ROOT = 'continual_rehearsal'
+"""Beside the recording: one rehearsal per first checkpoint and size, kept across launches."""
 TICK_S = 2.0
 """How often a running round's progress is published on /diagnostics."""
 STDERR_LINES = 10
@@ -199,12 +203,40 @@ class Trainer:
         """Until stopped: one poll every poll_s seconds."""
         n = self.node
         n.out.mkdir(parents=True, exist_ok=True)
+        resumed = self.resume_history()
         self.log.info(f'continual: deployed {n.deployed}; recording {n.recording}; history '
                       f'{n.history}; a round every {n.settings.new_steps} new closed steps')
         append_history(n.history, {'event': 'start', 'deployed': str(n.deployed),
-                                   'recording': str(n.recording)})
+                                   'recording': str(n.recording), 'resumed': resumed})
         while not self.stop.wait(float(n.p['poll_s'])):
             self.poll()
+
+    def resume_history(self) -> dict[str, Any] | None:
+        """Go on where an earlier trainer on this recording stopped (its history.jsonl).
+
+        The checkpoint it deployed last is set on both nodes again (a restarted launch starts
+        them on the first one), the chain of refused candidates continues, round numbers go
+        on. None when there is nothing to resume.
+        """
+        n = self.node
+        point = resume_point(read_history(n.history))
+        if not point.rounds:
+            return None
+        n.counts.update(point.counts, rounds=point.rounds)
+        self.resume = point.resume
+        if point.deployed is not None and point.deployed.resolve() != n.deployed:
+            why = n.set_checkpoint(point.deployed)
+            if why is None:
+                n.deployed = point.deployed.resolve()
+            else:
+                self.log.error(f'continual: could not redeploy {point.deployed} from the '
+                               f'history ({why}); {n.deployed} runs on')
+                self.resume = None
+        self.log.info(f'continual: resumed after round {point.rounds} from {n.history}: '
+                      f'deployed {n.deployed.name}'
+                      + (f', the next round continues {self.resume}' if self.resume else ''))
+        return {'rounds': point.rounds, 'deployed': str(n.deployed),
+                'resume_from': None if self.resume is None else str(self.resume)}
 
     def poll(self) -> None:
         """Check a swap under watch, then start a round when enough new steps are closed."""
@@ -247,7 +279,8 @@ class Trainer:
         folder = n.out / f'round_{number:03d}'
         request = {
             'deployed': str(n.deployed), 'first_checkpoint': str(Path(n.p['checkpoint'])),
-            'rehearsal': str(n.out / 'rehearsal'), 'new_bags': [str(b) for b in new],
+            'rehearsal': str(n.recording.parent / REHEARSAL_ROOT),
+            'new_bags': [str(b) for b in new],
             'splits': [str(b) for b in splits], 'out': str(folder), 'history': str(n.history),
             'settings': asdict(n.settings), 'corrupt_rewards': corrupt, 'forced': forced,
             'resume_from': None if self.resume is None else str(self.resume),
@@ -277,6 +310,8 @@ class Trainer:
             return
         n.state = 'waiting'
         self.resume = Path(answer['resume_from']) if answer['resume_from'] else None
+        append_history(n.history, {'event': 'chain', 'round': number,
+                                   'resume_from': answer['resume_from']})
         self.episode_length = self.episode_length or int(answer['episode_length'])
         if not answer['deploy'] and not forced:
             n.counts['refusals'] += 1

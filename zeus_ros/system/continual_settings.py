@@ -10,7 +10,7 @@ zeus_ros/offline/training/continual.py), which imports them too. No ROS, no torc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import datetime
 import json
 import os
@@ -20,8 +20,8 @@ from typing import Any
 
 from zeus_ros.atomic_file import replace_text
 
-__all__ = ['ContinualSettings', 'RoundProgress', 'append_history', 'read_history',
-           'read_progress']
+__all__ = ['ContinualSettings', 'ResumePoint', 'RoundProgress', 'append_history',
+           'read_history', 'read_progress', 'resume_point']
 
 
 @dataclass(frozen=True)
@@ -169,3 +169,48 @@ def read_progress(folder: Path | str) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
+
+
+@dataclass
+class ResumePoint:
+    """Where a restarted trainer goes on: what its history says was decided last."""
+
+    deployed: Path | None = None
+    """The checkpoint the nodes ran last (its last swap, unless rolled back); None: the first."""
+    resume: Path | None = None
+    """The refused candidate the next round continues (None: start from the deployed one)."""
+    rounds: int = 0
+    """Rounds already run: the next one is rounds + 1 (its folder, its gate seeds)."""
+    counts: dict[str, int] = field(default_factory=dict)
+    """swaps, refusals, rollbacks, failures so far."""
+
+
+def resume_point(records: list[dict[str, Any]]) -> ResumePoint:
+    """The state a history ends in: deployed checkpoint, chain, round and decision counts.
+
+    Files that no longer exist are not resumed from (the node then starts from its
+    `checkpoint` parameter, or from the deployed one).
+    """
+    point = ResumePoint(counts={'swaps': 0, 'refusals': 0, 'rollbacks': 0, 'failures': 0})
+    for record in records:
+        event = record.get('event')
+        point.rounds = max(point.rounds, int(record.get('round', 0) or 0))
+        if event == 'swap':
+            point.deployed, point.resume = Path(record['checkpoint']), None
+            point.counts['swaps'] += 1
+        elif event == 'live_check' and record.get('decision') == 'rollback':
+            if record.get('rolled_back_to') and not record.get('error'):
+                point.deployed = Path(record['rolled_back_to'])
+                point.counts['rollbacks'] += 1
+            point.resume = None
+        elif event == 'gate' and record.get('decision') == 'refuse':
+            point.counts['refusals'] += 1
+        elif event == 'failure':
+            point.counts['failures'] += 1
+        elif event == 'chain':
+            point.resume = Path(record['resume_from']) if record.get('resume_from') else None
+    if point.deployed is not None and not point.deployed.is_file():
+        point.deployed = None
+    if point.resume is not None and not point.resume.is_file():
+        point.resume = None
+    return point

@@ -552,7 +552,8 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
               ) -> dict[str, Any]:
     """One round of the live trainer, as `zeus continual-round` runs it: a JSON-ready answer.
 
-    The rehearsal recording of `first_checkpoint` (made once under `rehearsal_folder`), then
+    The rehearsal recording of `first_checkpoint` (made once under `rehearsal_folder`, in a
+    folder named by its sha256 and size), then
     `continual_round` from `start` (an earlier refused candidate; ignored when the file is
     gone) or `deployed`, and where the next round starts (`resume_from`; None when the round
     is `forced` past the gate). The answer holds what the node needs to swap and watch: the
@@ -562,7 +563,14 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
     of its own (eval_seed + round_number x ROUND_SEED).
     """
     settings = replace(settings, eval_seed=settings.eval_seed + round_number * ROUND_SEED)
-    rehearsal = rehearsal_bag(Path(first_checkpoint), rehearsal_folder, settings, log)
+    from zeus_ros.offline.evaluation.records import checkpoint_sha256
+
+    # One rehearsal per first checkpoint and size under `rehearsal_folder`: a restarted
+    # launch (a new recording folder beside it) finds it again instead of recording anew.
+    folder = Path(rehearsal_folder)
+    if settings.rehearsal_steps > 0 and Path(first_checkpoint).is_file():
+        folder /= f'{checkpoint_sha256(first_checkpoint)[:12]}_{settings.rehearsal_steps}'
+    rehearsal = rehearsal_bag(Path(first_checkpoint), folder, settings, log)
     begin = Path(start) if start is not None and Path(start).is_file() else None
     result = continual_round(Path(deployed), [Path(b) for b in new_bags],
                              [Path(b) for b in splits], out, history, settings,
