@@ -126,3 +126,79 @@ def test_continual_plan_points_the_trainer_at_the_recording_and_the_checkpoint(
         assert 'continual needs context_estimator and policy' in str(error)
     else:
         raise AssertionError('a continual plan without the agent nodes was accepted')
+
+
+DRIFT = [0.6, 0.7, 0.75, 0.8, 0.85, 0.9]
+"""Cheetah-Bias-v0 beyond its train range (which ends at 0.3): where the zoo checkpoint fades."""
+
+
+@pytest.mark.continual_live
+@pytest.mark.faults_only  # 3-7 minutes: `make test-continual`, not `make test`
+@pytest.mark.alone
+def test_continual_with_the_defaults_refuses_and_swaps_beyond_the_range(
+        tmp_path: Path) -> None:
+    """The zoo checkpoint, the defaults a user gets, a drift beyond the train range.
+
+    Nothing of the trainer is set: the rounds chain until one candidate clears the gate and
+    its confirmation; a refusal comes first, or round 1 is the drill (corrupt_rounds would
+    change a default, so the test waits for whichever the defaults give, refusal and swap).
+    """
+    require_ros()
+    params = yaml.safe_load((REPO / 'params' / 'zeus.yaml').read_text())
+    params['/**/sim_bridge']['ros__parameters'].update({
+        'mode': 'realtime', 'control_rate': 50.0,
+        'schedule': {'kind': 'switch', 'every': 200, 'values': DRIFT}})
+    params['/**/recorder']['ros__parameters']['output'] = str(tmp_path / 'rec')
+    (tmp_path / 'params.yaml').write_text(yaml.safe_dump(params))
+    history = tmp_path / 'rec_continual' / 'history.jsonl'
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', 'Cheetah-Bias-v0',
+            '--continual', '--params', str(tmp_path / 'params.yaml'), '--no-progress',
+            '--timeout', '480']
+    log = tmp_path / 'launch.log'
+    with log.open('w') as out:
+        launch = subprocess.Popen(argv, env=ros_environment(fresh_domain_id()), stdout=out,
+                                  stderr=subprocess.STDOUT, cwd=tmp_path,
+                                  start_new_session=True)
+        try:
+            deadline = time.monotonic() + 470
+            while time.monotonic() < deadline and launch.poll() is None:
+                events = _history(history)
+                if any(e.get('decision') == 'refuse' for e in events) and any(
+                        e['event'] == 'live_check' for e in events):
+                    break
+                time.sleep(1)
+        finally:
+            if launch.poll() is None:
+                launch.send_signal(signal.SIGINT)
+            launch.wait(timeout=60)
+    text = log.read_text()
+    events = _history(history)
+    gates = [e for e in events if e['event'] == 'gate']
+    assert 'refuse' in [g['decision'] for g in gates], text[-3000:]
+    deployed = [g for g in gates if g['decision'] == 'deploy']
+    assert deployed, text[-3000:]
+    assert deployed[0]['confirmation']['deploy'], deployed[0]  # confirmed on fresh states
+    assert len({g['eval_seed'] for g in gates}) == len(gates)  # fresh seeds every round
+    train = [v for v in deployed[0]['values'] if v['where'] == 'train']
+    assert all(v['diff'] >= -v['allowed'] for v in train)
+    (swap, *_) = [e for e in events if e['event'] == 'swap']
+    assert swap['sha256'] == deployed[0]['sha256'] and not swap['forced']
+    assert 'SCHED_BATCH' in text and 'actor gated on' in text
+
+
+def test_continual_explores_unless_the_params_file_sets_a_noise(tmp_path: Path) -> None:
+    """The shipped params deploy noise 0: under --continual the policy explores with 0.1."""
+    from zeus_ros.system import launch_defaults as d
+
+    def policy(params: dict) -> dict:
+        path = tmp_path / 'p.yaml'
+        path.write_text(yaml.safe_dump(params))
+        plan = d.plan_from_arguments({'continual': 'true', 'task': 'Cheetah-Bias-v0',
+                                      'params_file': str(path)})
+        return next(n.parameters for n in plan.nodes if n.name == 'policy')
+
+    shipped = yaml.safe_load((REPO / 'params' / 'zeus.yaml').read_text())
+    assert shipped['/**/policy']['ros__parameters']['noise'] == 0.0
+    assert policy(shipped)['noise'] == d.CONTINUAL_NOISE
+    shipped['/**/policy']['ros__parameters']['noise'] = 0.2
+    assert 'noise' not in policy(shipped)  # the params file's own noise stands
