@@ -52,3 +52,15 @@ def test_children_get_loopback_discovery_and_the_group_domain(
     monkeypatch.setenv(processes.DOMAIN_RANGE_ENV, '200-300')
     with pytest.raises(ValueError, match='ZEUS_DOMAIN_RANGE=200-300'):
         processes.fresh_domain_id()
+
+
+def test_background_priority_is_batch_work_in_a_child() -> None:
+    """SCHED_BATCH and the nice (also its session's, under autogroup) reach the process."""
+    code = ('import os; from zeus_ros.system.processes import background_priority; '
+            'print(background_priority(3, True)); '
+            'print(os.sched_getscheduler(0) == os.SCHED_BATCH, os.nice(0))')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=60, start_new_session=True)
+    applied, checked = done.stdout.splitlines()
+    assert 'SCHED_BATCH' in applied and 'nice' in applied
+    assert checked.split()[0] == 'True' and int(checked.split()[1]) >= 3

@@ -179,12 +179,19 @@ def background_priority(nice: int, batch: bool) -> str:
     beside other work at the same nice (a trainer at nice 10 beside two busy processes got
     about a tenth of a core and took 11-17 minutes to its first decision), but is never
     favoured on a wake-up, so the control loop's processes, which sleep between steps and
-    wake for each, still run first when they wake. `nice` lowers its share further.
+    wake for each, still run first when they wake. `nice` lowers its share further (the
+    process's and, with autogroup, its session's).
     """
     applied = []
     if nice:
         os.nice(int(nice))
         applied.append(f'nice {os.nice(0)}')
+        # With autogroup (the default of most Linux kernels) a nice value only orders the
+        # processes of one session: each node runs in a session of its own, so the niced
+        # trainer would still get a session's full share. Its session's nice says it across.
+        with contextlib.suppress(OSError):
+            Path('/proc/self/autogroup').write_text(str(os.nice(0)))
+            applied.append(f'autogroup nice {os.nice(0)}')
     if batch and hasattr(os, 'sched_setscheduler') and hasattr(os, 'SCHED_BATCH'):
         try:
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
