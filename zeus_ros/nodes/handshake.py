@@ -148,7 +148,7 @@ class Handshake:
 
     def __init__(self, node: Node, period: float = 0.25) -> None:
         from zeus_ros.nodes.peers import steady_timer
-        from zeus_ros.nodes.senders import SenderSubscription
+        from zeus_ros.nodes.sender_subscription import SenderSubscription
 
         self._node = node
         self.name = node.get_fully_qualified_name()

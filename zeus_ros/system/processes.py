@@ -177,8 +177,9 @@ def background_priority(nice: int, batch: bool) -> str:
 
     `batch`: Linux SCHED_BATCH (no root needed). The process keeps its fair share of the CPU
     beside other work at the same nice (a trainer at nice 10 on a busy machine took 11-17
-    minutes to its first decision), but is never favoured on a wake-up, so the control loop's processes, which sleep between steps and
-    wake for each, still run first when they wake. `nice` lowers its share further (the
+    minutes to its first decision), but is never favoured on a wake-up, so the control
+    loop's processes, which sleep between steps and wake for each, still run first when they
+    wake. `nice` lowers its share further (the
     process's and, with autogroup, its session's).
     """
     applied = []
