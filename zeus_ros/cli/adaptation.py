@@ -24,10 +24,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--episodes', type=at_least(1), default=3,
                         help='episodes per context value')
     parser.add_argument('--seed', type=at_least(0), default=EVAL_SEED, help='evaluation seed')
+    parser.add_argument('--threads', type=at_least(1), default=1,
+                        help='torch CPU threads (default 1: the networks act on one observation '
+                        "at a time; torch's default of one per core took 33 min where one "
+                        'took 36 s on a busy 2-core machine)')
     parser.add_argument('--no-progress', action='store_true')
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f'--episodes {args.episodes}: give at least 1')
+    import torch
+
+    torch.set_num_threads(args.threads)
     from zeus_ros.learning.errors import CheckpointError
 
     try:
