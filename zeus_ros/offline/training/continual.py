@@ -27,20 +27,26 @@ zeus_ros/bags/recording.py.
 - **Rehearsal.** `rehearsal_bag` records `rehearsal_steps` at the family's train values once
   (the deployed checkpoint acting, a little noise) and every round trains on it too: the old
   splits of a run that drifted away never show the train contexts again.
+- **The gated actor.** With a rehearsal, the candidate's actor is wrapped in a GatedActor
+  (learning/gated_actor.py) fitted on the rehearsal's per-step contexts: the deployed actor
+  acts wherever the context is familiar, a trained copy where it is novel, so a round cannot
+  forget the train contexts. The behaviour-cloning anchor is per sample (`bc_weight` on the
+  rehearsal, `bc_weight_new` on the recording).
 - **Progress across refusals.** A refused candidate that still gained on the seen contexts
   (`resume_refused`) is where the next round starts, critics and all (no warm-up); the gate
   always compares against the deployed checkpoint, so a chain of rounds only accumulates
   updates, never trust. A swap, a rollback or a round that gained nothing starts afresh.
 - **Gate.** Candidate and deployed checkpoint are evaluated in-process on the same seeds (the
-  same initial states per value): on the contexts seen in the new splits (the recording's
-  context truth; on a robot without truth, the deployed checkpoint's read-out of them:
-  continual_seen.py) and on the family's train values (no forgetting). Deploy only when the mean
-  gain over the seen contexts is at least max(`margin`, 2 s.e.) and
-  no value is worse than max(`tolerance_floor`, `tolerance` x |deployed return there|, 2 s.e.
-  of that value's paired episode differences). The s.e. of the gain is that of a mean over
-  these contexts, stratified by context (each paired episode a sample of its context's
-  difference): the question is whether the candidate is better where the robot now runs, not
-  on contexts drawn anew; with one episode per value, the spread across values stands in.
+  same initial states per value), fresh for every round (`ROUND_SEED`): on the contexts seen
+  in the new splits (the recording's context truth; on a robot without truth, the deployed
+  checkpoint's read-out of them: continual_seen.py) and on the family's train values. One
+  decision where the robot runs: the mean gain over the seen contexts is at least
+  max(`margin`, 2 s.e.), the s.e. that of a mean over these contexts, stratified by context
+  (each paired episode a sample of its context's difference; with one episode per value the
+  spread across values stands in). And a forgetting budget where it was trained: no train
+  value worse than max(`tolerance_floor`, `tolerance` x |deployed return there|, 2 s.e. of
+  that value's paired episode differences). A candidate that passes is confirmed by the same
+  rule on other fresh initial states (`CONFIRM_SEED`) before it is deployed.
 """
 
 from __future__ import annotations
