@@ -57,7 +57,8 @@ MIN_SEGMENT_STEPS = 20
 """Segments with fewer rewarded steps are left out: a segment cut by the recording's start or
 end holds a few steps, and its return would be one start-up transient."""
 SMOOTH = 30
-"""Segments in the running mean (one segment alone swings from -50 to -200 beyond the range)."""
+"""Segments in the running mean (one segment alone swings from -50 to -200 beyond the range);
+a third of them in a shorter run."""
 SEGMENT_COLUMNS = ('segment', 't_s', 'context', 'return')
 """What `segments` gives per segment (bench_continual's segments.csv columns)."""
 EVENT_COLUMNS = ('t_s', 'time', 'event', 'round', 'decision', 'gain', 'se', 'required',
@@ -195,7 +196,7 @@ class StepClock:
         if self.rate is not None:
             return (steps - self.steps[0]) / float(self.rate)
         where = np.clip(np.searchsorted(self.steps, steps), 0, len(self) - 1)
-        return self.received_s[where] - self.received_s[0]
+        return np.round(self.received_s[where] - self.received_s[0], 3)  # ms: epoch floats
 
     def of_epochs(self, epochs: Sequence[float]) -> np.ndarray:
         """Run time of each instant [s, epoch]: that of the step recorded nearest to it."""
@@ -523,8 +524,8 @@ def plot_returns(path: Path, runs: Sequence[PlotRun], title: str, ylabel: str) -
         color = f'C{index}'
         returns = np.asarray(run.returns, np.float64)
         ax.plot(run.t_s, returns, '.', color=color, alpha=0.25, markersize=3)
-        width = min(SMOOTH, len(returns))
-        if width:
+        width = min(SMOOTH, max(1, len(returns) // 3))  # a short run still shows a line
+        if len(returns):
             smooth = np.convolve(returns, np.ones(width) / width, mode='valid')
             ax.plot(run.t_s[width - 1:], smooth, '-', color=color,
                     label=f'{run.label} (mean of the last {width} segments)')
@@ -544,6 +545,8 @@ def plot_returns(path: Path, runs: Sequence[PlotRun], title: str, ylabel: str) -
     ax.plot([], [], 'k--', linewidth=1, label='swap')
     ax.plot([], [], 'k:', linewidth=1.5, label='rollback')
     ax.plot([], [], 'k-', linewidth=0.6, alpha=0.4, label='refused candidate')
+    if any(run.rounds for run in runs):
+        ax.plot([], [], '|', color='k', markersize=8, label='round start')
     if any(run.failures for run in runs):
         ax.plot([], [], 'r-.', linewidth=0.8, alpha=0.6, label='failed round / stop')
     ax.set_xlabel('time [s]')
