@@ -62,9 +62,13 @@ a third of them in a shorter run."""
 SEGMENT_COLUMNS = ('segment', 't_s', 'context', 'return')
 """What `segments` gives per segment (bench_continual's segments.csv columns)."""
 EVENT_COLUMNS = ('t_s', 'time', 'event', 'round', 'decision', 'gain', 'se', 'required',
-                 'checkpoint', 'reason')
+                 'checkpoint', 'reason', 'outside_s')
 """continual_events.csv: live_check rows put the live change in `gain` and minus its allowed
-loss in `required`; a swap its gate gain."""
+loss in `required`; a swap its gate gain. `outside_s`: how long before the first or after the
+last recorded step the line was written (drawn at the run's start or end; 0: inside)."""
+OUTSIDE_S = 60.0
+"""History lines further than this outside the recorded steps are named in the summary (the
+trainer starts before step 0, and the split being written is not read)."""
 FILES = ('continual_segments.csv', 'continual_events.csv', 'continual_returns.png')
 
 
@@ -157,6 +161,29 @@ def step_stamps(splits: Sequence[Path]) -> list[tuple[float, int]]:
         finally:
             reader.close()
     return [(stamp / 1e9, step) for step, stamp in seen.items()]
+
+
+def _one_run(splits: Sequence[Path]) -> list[tuple[float, int]]:
+    """step_stamps of splits that continue one another's steps (else ContinualReportError).
+
+    The recorder starts every launch in a new, empty folder; splits whose steps start over
+    are of two runs, and their segments and times would be mixed up.
+    """
+    stamps: list[tuple[float, int]] = []
+    last: tuple[int, Path] | None = None
+    for split in splits:
+        mine = step_stamps([split])
+        if not mine:
+            continue
+        low = min(step for _, step in mine)
+        if last is not None and low <= last[0]:
+            raise ContinualReportError(
+                f'{split}: its steps start over (from {low}, after step {last[0]} in '
+                f'{last[1].name}): the splits of two runs in one recording; report each run '
+                'from a folder of its own splits')
+        last = (max(step for _, step in mine), split)
+        stamps += mine
+    return stamps
 
 
 @dataclass(frozen=True)
@@ -303,15 +330,17 @@ def event_rows(history: Sequence[dict[str, Any]], clock: StepClock) -> list[dict
     timed = [e for e in history if isinstance(e.get('time'), str)]
     if not timed or not len(clock):
         return []
-    times = clock.of_epochs([_epoch_s(e['time']) for e in timed])
+    epochs = [_epoch_s(e['time']) for e in timed]
+    times = clock.of_epochs(epochs)
+    first, last = float(clock.received_s.min()), float(clock.received_s.max())
     rows = []
     number: int | str = ''
-    for event, t in zip(timed, times, strict=True):
+    for event, t, epoch in zip(timed, times, epochs, strict=True):
         kind = str(event.get('event', ''))
         number = event.get('round', number) if kind != 'start' else ''
         row: dict[str, Any] = dict.fromkeys(EVENT_COLUMNS, '')
         row.update({'t_s': round(float(t), 2), 'time': event['time'], 'event': kind,
-                    'round': number})
+                    'round': number, 'outside_s': round(max(first - epoch, epoch - last, 0.0), 1)})
         if kind == 'gate':
             row.update({'decision': event.get('decision', ''), 'gain': _number(event.get('gain')),
                         'se': _number(event.get('se')),
@@ -331,6 +360,9 @@ def event_rows(history: Sequence[dict[str, Any]], clock: StepClock) -> list[dict
                         'reason': event.get('error') or ''})
         elif kind == 'start':
             row['checkpoint'] = event.get('deployed', '')
+            row['reason'] = 'resumed' if event.get('resumed') else ''
+        elif kind == 'chain':  # where the next round starts: a refused candidate, or none
+            row['checkpoint'] = event.get('resume_from') or ''
         elif kind == 'round':
             row['reason'] = event.get('trigger', '')
         elif kind in ('failure', 'swap_failed'):
@@ -386,6 +418,10 @@ class ContinualReport:
             gain = f"{e['gain']:+.1f} ± {e['se']:.1f}" if e['gain'] != '' else '?'
             lines.append(f"  round {e['round']} at {e['t_s']:.0f} s: {e['decision']} "
                          f'(gain {gain} per episode, required {_fmt(e["required"])})')
+        outside = sum(e['outside_s'] > OUTSIDE_S for e in self.events)
+        if outside:
+            lines.append(f'{outside} history line(s) written more than {OUTSIDE_S:.0f} s before '
+                         'the first or after the last closed step: drawn at its start or end')
         for name, which in (('first', 0), ('last', 2)):
             mean, se, n = self.third(which)
             lines.append(f'return per segment, {name} third: {mean:.1f} ± {se:.1f} '
@@ -429,8 +465,8 @@ def build_report(folder: Path | str) -> ContinualReport:
         raise ContinualReportError(f'{folders.recording}: no closed split with steps (a '
                                    'split is closed when the recorder starts the next one)')
     try:
+        clock = StepClock.from_stamps(_one_run(splits))
         data = ingest_bags(splits)
-        clock = StepClock.from_stamps(step_stamps(splits))
     except (BagError, OSError) as error:
         raise ContinualReportError(f'{folders.recording}: {error}') from error
     if not len(clock) or not data.episodes:
