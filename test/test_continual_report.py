@@ -47,6 +47,8 @@ def _write_history(trainer: Path, recording: Path, first: float, last: float) ->
         {'time': at(0.25), 'event': 'gate', 'candidate': '/t/round_001/candidate.pt',
          'gain': 8.3, 'se': 6.2, 'required': 12.4, 'decision': 'refuse',
          'reason': 'gain +8.30 < 12.40', 'values': [], 'confirmation': None},
+        {'time': at(0.26), 'event': 'chain', 'round': 1,
+         'resume_from': '/t/round_001/candidate.pt'},
         {'time': at(0.4), 'event': 'round', 'round': 2, 'trigger': 'novelty alarm',
          'new_splits': 1},
         {'time': at(0.55), 'event': 'gate', 'candidate': '/t/round_002/candidate.pt',
@@ -135,21 +137,26 @@ def test_segments_and_every_decision_on_one_time_axis(run: Path, tmp_path: Path)
     assert deployed == ['zeus.pt', 'round_002_abc.pt', 'zeus.pt'], deployed
 
     events = _rows(out / 'continual_events.csv')
-    assert [e['event'] for e in events] == ['start', 'round', 'gate', 'round', 'gate', 'swap',
-                                            'live_check', 'stopped']
+    assert [e['event'] for e in events] == ['start', 'round', 'gate', 'chain', 'round', 'gate',
+                                            'swap', 'live_check', 'stopped']
     at = [float(e['t_s']) for e in events]
     assert at == sorted(at)
     assert at[0] == 0.0 and at[-1] == pytest.approx(report.duration_s, abs=0.01)  # clamped
     assert all(0.0 < t < report.duration_s for t in at[1:-1])
-    for event, fraction in zip(events[1:-1], (0.1, 0.25, 0.4, 0.55, 0.56, 0.8), strict=True):
+    for event, fraction in zip(events[1:-1], (0.1, 0.25, 0.26, 0.4, 0.55, 0.56, 0.8),
+                               strict=True):
         assert float(event['t_s']) == pytest.approx(fraction * report.duration_s, abs=0.1)
-    refuse, deploy = events[2], events[4]
+        assert float(event['outside_s']) == 0.0
+    assert float(events[0]['outside_s']) == 3.0 and float(events[-1]['outside_s']) == 5.0
+    assert events[3]['checkpoint'] == '/t/round_001/candidate.pt'
+    refuse, deploy = events[2], events[5]
     assert (refuse['round'], refuse['decision'], float(refuse['gain']), float(refuse['se']),
             float(refuse['required'])) == ('1', 'refuse', 8.3, 6.2, 12.4)
     assert (deploy['round'], deploy['decision'], float(deploy['gain'])) == ('2', 'deploy', 15.0)
-    assert events[6]['decision'] == 'rollback' and float(events[6]['gain']) == -30.5
-    assert float(events[6]['required']) == -4.0 and events[6]['checkpoint'] == '/zoo/zeus.pt'
-    assert events[7]['reason'] == 'stopped in training'
+    rollback = events[7]
+    assert rollback['decision'] == 'rollback' and float(rollback['gain']) == -30.5
+    assert float(rollback['required']) == -4.0 and rollback['checkpoint'] == '/zoo/zeus.pt'
+    assert events[8]['reason'] == 'stopped in training'
     assert (out / 'continual_returns.png').stat().st_size > 10_000
 
     assert report.counts == {'rounds': 2, 'deploys': 1, 'refusals': 1, 'swaps': 1,
@@ -180,3 +187,15 @@ def test_zeus_report_of_either_folder(run: Path, tmp_path: Path,
     assert zeus(['report', str(copy)]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and 'no continual history' in err, err
+
+
+@pytest.mark.slow
+def test_splits_whose_steps_start_over_are_refused(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture) -> None:
+    """Two collections in one folder (steps from 0 in each): not one run's time axis."""
+    recording = tmp_path / 'continual_y'
+    record(recording, BIAS, VALUES[:2], zoo_checkpoint(BIAS), splits=2, steps=60, every=30)
+    _write_history(recording.with_name(recording.name + cr.SUFFIX), recording, 0.0, 1.0)
+    assert zeus(['report', str(recording)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and 'steps start over' in err, err
