@@ -51,12 +51,9 @@ SCENARIOS: dict[str, tuple[str, str, list[float]]] = {
 """Scenario -> (task, zoo folder, context values beyond the train range). Where the zoo
 checkpoint fades (issue 47): bias -98 per episode against the oracle's -40; motor below its
 own no_context; run keeps 0.1-0.2 of the oracle's headroom."""
-EPISODE = 40
 REFERENCE_SEED = 7000
 """In-process evaluation seeds of the references: no gate uses them (gates: 300 + 1000 r)."""
 REFERENCE_EPISODES = 10
-SMOOTH = 30
-"""Segments in the picture's running mean (one segment alone swings from -50 to -200)."""
 
 
 def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
@@ -229,24 +226,6 @@ def own_splits(folder: Path, task: str) -> list[Path]:
     return kept
 
 
-def segments(splits: list[Path], rate: float) -> list[dict[str, Any]]:
-    """Return per segment (reward per step x EPISODE) with its start time in seconds."""
-    from zeus_ros.offline.data.ingest import ingest_bags
-
-    data = ingest_bags(splits)
-    start = min(int(ep.steps[0]) for ep in data.episodes)
-    sums: dict[int, list[float]] = {}
-    for ep in data.episodes:
-        for i, reward in enumerate(ep.reward):
-            seg = sums.setdefault(int(ep.segment[i + 1]), [0.0, 0, int(ep.steps[i + 1]),
-                                                           float(ep.context[i + 1][0])])
-            seg[0] += float(reward)
-            seg[1] += 1
-            seg[2] = min(seg[2], int(ep.steps[i + 1]))
-    return [{'segment': s, 't_s': (v[2] - start) / rate, 'context': v[3],
-             'return': v[0] / v[1] * EPISODE} for s, v in sorted(sums.items()) if v[1] >= 20]
-
-
 def latencies(splits: list[Path]) -> list[tuple[float, float, int]]:
     """(state receive time [s, epoch], action - state receive time [ms], step) per step."""
     from rosbags.rosbag2 import Reader
@@ -283,19 +262,6 @@ def busy_intervals(history: Path) -> list[tuple[float, float]]:
             end = datetime.datetime.fromisoformat(event['time']).timestamp()
             out.append((end - event['train_s'] - event['gate_s'], end))
     return out
-
-
-def _marks(events: list[dict[str, Any]], kind: str, lat: list[tuple[float, float, int]],
-           rate: float) -> list[float]:
-    """Run time [s, from step 0] of each swap or rollback: the step received then."""
-    import datetime
-
-    if not lat:
-        return []
-    first = min(k for _, _, k in lat)
-    times = [datetime.datetime.fromisoformat(e['time']).timestamp() for e in events
-             if e['event'] == kind or e.get('decision') == kind]
-    return [round((min(lat, key=lambda x: abs(x[0] - t))[2] - first) / rate, 1) for t in times]
 
 
 def first_decision_s(events: list[dict[str, Any]], lat: list[tuple[float, float, int]]
@@ -388,6 +354,7 @@ def main() -> int:
     else:
         infos = run_modes(modes, args)
     summary, rows, deployed = [], [], []
+    from zeus_ros.offline.evaluation.continual_report import marks, segments
     from zeus_ros.system.continual_settings import read_history
 
     for mode in modes:
@@ -413,9 +380,9 @@ def main() -> int:
             'p50_idle_ms': float(np.percentile(outside, 50)) if outside else float('nan'),
             'p99_idle_ms': float(np.percentile(outside, 99)) if outside else float('nan'),
             'p99_busy_ms': float(np.percentile(inside, 99)) if inside else float('nan'),
-            'swap_s': _marks(events, 'swap', lat, args.rate),
-            'rollback_s': _marks(events, 'rollback', lat, args.rate),
-            'refusal_s': _marks(events, 'refuse', lat, args.rate)})
+            'swap_s': marks(events, 'swap', lat, args.rate),
+            'rollback_s': marks(events, 'rollback', lat, args.rate),
+            'refusal_s': marks(events, 'refuse', lat, args.rate)})
         summary.append(info)
         rows += [{'mode': mode, **s} for s in segs]
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in info.items()},
@@ -447,41 +414,12 @@ def main() -> int:
 
 def _plot(out: Path, rows: list[dict[str, Any]], summary: list[dict[str, Any]],
           scenario: str) -> None:
-    import matplotlib
+    from zeus_ros.offline.evaluation.continual_report import plot_modes
 
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4))
-    for index, mode in enumerate(dict.fromkeys(r['mode'] for r in rows)):
-        mine = [r for r in rows if r['mode'] == mode]
-        color = f'C{index}'
-        t, returns = [r['t_s'] for r in mine], np.array([r['return'] for r in mine])
-        ax.plot(t, returns, '.', color=color, alpha=0.25, markersize=3)
-        width = min(SMOOTH, len(returns))
-        if width:
-            smooth = np.convolve(returns, np.ones(width) / width, mode='valid')
-            ax.plot(t[width - 1:], smooth, '-', color=color,
-                    label=f'{mode} (mean of the last {width} segments)')
-        info = next(i for i in summary if i['mode'] == mode)
-        for t_refused in info.get('refusal_s', []):
-            ax.axvline(t_refused, color=color, linestyle='-', linewidth=0.6, alpha=0.4)
-        for t in info['swap_s']:
-            ax.axvline(t, color=color, linestyle='--', linewidth=1)
-        for t in info['rollback_s']:
-            ax.axvline(t, color=color, linestyle=':', linewidth=1.5)
-    ax.plot([], [], 'k--', linewidth=1, label='swap')
-    ax.plot([], [], 'k:', linewidth=1.5, label='rollback')
-    ax.plot([], [], 'k-', linewidth=0.6, alpha=0.4, label='refused candidate')
-    ax.set_xlabel('time [s]')
-    ax.set_ylabel('return per segment (per 40 steps)')
     task, _, values = SCENARIOS[scenario]
-    ax.set_title(f'{task}, {_context_name(task)} {min(values)}-{max(values)} (beyond every '
-                 'preset): fixed vs --continual')
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out / 'returns.png', dpi=120)
-    plt.close(fig)
+    plot_modes(out / 'returns.png', rows, summary,
+               f'{task}, {_context_name(task)} {min(values)}-{max(values)} (beyond every '
+               'preset): fixed vs --continual', 'return per segment (per 40 steps)')
 
 
 if __name__ == '__main__':
