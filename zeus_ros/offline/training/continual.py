@@ -379,8 +379,8 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
                     out: Path | str, history: Path | str, settings: ContinualSettings, *,
                     corrupt_rewards: bool = False, log: Callable[[str], None] = print,
                     stop: Callable[[], bool] = lambda: False,
-                    rehearsal: Path | None = None, start: Path | None = None
-                    ) -> RoundResult:
+                    rehearsal: Path | None = None, start: Path | None = None,
+                    round_number: int = 0) -> RoundResult:
     """Train a candidate on the replay mix, gate it, and record the decision (no swap here).
 
     `rehearsal`: a bag (`rehearsal_bag`) added to the old data of the round. `start`: an
@@ -405,7 +405,8 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 
     record = append_history(history, {
-        'event': 'gate', 'candidate': str(candidate.path), 'sha256': candidate.sha256,
+        'event': 'gate', 'round': round_number, 'candidate': str(candidate.path),
+        'sha256': candidate.sha256,
         'deployed': str(deployed), 'deployed_sha256': checkpoint_sha256(deployed),
         'started_from': str(start or deployed),
         'new_bags': candidate.new_bags, 'old_bags': candidate.old_bags,
@@ -472,7 +473,7 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
     result = continual_round(Path(deployed), [Path(b) for b in new_bags],
                              [Path(b) for b in splits], out, history, settings,
                              corrupt_rewards=corrupt_rewards, log=log, stop=stop,
-                             rehearsal=rehearsal, start=begin)
+                             rehearsal=rehearsal, start=begin, round_number=round_number)
     resume = None if forced else resume_from(result, settings, corrupt_rewards)
     from sim_bridge.registry import task_class
     from zeus_ros.learning.inference import InferenceAgent
