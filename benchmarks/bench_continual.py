@@ -65,6 +65,9 @@ def _params(folder: Path, args: argparse.Namespace, mode: str) -> Path:
                    'schedule': {'kind': 'switch', 'every': args.every, 'values': values}})
     for node in ('context_estimator', 'policy'):
         params[f'/**/{node}']['ros__parameters']['checkpoint'] = zoo
+    for section in params.values():  # every node that names the task runs the scenario's
+        if isinstance(section, dict) and 'task' in section.get('ros__parameters', {}):
+            section['ros__parameters']['task'] = task
     if args.noise is not None:
         params['/**/policy']['ros__parameters']['noise'] = args.noise
     recorder = params['/**/recorder']['ros__parameters']
