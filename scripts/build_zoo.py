@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 import hashlib
+import os
 from pathlib import Path
 import re
 import shutil
@@ -121,9 +122,7 @@ def sha256(path: Path) -> str:
 
 def method_note(m: Measured) -> str:
     """Which training method the file holds, in words."""
-    from zeus_ros.learning.inference import InferenceAgent
-
-    stored = InferenceAgent.from_checkpoint(m.path).method
+    stored = m.report.method  # read when it was measured: the card may not match it yet
     if m.method == 'zeus':
         return f"the family's default, stored as `{stored}`"
     return {'no_context': 'plain SAC, no context', 'oracle': 'SAC given the true context'
@@ -207,11 +206,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f'[zoo] {name} {method}: {source.relative_to(CHECKPOINTS)} (seed {seed})',
                   flush=True)
             target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(source, target)
-            if learned_context(target):
-                prepare(target)
-            measured = Measured(name, method, target, source, seed, train_returns,
-                                measure_adaptation(target, episodes=EPISODES))
+            # Built under a name no card or index pins (the old ones would refuse the new
+            # bytes: zeus_ros/integrity.py), then moved in place and recorded anew.
+            staging = target.with_name(f'{method}.building.pt')
+            shutil.copyfile(source, staging)
+            if learned_context(staging):
+                prepare(staging)
+            report = measure_adaptation(staging, episodes=EPISODES)
+            os.replace(staging, target)
+            measured = Measured(name, method, target, source, seed, train_returns, report)
             write_card(measured, entry['budget'])
             built.append(measured)
             print(f'[zoo]   train {fmt(measured.returns["train"])}, beyond the range '
@@ -225,6 +228,14 @@ def main(argv: list[str] | None = None) -> int:
         _, _, tail = rest.partition(END)
         INDEX.write_text(f'{head}{BEGIN}\n{table}\n{END}{tail}')
         print(f'[zoo] index: {INDEX}')
+    elif built:  # the rebuilt files' sha256 in their rows: the index pins what it names
+        text = INDEX.read_text()
+        for m in built:
+            rel = re.escape(f'{family_dir(m.family)}/{m.method}.pt')
+            text = re.sub(rf'^(\|.*\[`{rel}`\].*\| `)[0-9a-f]{{12}}(` \|)$',
+                          lambda match, m=m: f'{match.group(1)}{sha256(m.path)[:12]}'
+                                             f'{match.group(2)}', text, flags=re.MULTILINE)
+        INDEX.write_text(text)
     return 0
 
 

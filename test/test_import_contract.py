@@ -52,6 +52,7 @@ TOP_LEVEL_UTILITIES = frozenset({
     'zeus_ros.cli_args',  # argument types and errors; input_path is also read by training
     'zeus_ros.config_sets',  # --set KEY=VALUE on a config; also the sweep's grids
     'zeus_ros.gym_env',  # the zeus_ros/<task> Gymnasium registrations
+    'zeus_ros.integrity',  # checkpoints' recorded sha256: load_checkpoint, zeus launch; no torch
     'zeus_ros.labels',  # task and context labels for tables and plots
     'zeus_ros.step_log',  # per-step records, context segments, plots (inspect, demo)
     'zeus_ros.yaml_text',  # a user's YAML file, with a one-line error saying where

@@ -15,8 +15,12 @@ import os
 from pathlib import Path
 from typing import Any, NoReturn
 
-__all__ = ['TASK_HELP', 'ZeusArgumentParser', 'flag_or_positional', 'input_path', 'nearest',
-           'task_name']
+__all__ = ['EXPECT_SHA256_HELP', 'TASK_HELP', 'ZeusArgumentParser', 'flag_or_positional',
+           'input_path', 'nearest', 'sha256_arg', 'task_name']
+
+EXPECT_SHA256_HELP = ('refuse the checkpoint unless its sha256 is this (64 hex digits, as '
+                      'sha256sum prints it); a sidecar FILE.sha256, its card or the zoo index '
+                      'pin it the same way, without this flag (docs/security.md)')
 
 
 def _task_names() -> tuple[str, ...]:
@@ -90,6 +94,16 @@ def at_least(minimum: float, kind: type = int, maximum: float | None = None
 
     parse.__name__ = f'{kind.__name__} >= {minimum:g}'
     return parse
+
+
+def sha256_arg(text: str) -> str:
+    """The argparse `type` of --expect-sha256: 64 hex digits (lower-cased), else one line."""
+    from zeus_ros.integrity import parse_sha256
+
+    try:
+        return parse_sha256(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 class ZeusArgumentParser(argparse.ArgumentParser):

@@ -14,11 +14,14 @@ __all__ = ['main']
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus adaptation`."""
-    from zeus_ros.cli_args import ZeusArgumentParser, at_least
+    from zeus_ros.cli_args import EXPECT_SHA256_HELP, ZeusArgumentParser, at_least, sha256_arg
 
     parser = ZeusArgumentParser(prog='zeus adaptation', description=adaptation.__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--checkpoint', type=Path, required=True, help='your checkpoint')
+    parser.add_argument('--expect-sha256', type=sha256_arg, metavar='SHA256',
+                        help=f'{EXPECT_SHA256_HELP} (--checkpoint; the zoo one is checked '
+                        'against its card and the zoo index)')
     parser.add_argument('--against', default='zoo',
                         help="'zoo' (the family's zoo checkpoint, default), 'none', or a file")
     parser.add_argument('--episodes', type=at_least(1), default=3,
@@ -39,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         mine = measure_adaptation(args.checkpoint, episodes=args.episodes, seed=args.seed,
-                                  progress=not args.no_progress)
+                                  progress=not args.no_progress,
+                                  expect_sha256=args.expect_sha256)
         reports = [('yours', mine)]
         other = None
         if args.against == 'zoo':

@@ -36,7 +36,7 @@ from zeus_ros.cli.demo_summary import (
 )
 from zeus_ros.cli.inspect_topics import Inspector
 from zeus_ros.cli.launch import NodeProcess, Supervisor, node_argv
-from zeus_ros.cli_args import ZeusArgumentParser, at_least
+from zeus_ros.cli_args import EXPECT_SHA256_HELP, ZeusArgumentParser, at_least, sha256_arg
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
 from zeus_ros.system.launch_defaults import (
     RECORDED_ANSWERS,
@@ -137,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
                         '--checkpoint (checkpoints/README.md lists the families that have one)')
     parser.add_argument('--checkpoint', type=Path, default=None,
                         help="default: the family's zoo checkpoint")
+    parser.add_argument('--expect-sha256', type=sha256_arg, metavar='SHA256',
+                        help=EXPECT_SHA256_HELP)
     parser.add_argument('--obs', choices=('state', 'pixels'), default='state',
                         help="pixels: sim_bridge renders 84x84 frames and the family's zoo "
                         'pixel checkpoint acts on them (experimental; about 20 steps/s on '
@@ -178,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
         from zeus_ros.learning.errors import CheckpointError
 
         try:  # before any node starts or any file is written: a bad file leaves no results
-            loaded = load_checkpoint(checkpoint, expect_task=args.task, load_optimizers=False)
+            loaded = load_checkpoint(checkpoint, expect_task=args.task, load_optimizers=False,
+                                     expect_sha256=args.expect_sha256)
         except CheckpointError as error:
             print(f'zeus demo: --checkpoint: {error}', file=sys.stderr)
             return 2

@@ -12,7 +12,14 @@ from pathlib import Path
 import sys
 
 from sim_bridge.presets import SPLITS
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
+from zeus_ros.cli_args import (
+    EXPECT_SHA256_HELP,
+    TASK_HELP,
+    ZeusArgumentParser,
+    at_least,
+    sha256_arg,
+    task_name,
+)
 from zeus_ros.offline.evaluation.evaluate import evaluate, parse_values
 from zeus_ros.offline.evaluation.metrics import format_table
 
@@ -26,6 +33,8 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='checkpoint file(s) or folder(s) of them; several (or a folder, or '
                         '--split all) evaluate each into OUT/<task>/<method>_s<seed>/ and '
                         'write the tables over seeds (OUT/tables.md)')
+    parser.add_argument('--expect-sha256', type=sha256_arg, metavar='SHA256',
+                        help=f'{EXPECT_SHA256_HELP}; one checkpoint only')
     parser.add_argument('--task', '--task-file', type=task_name,
                         help=f'expected task (error if the checkpoint has another); {TASK_HELP}')
     parser.add_argument('--split', choices=(*SPLITS, 'all'), default='train',
@@ -76,18 +85,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.values is not None and args.split == 'all':
         print('zeus eval: --values replaces the split: drop --split all', file=sys.stderr)
         return 2
-    if len(args.checkpoint) > 1 or args.checkpoint[0].is_dir() or args.split == 'all':
+    many = len(args.checkpoint) > 1 or args.checkpoint[0].is_dir() or args.split == 'all'
+    if many and args.expect_sha256:
+        print('zeus eval: --expect-sha256 pins one checkpoint file (one split): pin several '
+              'with a sidecar FILE.sha256 each', file=sys.stderr)
+        return 2
+    if many:
         return _main_many(args)
     try:
         values = None
         if args.values is not None:
             from zeus_ros.learning.inference import InferenceAgent
 
-            names = InferenceAgent.from_checkpoint(args.checkpoint[0],
-                                                   expect_task=args.task).context_names
+            names = InferenceAgent.from_checkpoint(
+                args.checkpoint[0], expect_task=args.task,
+                expect_sha256=args.expect_sha256).context_names
             values = parse_values(args.values, names)
         result = evaluate(args.checkpoint[0], split='custom' if values else args.split,
-                          task=args.task, values=values,
+                          task=args.task, values=values, expect_sha256=args.expect_sha256,
                           episodes=args.episodes, switch_every=args.switch_every,
                           switch_episodes=args.switch_episodes, probe_steps=args.probe_steps,
                           seed=args.seed, out=args.out, progress=not args.no_progress)

@@ -32,6 +32,7 @@ from typing import IO
 from zeus_ros.cli_args import ZeusArgumentParser, at_least
 from zeus_ros.system import launch_defaults
 from zeus_ros.system.launch_defaults import (
+    AGENT_NODES,
     CONTAINER,
     CONTAINER_MODULE,
     NODES,
@@ -415,6 +416,7 @@ def main(argv: list[str] | None = None) -> int:
         known = [*NODES, CONTAINER]
         policies = parse_cli(args.respawn, known, policies_from_params(
             launch_defaults.read_params(launch.params_file), known))
+        _verify_checkpoints(launch)
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2
@@ -432,6 +434,21 @@ def main(argv: list[str] | None = None) -> int:
                          policies=policies)
     finally:
         progress.close()
+
+
+def _verify_checkpoints(launch: LaunchPlan) -> None:
+    """Refuse, before any node starts, a checkpoint the launch names that its record refutes.
+
+    The nodes check it too (a params file's relative path is theirs to find); this spares a
+    start-up that ends with every agent node exiting 2. IntegrityError is a ValueError.
+    """
+    from zeus_ros.integrity import verify_file
+
+    named = {str(node.parameters['checkpoint']) for node in launch.nodes
+             if node.name in AGENT_NODES and node.parameters.get('checkpoint')}
+    for checkpoint in sorted(named):
+        if Path(checkpoint).is_absolute():
+            verify_file(checkpoint)
 
 
 if __name__ == '__main__':

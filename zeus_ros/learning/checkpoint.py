@@ -6,7 +6,9 @@ Layout (a dict of tensors and plain Python data, loadable with torch.load(weight
 A deployment export (`export_for_deployment`) has `deploy: True` and keeps only the networks
 that act and infer the context (DEPLOY_MODULES), no optimizers: ~10x smaller, not resumable.
 Every tensor must be finite: saving refuses NaN/Inf weights and loading refuses such a file, so a
-run poisoned by bad data never reaches evaluation, export or a robot.
+run poisoned by bad data never reaches evaluation, export or a robot. A file whose sha256 is
+recorded (zoo index, card, sidecar, --expect-sha256) must match it (zeus_ros/integrity.py), so
+a flipped bit in a finite weight is refused too.
 """
 
 from __future__ import annotations
@@ -21,13 +23,14 @@ from typing import Any
 import torch
 
 from zeus_ros.atomic_file import atomic_write
+from zeus_ros.integrity import IntegrityError, check_file, pins_for
 from zeus_ros.learning.agent import ZeusAgent
 from zeus_ros.learning.config import ZeusConfig, config_from_dict, upgrade_stored_config
-from zeus_ros.learning.errors import CheckpointError, ConfigError
+from zeus_ros.learning.errors import CheckpointError, CheckpointIntegrityError, ConfigError
 from zeus_ros.learning.spec import AgentSpec
 
 __all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_deployment',
-           'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint']
+           'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint', 'verify_checkpoint']
 
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
@@ -170,15 +173,56 @@ def _load_error(error: Exception) -> str:
     return f'unreadable or corrupt ({type(error).__name__}: {detail})'
 
 
+def verify_checkpoint(path: Path, data: bytes | None, *, sha256: str | None = None,
+                      expect_sha256: str | None = None) -> bytes | None:
+    """Refuse the file unless it matches every sha256 recorded for it.
+
+    The check itself is zeus_ros/integrity.py's. Returns the bytes to decode: `data`, or the
+    file read once here when it has a recorded
+    sha256 (hashed, then decoded from memory: what is checked is what is loaded); None (read
+    it as usual, unhashed) when nothing is recorded. `sha256`: the digest of `data`, if known.
+
+    Raises:
+        CheckpointIntegrityError: a mismatch (one line: the file, both hashes, what to do).
+        CheckpointError: an unreadable file or sidecar, or an `expect_sha256` that is no hash.
+    """
+    try:
+        pins = pins_for(path, expect_sha256)
+    except IntegrityError as error:
+        raise CheckpointIntegrityError(str(error)) from None
+    except ValueError as error:  # an expect_sha256 that is no sha256
+        raise _fail(path, str(error)) from None
+    if not pins:
+        return data
+    if data is None:
+        try:
+            data = path.read_bytes()
+        except OSError as error:
+            raise _fail(path, f'unreadable ({error.strerror or error})') from None
+        sha256 = None
+    try:
+        check_file(path, data, pins, sha256)
+    except IntegrityError as error:
+        raise CheckpointIntegrityError(str(error)) from None
+    return data
+
+
 def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu',
                     expect_task: str | None = None, expect_obs_kind: str | None = None,
-                    load_optimizers: bool = True, data: bytes | None = None
-                    ) -> LoadedCheckpoint:
+                    load_optimizers: bool = True, data: bytes | None = None,
+                    sha256: str | None = None, expect_sha256: str | None = None,
+                    verify: bool = True) -> LoadedCheckpoint:
     """Rebuild the agent stored at `path` on `map_location`, validating it on the way.
 
     `data`: the file's bytes, already read (a node hashes them to say what it runs): decoded
-    instead of reading `path` again, so what is hashed is what is loaded; `path` then only
-    names the file in errors.
+    instead of reading `path` again, so what is hashed is what is loaded; `path` then names
+    the file in errors and says where its card, sidecar or zoo index entry are. `sha256`: the
+    digest of `data` when the caller has it (not hashed again).
+
+    A file with a recorded sha256 (`expect_sha256`, a sidecar, its card, the zoo index:
+    zeus_ros/integrity.py) is read once, hashed and refused on a mismatch; one without loads
+    unhashed.
+    `verify=False` only for a file the caller has just written (its card is rewritten next).
 
     `load_optimizers=False` (and every deployment export) gives an agent that acts only (no
     optimizers: less memory and start-up; `update` refuses).
@@ -186,10 +230,13 @@ def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu
     Raises:
         CheckpointError: missing or unreadable file, other format version, task or obs-kind
             other than expected, or weights that do not fit the stored shapes.
+        CheckpointIntegrityError (a CheckpointError): its sha256 is not the recorded one.
     """
     path = Path(path)
     if data is None and not path.is_file():
         raise _fail(path, 'no such file')
+    if verify:
+        data = verify_checkpoint(path, data, sha256=sha256, expect_sha256=expect_sha256)
     try:
         device = torch.device(map_location)
     except (RuntimeError, ValueError) as error:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ['CheckpointError', 'ConfigError']
+__all__ = ['CheckpointError', 'CheckpointIntegrityError', 'ConfigError']
 
 
 class ConfigError(ValueError):
@@ -11,3 +11,10 @@ class ConfigError(ValueError):
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, unreadable, of another format version or for another setup."""
+
+
+class CheckpointIntegrityError(CheckpointError):
+    """A checkpoint's bytes are not its recorded sha256: corrupt or tampered (zeus_ros/integrity).
+
+    Also raised when its record (a sidecar) is unusable: a pin must never fail open.
+    """

@@ -164,14 +164,17 @@ class InferenceAgent:
                         expect_obs_kind: str | None = None,
                         device: str | torch.device = 'cpu',
                         reuse_features: bool = False,
-                        data: bytes | None = None) -> InferenceAgent:
+                        data: bytes | None = None, sha256: str | None = None,
+                        expect_sha256: str | None = None) -> InferenceAgent:
         """Load and validate a checkpoint (CheckpointError on any mismatch).
 
-        `data`: the file's bytes when the caller has read them already (load_checkpoint).
+        `data`: the file's bytes when the caller has read them already, `sha256` their digest
+        when it has it too, `expect_sha256` a pin (load_checkpoint: a file whose recorded
+        sha256 differs is refused).
         """
         loaded = load_checkpoint(path, map_location=device, expect_task=expect_task,
                                  expect_obs_kind=expect_obs_kind, load_optimizers=False,
-                                 data=data)
+                                 data=data, sha256=sha256, expect_sha256=expect_sha256)
         return cls(loaded.agent, reuse_features=reuse_features, extra=loaded.extra)
 
     def drop_training_modules(self) -> None:

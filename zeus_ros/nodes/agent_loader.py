@@ -9,6 +9,8 @@ share, then the working directory).
 A node says exactly what it loaded (absolute path and sha256), at start and on a live
 redeploy, and the estimator stamps every estimate with that sha256: the policy acts only on
 estimates of its own checkpoint, so a half-done redeploy never pairs mismatched networks.
+That same digest is compared with the file's recorded sha256 (card, sidecar, zoo index:
+zeus_ros/integrity.py): a node given a changed zoo file exits 2, a live change to one is refused.
 
 Nodes of one process (zeus launch --single-process) that load the same file share one
 InferenceAgent: one copy of the networks, and the policy acts on the phi of the observation the
@@ -28,7 +30,7 @@ import weakref
 
 import torch
 
-from zeus_ros.learning.checkpoint import CheckpointError
+from zeus_ros.learning.checkpoint import CheckpointError, verify_checkpoint
 from zeus_ros.learning.inference import InferenceAgent
 from zeus_ros.learning.readout import ContextReadout, NoveltyMonitor, monitors_from_extra
 from zeus_ros.system.launch_defaults import resolve_path
@@ -79,13 +81,17 @@ def load_inference_agent(node_name: str, params: Mapping[str, Any]) -> LoadedAge
     sha256 = hashlib.sha256(data).hexdigest()
     key = (sha256, str(params['device']), str(params['task']))
     agent = _SHARED.get(key)
-    if agent is None:
-        try:
+    fresh = agent is None
+    try:
+        if agent is None:  # load_checkpoint checks the recorded sha256 against this digest
             agent = InferenceAgent.from_checkpoint(
                 path, expect_task=params['task'] or None, device=params['device'],
-                reuse_features=True, data=data)
-        except CheckpointError as error:
-            raise ValueError(f'{node_name}: {error}') from error
+                reuse_features=True, data=data, sha256=sha256)
+        else:  # the same bytes, maybe under another name: checked as load_checkpoint would
+            verify_checkpoint(path, data, sha256=sha256)
+    except CheckpointError as error:
+        raise ValueError(f'{node_name}: {error}') from error
+    if fresh:
         agent.drop_training_modules()
         _release_freed_memory()
         _SHARED[key] = agent

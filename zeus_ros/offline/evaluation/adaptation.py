@@ -47,9 +47,12 @@ def _per_value(rows: Sequence[dict[str, Any]], episodes: int) -> np.ndarray:
 
 
 def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_SEED,
-                       splits: Sequence[str] = MEASURED_SPLITS, progress: bool = True
-                       ) -> AdaptationReport:
-    """Returns and value of adaptation of one checkpoint on its family's splits."""
+                       splits: Sequence[str] = MEASURED_SPLITS, progress: bool = True,
+                       expect_sha256: str | None = None) -> AdaptationReport:
+    """Returns and value of adaptation of one checkpoint on its family's splits.
+
+    `expect_sha256`: refuse the file unless it has this sha256 (zeus_ros/integrity.py).
+    """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.diagnostics import context_sensitivity
     from zeus_ros.offline.evaluation.evaluate import (
@@ -59,7 +62,7 @@ def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_
     )
     from zeus_ros.offline.evaluation.report import mean_se
 
-    agent = InferenceAgent.from_checkpoint(checkpoint)
+    agent = InferenceAgent.from_checkpoint(checkpoint, expect_sha256=expect_sha256)
     report = AdaptationReport(Path(checkpoint), agent.task, agent.method)
     train_mean = None
     if agent.context_dim:

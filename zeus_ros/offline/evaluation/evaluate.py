@@ -341,8 +341,11 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
              episodes: int = 3, switch_every: int | None = None, switch_episodes: int = 1,
              probe_steps: int = 4000, seed: int = 0, out: str | Path | None = None,
              progress: bool = True, values: Sequence[dict[str, float]] | None = None,
-             diagnostics: bool = True) -> dict[str, Any]:
+             diagnostics: bool = True, expect_sha256: str | None = None) -> dict[str, Any]:
     """Run the whole evaluation of one checkpoint on one split; write CSV/PNG into `out`.
+
+    `expect_sha256`: refuse the file unless it has this sha256 (besides what its card,
+    sidecar or the zoo index record: zeus_ros/integrity.py).
 
     `values` replaces the split's preset values (then `split` only labels the outputs).
     `switch_every` None: every 100 steps, or a quarter episode for shorter episodes (40-step
@@ -358,7 +361,8 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
     from zeus_ros.offline.evaluation.metrics import plot_bars, plot_trace
 
     started = time.perf_counter()
-    agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task)
+    agent = InferenceAgent.from_checkpoint(checkpoint, expect_task=task,
+                                           expect_sha256=expect_sha256)
     out = Path(out) if out is not None else default_out(checkpoint, split)
     values_given = values is not None
     values = split_values(agent.task, split) if values is None else list(values)
