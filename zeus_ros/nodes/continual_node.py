@@ -89,10 +89,10 @@ SPECS: dict[str, Spec] = {
                        'it); the checkpoint deployed now is on /diagnostics', required=True,
                        allowed='an existing checkpoint file'),
     'out': Spec('', 'folder of history.jsonl, the round folders and the deployed copies',
-                allowed="'' (<recording>_continual) or a folder"),
+                allowed="a folder (empty: the recording's path + _continual)"),
     'task': Spec('', 'the task family of the launch (zeus launch --task); not read: a round '
                  "takes the task from the deployed checkpoint and refuses another task's "
-                 'recording', allowed="'' or a task family name"),
+                 'recording', allowed='a task family name, or empty'),
     'new_steps': _setting('new_steps', 1),
     'warmup_updates': _setting('warmup_updates', 0),
     'updates': _setting('updates', 1),
