@@ -50,7 +50,7 @@ def test_every_trainer_parameter_has_a_description_and_a_range() -> None:
         assert SPECS[name].default == getattr(ContinualSettings(), name), name
         assert SPECS[name].description.startswith(docs[name]), name
         assert SPECS[name].live, name
-    assert DEFAULTS == {name: spec.default for name, spec in SPECS.items()}
+    assert {name: spec.default for name, spec in SPECS.items()} == DEFAULTS
 
 
 def test_the_guide_lists_every_trainer_parameter_with_its_range() -> None:
