@@ -76,7 +76,8 @@ _SETTING_DOCS = field_docs(ContinualSettings)
 def _setting(name: str, low: float | None = None, high: float | None = None) -> Spec:
     """A round's setting: its default and description are ContinualSettings' (written once)."""
     return Spec(getattr(ContinualSettings(), name),
-                f'{_SETTING_DOCS[name]} (a live change applies from the next round)',
+                f"{_SETTING_DOCS.get(name, f'ContinualSettings.{name}')} (a live change "
+                'applies from the next round)',
                 live=True, low=low, high=high)
 
 

@@ -106,9 +106,13 @@ def field_docs(cls: type) -> dict[str, str]:
 
     Python keeps no attribute docstrings at run time: read from the class's source, so that
     the trainer node's parameter descriptions are these texts, written once. A field without
-    one is missing from the result.
+    one is missing from the result; without the source (a .pyc-only install) all are.
     """
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return {}
+    tree = ast.parse(textwrap.dedent(source))
     body = next(node for node in tree.body if isinstance(node, ast.ClassDef)).body
     names = {f.name for f in fields(cls)}
     docs = {}
