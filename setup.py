@@ -63,6 +63,7 @@ setup(
             'policy_node = zeus_ros.nodes.policy_node:main',
             'recorder_node = zeus_ros.nodes.recorder_node:main',
             'robot_bridge_node = zeus_ros.nodes.robot_bridge_node:main',
+            'continual_trainer_node = zeus_ros.nodes.continual_node:main',
             'loop_container = zeus_ros.nodes.container:main',
             'zeus = zeus_ros.cli:main',
         ],

@@ -72,10 +72,6 @@ def launch_nodes(context: LaunchContext) -> list:
         actions += [container, _on_exit(container, watch)]
     for spec in plan.separate:
         watch = exits[spec.name]
-        if spec.name == launch_defaults.TRAINER:  # no console script: run its module
-            trainer = _trainer_process(plan, spec, env)
-            actions += [trainer, _on_exit(trainer, watch)]
-            continue
         node = Node(package=launch_defaults.PACKAGE, executable=spec.executable,
                     name=spec.name, namespace=plan.namespace or None,
                     parameters=[str(plan.params_file), spec.parameters],
@@ -84,18 +80,6 @@ def launch_nodes(context: LaunchContext) -> list:
                     additional_env=env, **watch.respawn.kwargs())
         actions += [node, _on_exit(node, watch)]
     return actions
-
-
-def _trainer_process(plan: launch_defaults.LaunchPlan, spec: launch_defaults.NodePlan,
-                     env: dict[str, str]) -> Any:
-    """The continual trainer, as `zeus launch` starts it; its exit does not stop the loop."""
-    import sys
-
-    from launch.actions import ExecuteProcess
-
-    return ExecuteProcess(cmd=[sys.executable, '-m', spec.module, '--ros-args',
-                               *plan.ros_args(spec)], name=spec.name, output='screen',
-                          additional_env=env)
 
 
 def dds_env() -> dict[str, str]:

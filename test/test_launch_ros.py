@@ -270,8 +270,9 @@ def test_the_description_starts_the_plan_with_its_respawn_policy(
     actions = launch_actions(monkeypatch, continual='true')
     nodes = {n.kwargs['name']: n.kwargs for n in _nodes(actions)}
     assert nodes['recorder']['respawn'] is False  # its output is set: a restart would refuse it
-    [trainer] = [a for a in actions if type(a).__name__ == 'ExecuteProcess']
-    assert trainer.kwargs['name'] == d.TRAINER and 'respawn' not in trainer.kwargs
+    trainer = nodes[d.TRAINER]  # a node executable like the others, never restarted
+    assert (trainer['executable'], trainer['respawn']) == ('continual_trainer_node', False)
+    assert not [a for a in actions if type(a).__name__ == 'ExecuteProcess']
     assert len([a for a in actions if type(a).__name__ == 'RegisterEventHandler']) == 5
 
     actions = launch_actions(monkeypatch, single_process='true', record='true')

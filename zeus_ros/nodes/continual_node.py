@@ -18,13 +18,18 @@ background thread spins the node (step and context-truth subscriptions, paramete
 context_estimator and then policy (they pair by sha256: no mismatched pair ever acts); the
 previous checkpoint stays on disk and is what a failed live check restores. Every decision is
 one log line, one /diagnostics status and one line of OUT/history.jsonl.
+
+Installed as `continual_trainer_node`. Its parameters (SPECS) carry a description and a range
+(`ros2 param describe`); a bad one stops it at start with one line (exit 2) and is refused
+with the reason by `ros2 param set`. What a round does can change live (from the next round,
+a `parameters` line in the history); its wiring, priority and novelty window cannot.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, fields
+from dataclasses import asdict, fields, replace
 import json
 import os
 from pathlib import Path
@@ -43,9 +48,11 @@ from rclpy.parameter import Parameter
 
 from zeus_ros.atomic_file import replace_text
 from zeus_ros.bags.recording import closed_splits, split_steps
+from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.system.continual_settings import (
     ContinualSettings,
     append_history,
+    field_docs,
     read_history,
     read_progress,
     resume_point,
@@ -63,13 +70,77 @@ TARGETS = ('context_estimator', 'policy')
 SETTINGS = tuple(f.name for f in fields(ContinualSettings)
                  if f.name not in ('eval_seed', 'seed'))
 """What a round does: parameters of the same name, defaults from ContinualSettings."""
-DEFAULTS: dict[str, Any] = {
-    'recording': '', 'checkpoint': '', 'out': '', 'task': '',
-    **{name: getattr(ContinualSettings(), name) for name in SETTINGS},
-    'threads': 1, 'nice': 0, 'sched_batch': True, 'check_segments': 2, 'keep_recording_mb': 2048,
-    'keep_candidates': 5, 'corrupt_rounds': [0], 'force_rounds': [0], 'poll_s': 1.0,
-    'novelty_window': 200, 'novelty_fraction': 0.5, 'novelty_min_steps': 500,
+_SETTING_DOCS = field_docs(ContinualSettings)
+
+
+def _setting(name: str, low: float | None = None, high: float | None = None) -> Spec:
+    """A round's setting: its default and description are ContinualSettings' (written once)."""
+    return Spec(getattr(ContinualSettings(), name),
+                f"{_SETTING_DOCS.get(name, f'ContinualSettings.{name}')} (a live change "
+                'applies from the next round)',
+                live=True, low=low, high=high)
+
+
+SPECS: dict[str, Spec] = {
+    'recording': Spec('', "the recorder's output folder: rounds train on its closed splits "
+                      '(zeus launch --continual sets it)', required=True,
+                      allowed='a folder; it may not exist yet (the recorder makes it)'),
+    'checkpoint': Spec('', 'the first deployed checkpoint, which context_estimator and policy '
+                       'run at start: rounds continue from it (zeus launch --continual sets '
+                       'it); the checkpoint deployed now is on /diagnostics', required=True,
+                       allowed='an existing checkpoint file'),
+    'out': Spec('', 'folder of history.jsonl, the round folders and the deployed copies',
+                allowed="a folder (empty: the recording's path + _continual)"),
+    'task': Spec('', 'the task family of the launch (zeus launch --task); not read: a round '
+                 "takes the task from the deployed checkpoint and refuses another task's "
+                 'recording', allowed='a task family name, or empty'),
+    'new_steps': _setting('new_steps', 1),
+    'warmup_updates': _setting('warmup_updates', 0),
+    'updates': _setting('updates', 1),
+    'actor_lr_scale': _setting('actor_lr_scale', 0.0, 10.0),
+    'bc_weight': _setting('bc_weight', 0.0),
+    'bc_weight_new': _setting('bc_weight_new', -1.0),
+    'gate_actor': _setting('gate_actor'),
+    'old_ratio': _setting('old_ratio', 0.0),
+    'max_old_steps': _setting('max_old_steps', 0),
+    'rehearsal_steps': _setting('rehearsal_steps', 0),
+    'episodes': _setting('episodes', 1),
+    'resume_refused': _setting('resume_refused'),
+    'max_seen_values': _setting('max_seen_values', 1),
+    'max_train_values': _setting('max_train_values', 0),
+    'margin': _setting('margin', 0.0),
+    'tolerance': _setting('tolerance', 0.0, 1.0),
+    'tolerance_floor': _setting('tolerance_floor', 0.0),
+    'threads': Spec(1, "torch threads of a round's child process (from the next round)",
+                    live=True, low=1, high=256),
+    'nice': Spec(0, "the trainer's nice value (its session's too: autogroup), inherited by "
+                 'its rounds; 0: none', low=0, high=19),
+    'sched_batch': Spec(True, 'run as Linux SCHED_BATCH: a fair share of the CPU, never '
+                        "favoured when the control loop's processes wake"),
+    'check_segments': Spec(2, 'complete context segments after a swap that the live check '
+                           'compares with the previous checkpoint (from the next swap)',
+                           live=True, low=1),
+    'keep_recording_mb': Spec(2048, 'closed splits beyond this many MB are deleted, oldest '
+                              'first (never those since the last swap)', live=True, low=1),
+    'keep_candidates': Spec(5, 'newest round folders kept (and the one a chain continues); '
+                            'deployed copies are all kept', live=True, low=1),
+    'corrupt_rounds': Spec([0], 'drill: these rounds (numbered from 1; 0: none) train fresh '
+                           'critics on negated rewards', live=True, low=0),
+    'force_rounds': Spec([0], 'drill: these rounds (numbered from 1; 0: none) are swapped in '
+                         'whatever the gate says, to exercise the rollback', live=True, low=0),
+    'poll_s': Spec(1.0, 'seconds between looks at the recording (new closed splits, the live '
+                   'check)', live=True, low=0.05, high=60.0),
+    'novelty_window': Spec(200, "scored steps in the novelty alarm's window (0: no alarm)",
+                           low=0),
+    'novelty_fraction': Spec(0.5, 'the alarm is up while at least this share of the window '
+                             "was outside the checkpoint's training contexts", low=0.01,
+                             high=1.0),
+    'novelty_min_steps': Spec(500, 'new closed steps that start a round while the novelty '
+                              'alarm is up (instead of new_steps)', live=True, low=1),
 }
+"""The trainer's parameters: meaning, range, whether a change applies live. What a round does
+is live from the next round; the process's wiring and priority and the alarm's shape are not."""
+DEFAULTS: dict[str, Any] = {name: spec.default for name, spec in SPECS.items()}
 """Parameters; `corrupt_rounds` / `force_rounds` (round numbers from 1; 0: none) are drills:
 that round trains on negated rewards / is swapped in whatever the gate says. A novelty alarm
 (at least `novelty_fraction` of the last `novelty_window` scored steps outside the
@@ -90,14 +161,17 @@ STDERR_LINES = 10
 class ContinualTrainer(Node):
     """The ROS side: parameters, subscriptions, the swap and /diagnostics."""
 
-    def __init__(self) -> None:
-        super().__init__('continual_trainer')
-        for name, default in DEFAULTS.items():
-            self.declare_parameter(name, default)
-        p = {name: self.get_parameter(name).value for name in DEFAULTS}
-        if not p['recording'] or not p['checkpoint']:
-            raise ValueError('continual_trainer: parameters recording and checkpoint are '
-                             'required (zeus launch --continual sets both)')
+    def __init__(self, **node_options: Any) -> None:
+        """`node_options` go to rclpy's Node (cli_args, context: a test's own).
+
+        Raises ValueError (one line) for a parameter out of its range (SPECS) or a checkpoint
+        that is not a file.
+        """
+        super().__init__('continual_trainer', **node_options)
+        p = declare_specs(self, SPECS)
+        if not Path(p['checkpoint']).is_file():
+            raise ValueError(f'continual_trainer: parameter checkpoint {p["checkpoint"]!r} is '
+                             'not a file')
         self.p = p
         self.recording = Path(p['recording']).resolve()
         self.out = Path(p['out'] or f'{self.recording}_continual').resolve()
@@ -128,6 +202,16 @@ class ContinualTrainer(Node):
 
         self.clients_ = {name: AsyncParameterClient(self, name) for name in TARGETS}
         self.create_timer(5.0, lambda: self.report('status'))
+        serve_live_changes(self, SPECS, self.p, self._changed)
+
+    def _changed(self, changed: dict[str, Any]) -> None:
+        """A live change: the round's settings anew (read at the next round), a history line."""
+        settings = {k: v for k, v in changed.items() if k in SETTINGS}
+        if settings:
+            self.settings = replace(self.settings, **settings)
+        append_history(self.history, {'event': 'parameters', 'changed': {
+            k: list(v) if isinstance(v, list | tuple) or hasattr(v, 'typecode') else v
+            for k, v in changed.items()}})
 
     def _on_step(self, msg: Any) -> None:
         with self.lock:
@@ -513,9 +597,19 @@ def _to_stderr(line: str) -> None:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point: `python -m zeus_ros.nodes.continual_node --ros-args -p recording:=...`."""
+    """Entry point: `continual_trainer_node --ros-args -p recording:=... -p checkpoint:=...`.
+
+    (or `python -m zeus_ros.nodes.continual_node`, as `zeus launch` starts it). A bad params
+    file or parameter is one `error:` line and exit code 2, as for the other nodes.
+    """
     from rclpy.signals import SignalHandlerOptions
 
+    from zeus_ros.nodes.spin import params_file_errors
+
+    bad = params_file_errors(sys.argv[1:] if args is None else args)
+    if bad:
+        print(f'error: {bad[0]}', file=sys.stderr)
+        return 2
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = ContinualTrainer()

@@ -25,7 +25,7 @@ from rclpy.parameter import Parameter
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ['ROS_OWN', 'Spec', 'declare_specs', 'serve_live_changes', 'validate']
+__all__ = ['ROS_OWN', 'Spec', 'declare_specs', 'range_text', 'serve_live_changes', 'validate']
 
 ROS_OWN = frozenset({'use_sim_time', 'start_type_description_service'})
 """Parameters rclpy declares on every node."""
@@ -42,6 +42,9 @@ class Spec:
     high: float | None = None
     choices: tuple[Any, ...] = ()
     required: bool = False
+    allowed: str = ''
+    """What a value may be, in words, where no bound or choice says it all (a file that exists).
+    A list parameter's `low` / `high` bound each of its items."""
 
 
 def _type_name(value: Any) -> str:
@@ -60,6 +63,37 @@ def _type_ok(default: Any, value: Any) -> bool:
     return isinstance(value, type(default))
 
 
+def range_text(spec: Spec) -> str:
+    """The values `spec` allows, in words (`ros2 param describe`, the guide's tables)."""
+    if spec.choices:
+        return 'one of ' + ', '.join(map(str, spec.choices))
+    if isinstance(spec.default, bool):
+        text = 'true or false'
+    elif spec.low is not None and spec.high is not None:
+        text = f'{spec.low} to {spec.high}'
+    elif spec.low is not None:
+        text = f'>= {spec.low}'
+    elif spec.high is not None:
+        text = f'<= {spec.high}'
+    else:
+        text = ''
+    if isinstance(spec.default, list) and text:
+        text = f'each {text}'
+    return '; '.join(part for part in (text, spec.allowed) if part)
+
+
+def _bounded_items(node_name: str, key: str, spec: Spec, value: Any) -> None:
+    """A list parameter with bounds: every item a number of the default's kind, in bounds."""
+    for item in value:
+        if spec.default and not _type_ok(spec.default[0], item):
+            raise ValueError(f'{node_name}: parameter {key} must hold '
+                             f'{_type_name(spec.default[0])}s, got {list(value)!r}')
+        if (spec.low is not None and item < spec.low) or (
+                spec.high is not None and item > spec.high):
+            raise ValueError(f'{node_name}: parameter {key} must hold values '
+                             f'{range_text(spec).removeprefix("each ")}, got {list(value)!r}')
+
+
 def validate(node_name: str, specs: Mapping[str, Spec], values: Mapping[str, Any]) -> None:
     """Raise ValueError naming parameter, value and what is allowed, for the first bad value."""
     for key, value in values.items():
@@ -67,11 +101,14 @@ def validate(node_name: str, specs: Mapping[str, Spec], values: Mapping[str, Any
         if not _type_ok(spec.default, value):
             raise ValueError(f'{node_name}: parameter {key} must be {_type_name(spec.default)}, '
                              f'got {value!r}')
+        scalar = not isinstance(spec.default, list)
+        if not scalar and (spec.low is not None or spec.high is not None):
+            _bounded_items(node_name, key, spec, value)
         if isinstance(value, float) and not math.isfinite(value):
             raise ValueError(f'{node_name}: parameter {key} must be a finite number, got {value}')
-        if spec.low is not None and value < spec.low:
+        if scalar and spec.low is not None and value < spec.low:
             raise ValueError(f'{node_name}: parameter {key} must be >= {spec.low}, got {value}')
-        if spec.high is not None and value > spec.high:
+        if scalar and spec.high is not None and value > spec.high:
             raise ValueError(f'{node_name}: parameter {key} must be <= {spec.high}, got {value}')
         if spec.choices and value not in spec.choices:
             raise ValueError(f'{node_name}: parameter {key}={value!r} is not allowed; '
@@ -84,8 +121,8 @@ def _descriptor(spec: Spec) -> ParameterDescriptor:
     """What `ros2 param describe` shows: meaning, limits, and whether a change applies live."""
     text = spec.description + ('' if spec.live else ' (read-only: restart the node to change)')
     descriptor = ParameterDescriptor(description=text, read_only=not spec.live)
-    if spec.choices:
-        descriptor.additional_constraints = 'one of ' + ', '.join(map(str, spec.choices))
+    if spec.choices or spec.allowed or isinstance(spec.default, list):
+        descriptor.additional_constraints = range_text(spec)
     if spec.low is not None or spec.high is not None:
         if isinstance(spec.default, float):
             descriptor.floating_point_range = [FloatingPointRange(

@@ -10,18 +10,22 @@ zeus_ros/offline/training/continual.py), which imports them too. No ROS, no torc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import ast
+from dataclasses import dataclass, field, fields
 import datetime
+import inspect
+import itertools
 import json
 import os
 from pathlib import Path
+import textwrap
 import time
 from typing import Any
 
 from zeus_ros.atomic_file import replace_text
 
 __all__ = ['ContinualSettings', 'ResumePoint', 'RoundProgress', 'append_history',
-           'read_history', 'read_progress', 'resume_point']
+           'field_docs', 'read_history', 'read_progress', 'resume_point']
 
 
 @dataclass(frozen=True)
@@ -88,12 +92,37 @@ class ContinualSettings:
     context; measured in the drift scenario, the spread across 6 values' means asked for
     +31 and refused a gain of +27.6 whose stratified 2 s.e. was at most 17.5)."""
     tolerance: float = 0.10
-    """Allowed loss at any value, as a fraction of |deployed return| there..."""
+    """Allowed loss at any train value, as a fraction of |deployed return| there (and at least
+    `tolerance_floor`); the live check after a swap allows the same loss."""
     tolerance_floor: float = 2.0
-    """...and at least this much return per episode, and at least 2 s.e. of that value's
-    paired episode differences: a loss within its own noise is not called worse (far beyond
-    the range one 40-step episode may earn -50 or -200 on a fall)."""
+    """The least allowed loss at a train value, in return per episode, and at least 2 s.e. of
+    that value's paired episode differences: a loss within its own noise is not called worse
+    (far beyond the range one 40-step episode may earn -50 or -200 on a fall)."""
     seed: int = 0
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """Each dataclass field's docstring (the string under it), on one line.
+
+    Python keeps no attribute docstrings at run time: read from the class's source, so that
+    the trainer node's parameter descriptions are these texts, written once. A field without
+    one is missing from the result; without the source (a .pyc-only install) all are.
+    """
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return {}
+    tree = ast.parse(textwrap.dedent(source))
+    body = next(node for node in tree.body if isinstance(node, ast.ClassDef)).body
+    names = {f.name for f in fields(cls)}
+    docs = {}
+    for statement, following in itertools.pairwise(body):
+        if (isinstance(statement, ast.AnnAssign) and isinstance(statement.target, ast.Name)
+                and statement.target.id in names and isinstance(following, ast.Expr)
+                and isinstance(following.value, ast.Constant)
+                and isinstance(following.value.value, str)):
+            docs[statement.target.id] = ' '.join(following.value.value.split())
+    return docs
 
 
 def append_history(path: Path | str, record: dict[str, Any]) -> dict[str, Any]:

@@ -67,8 +67,7 @@ NODES: dict[str, str] = {
     'robot_bridge': 'zeus_ros.nodes.robot_bridge_node',
     'continual_trainer': 'zeus_ros.nodes.continual_node',
 }
-"""Node name -> module; the installed executable is `<name>_node` (the continual trainer
-runs as `python -m` of its module: it is started only by the launchers)."""
+"""Node name -> module; the installed executable is `<name>_node` (continual_trainer_node)."""
 DEFAULT_NODES = ('sim_bridge', 'context_estimator', 'policy')
 STEP_SOURCES = frozenset({'sim_bridge', 'robot_bridge'})
 """Nodes that publish the steps (a launch runs one): they wait for every other node."""
