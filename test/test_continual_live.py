@@ -61,23 +61,19 @@ def _history(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-@pytest.mark.continual_live
-@pytest.mark.alone  # a realtime loop and a niced trainer: the machine to itself under xdist
-def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
-        tmp_path: Path) -> None:
-    require_ros()
-    weak = weak_checkpoint(tmp_path / 'weak.pt')
-    history = tmp_path / 'rec_continual' / 'history.jsonl'
-    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', WEAK_TASK,
-            '--checkpoint', str(weak), '--continual', '--params', str(_params(tmp_path)),
-            '--no-progress', '--timeout', '300']
-    env = ros_environment(fresh_domain_id())
-    log = tmp_path / 'launch.log'
+def _launch_until_refused_and_checked(argv: list[str], folder: Path, history: Path,
+                                      seconds: float) -> tuple[str, list[dict]]:
+    """Run the launch until its history holds a refusal and a live check (or `seconds`).
+
+    Returns the launch's output and the history; the launch is stopped with SIGINT.
+    """
+    log = folder / 'launch.log'
     with log.open('w') as out:
-        launch = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT,
-                                  cwd=tmp_path, start_new_session=True)
+        launch = subprocess.Popen(argv, env=ros_environment(fresh_domain_id()), stdout=out,
+                                  stderr=subprocess.STDOUT, cwd=folder,
+                                  start_new_session=True)
         try:
-            deadline = time.monotonic() + 290
+            deadline = time.monotonic() + seconds
             while time.monotonic() < deadline and launch.poll() is None:
                 events = _history(history)
                 if any(e.get('decision') == 'refuse' for e in events) and any(
@@ -88,8 +84,20 @@ def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
             if launch.poll() is None:
                 launch.send_signal(signal.SIGINT)
             launch.wait(timeout=60)
-    text = log.read_text()
-    events = _history(history)
+    return log.read_text(), _history(history)
+
+
+@pytest.mark.continual_live
+@pytest.mark.alone  # a realtime loop and a niced trainer: the machine to itself under xdist
+def test_continual_launch_swaps_a_better_candidate_and_refuses_a_corrupted_one(
+        tmp_path: Path) -> None:
+    require_ros()
+    weak = weak_checkpoint(tmp_path / 'weak.pt')
+    history = tmp_path / 'rec_continual' / 'history.jsonl'
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', WEAK_TASK,
+            '--checkpoint', str(weak), '--continual', '--params', str(_params(tmp_path)),
+            '--no-progress', '--timeout', '300']
+    text, events = _launch_until_refused_and_checked(argv, tmp_path, history, 290)
     gates = [e for e in events if e['event'] == 'gate']
     assert [g['decision'] for g in gates[:2]] == ['deploy', 'refuse'], text[-3000:]
     assert gates[1]['corrupt_rewards'] and gates[1]['deployed_sha256'] == gates[0]['sha256']
@@ -154,25 +162,7 @@ def test_continual_with_the_defaults_refuses_and_swaps_beyond_the_range(
     argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', 'Cheetah-Bias-v0',
             '--continual', '--params', str(tmp_path / 'params.yaml'), '--no-progress',
             '--timeout', '480']
-    log = tmp_path / 'launch.log'
-    with log.open('w') as out:
-        launch = subprocess.Popen(argv, env=ros_environment(fresh_domain_id()), stdout=out,
-                                  stderr=subprocess.STDOUT, cwd=tmp_path,
-                                  start_new_session=True)
-        try:
-            deadline = time.monotonic() + 470
-            while time.monotonic() < deadline and launch.poll() is None:
-                events = _history(history)
-                if any(e.get('decision') == 'refuse' for e in events) and any(
-                        e['event'] == 'live_check' for e in events):
-                    break
-                time.sleep(1)
-        finally:
-            if launch.poll() is None:
-                launch.send_signal(signal.SIGINT)
-            launch.wait(timeout=60)
-    text = log.read_text()
-    events = _history(history)
+    text, events = _launch_until_refused_and_checked(argv, tmp_path, history, 470)
     gates = [e for e in events if e['event'] == 'gate']
     assert 'refuse' in [g['decision'] for g in gates], text[-3000:]
     deployed = [g for g in gates if g['decision'] == 'deploy']
