@@ -49,7 +49,7 @@ def rows(root: Path) -> list[dict[str, object]]:
                         'oracle_inprocess': float(oracle['scenario_return']),
                         'no_context_inprocess': float(plain['scenario_return'])})
             if deployed:
-                last = deployed[-1]
+                last = _running_at_the_end(folder, deployed)
                 row.update({'last_deployed_inprocess': float(last['scenario_return']),
                             'gap_closed': float(last['gap_closed']),
                             'worst_train_change': min(float(r['worst_train_change'])
@@ -58,6 +58,18 @@ def rows(root: Path) -> list[dict[str, object]]:
                                                  for r in deployed)})
         out.append(row)
     return out
+
+
+def _running_at_the_end(folder: Path, deployed: list[dict[str, str]]) -> dict[str, str]:
+    """The deployed checkpoint's row that ran last: its last swap, unless rolled back."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from zeus_ros.system.continual_settings import read_history, resume_point
+
+    point = resume_point(read_history(folder / 'history.jsonl'))
+    name = None if point.deployed is None else point.deployed.stem
+    return next((r for r in deployed if r['checkpoint'] == f'deployed {name}'), deployed[-1])
 
 
 def main() -> int:
