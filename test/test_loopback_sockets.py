@@ -3,7 +3,8 @@
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST keeps discovery local, but with Fast DDS's default
 transports every participant still listens on 0.0.0.0. The package's profile
 (params/dds/fastdds_loopback.xml, set by scripts/env.sh and every launcher) binds them to
-loopback. The sockets are read from /proc, as `ss -uanp` lists them.
+loopback. The sockets are read from /proc, as `ss -uanp` lists them. Left off loopback under
+LOCALHOST: two Fast DDS send sockets per participant that nothing reads (docs/security.md).
 """
 
 from __future__ import annotations
