@@ -15,8 +15,8 @@ import os
 from pathlib import Path
 from typing import Any, NoReturn
 
-__all__ = ['EXPECT_SHA256_HELP', 'TASK_HELP', 'ZeusArgumentParser', 'flag_or_positional',
-           'input_path', 'nearest', 'sha256_arg', 'task_name']
+__all__ = ['EXPECT_SHA256_HELP', 'SEED_MAX', 'TASK_HELP', 'ZeusArgumentParser',
+           'flag_or_positional', 'input_path', 'nearest', 'seed_arg', 'sha256_arg', 'task_name']
 
 EXPECT_SHA256_HELP = ('refuse the checkpoint unless its sha256 is this (64 hex digits, as '
                       'sha256sum prints it); a sidecar FILE.sha256, its card or the zoo index '
@@ -94,6 +94,25 @@ def at_least(minimum: float, kind: type = int, maximum: float | None = None
 
     parse.__name__ = f'{kind.__name__} >= {minimum:g}'
     return parse
+
+
+SEED_MAX = 2**32 - 1
+"""The largest seed numpy takes (np.random.seed, RandomState): seeds are 0 .. 2**32 - 1."""
+
+
+def seed_arg(text: str) -> int:
+    """The argparse `type` of --seed: an integer in numpy's range 0 .. 2**32 - 1, else one line.
+
+    A larger seed would start the run and fail in numpy with a traceback (issue 49).
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f'{text} must be an integer in [0, {SEED_MAX}] '
+                                         "(numpy's seed range)")
+    return value
 
 
 def sha256_arg(text: str) -> str:

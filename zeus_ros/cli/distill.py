@@ -21,7 +21,7 @@ __all__ = ['main']
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, seed_arg, task_name
 
     parser = ZeusArgumentParser(prog='zeus distill', description=library.__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -31,7 +31,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=Path, required=True, help='folder for student.pt')
     parser.add_argument('--config', type=Path, default=DEFAULT_CONFIG,
                         help='pixel network config (default: params/train/pixels_student.yaml)')
-    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--seed', type=seed_arg, help='override the config seed')
     parser.add_argument('--data-cache', type=Path,
                         help="round 0's teacher data: read when the file exists, else "
                         'written (the seeds of a comparison share it)')

@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.cli_args import SEED_MAX
 from zeus_ros.learning.context import AGGREGATIONS, CONTEXT_HEADS
 from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.methods import METHOD_REGISTRY, METHODS, method_objective
@@ -324,8 +325,10 @@ class ZeusConfig:
                 self.device in ('auto', 'cpu', 'cuda') or self.device.startswith('cuda:')):
             raise ConfigError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', "
                               f'got {self.device!r}')
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise ConfigError(f'seed must be an integer, got {self.seed!r}')
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
+                or not 0 <= self.seed <= SEED_MAX:
+            raise ConfigError(f"seed must be an integer in [0, {SEED_MAX}] (numpy's seed "
+                              f'range), got {self.seed!r}')
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data copy (for YAML, checkpoints and logs)."""
