@@ -76,6 +76,19 @@ def main(argv: list[str] | None = None) -> int:
     except (CheckpointError, ConfigError, ValueError) as error:
         print(f'zeus distill: {error}', file=sys.stderr)
         return 2
+    except Exception as error:  # torch wraps ENOSPC in a RuntimeError: look behind it
+        from zeus_ros.atomic_file import disk_full_message
+
+        full = disk_full_message(error, args.out)
+        if full is None:
+            raise
+        from zeus_ros.offline.training.distill_resume import RESUME_FILE
+
+        again = ('run it again with --resume (it continues after the last finished round)'
+                 if (args.out / RESUME_FILE).exists()
+                 else 'run it again (no round finished: nothing to resume)')
+        print(f'zeus distill: {full}; free some space and {again}', file=sys.stderr)
+        return 2
     print(f'wrote {path}')
     return 0
 

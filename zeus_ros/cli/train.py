@@ -134,8 +134,12 @@ def main(argv: list[str] | None = None) -> int:
         full = disk_full_message(error, args.out)
         if full is None:
             raise
-        print(f'zeus train: {full}; --resume continues from the last checkpoint written',
-              file=sys.stderr)
+        from zeus_ros.offline.training.train import CHECKPOINT
+
+        again = (f'--resume continues from {args.out / CHECKPOINT}'
+                 if (args.out / CHECKPOINT).exists() else
+                 'run it again (no checkpoint was written yet: nothing to resume)')
+        print(f'zeus train: {full}; free some space, then {again}', file=sys.stderr)
         return 2
     finally:
         warnings.showwarning = default_showwarning
