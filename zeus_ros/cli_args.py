@@ -159,13 +159,13 @@ class ZeusArgumentParser(argparse.ArgumentParser):
 
 
 def flag_or_positional(parser: ZeusArgumentParser, flag: str, *, many: bool,
-                       **kwargs: object) -> None:
+                       **kwargs: Any) -> None:
     """Add `--flag VALUE` plus the old positional spelling, kept as a silent alias.
 
     Call `parser.parse_args` through ZeusArgumentParser.parse_args, which merges the two.
     """
     dest = flag.lstrip('-').replace('-', '_')
     parser.add_argument(flag, nargs='+' if many else None, dest=dest, **kwargs)
-    parser.add_argument(f'_{dest}', nargs='*', help=argparse.SUPPRESS,
-                        type=kwargs.get('type'))
+    typed = {'type': kwargs['type']} if 'type' in kwargs else {}
+    parser.add_argument(f'_{dest}', nargs='*', help=argparse.SUPPRESS, **typed)
     parser._zeus_aliases.append((flag, dest, many))
