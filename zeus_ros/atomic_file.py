@@ -46,8 +46,13 @@ FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
 
 
 @contextmanager
-def atomic_write(path: str | Path, mode: str = 'w', **open_args: Any) -> Iterator[IO[Any]]:
-    """Open a temp file for writing; on a clean exit it replaces `path`, else it is removed."""
+def atomic_write(path: str | Path, mode: str = 'w', *, size: int = 0,
+                 **open_args: Any) -> Iterator[IO[Any]]:
+    """Open a temp file for writing; on a clean exit it replaces `path`, else it is removed.
+
+    `size`: the bytes the caller will write, where it knows them, so a full disk names what the
+    whole file needs rather than the part of it that fit.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(path)
@@ -64,7 +69,7 @@ def atomic_write(path: str | Path, mode: str = 'w', **open_args: Any) -> Iterato
         full = disk_full(error)
         if full is None:
             raise
-        raise DiskFullError(path, _size(tmp), full) from error
+        raise DiskFullError(path, max(_size(tmp), size), full) from error
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -15,8 +15,8 @@ import os
 from pathlib import Path
 from typing import Any, NoReturn
 
-__all__ = ['EXPECT_SHA256_HELP', 'TASK_HELP', 'ZeusArgumentParser', 'flag_or_positional',
-           'input_path', 'nearest', 'sha256_arg', 'task_name']
+__all__ = ['EXPECT_SHA256_HELP', 'SEED_MAX', 'TASK_HELP', 'ZeusArgumentParser',
+           'flag_or_positional', 'input_path', 'nearest', 'seed_arg', 'sha256_arg', 'task_name']
 
 EXPECT_SHA256_HELP = ('refuse the checkpoint unless its sha256 is this (64 hex digits, as '
                       'sha256sum prints it); a sidecar FILE.sha256, its card or the zoo index '
@@ -96,6 +96,25 @@ def at_least(minimum: float, kind: type = int, maximum: float | None = None
     return parse
 
 
+SEED_MAX = 2**32 - 1
+"""The largest seed numpy takes (np.random.seed, RandomState): seeds are 0 .. 2**32 - 1."""
+
+
+def seed_arg(text: str) -> int:
+    """The argparse `type` of --seed: an integer in numpy's range 0 .. 2**32 - 1, else one line.
+
+    A larger seed would start the run and fail in numpy with a traceback (issue 49).
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f'{text} must be an integer in [0, {SEED_MAX}] '
+                                         "(numpy's seed range)")
+    return value
+
+
 def sha256_arg(text: str) -> str:
     """The argparse `type` of --expect-sha256: 64 hex digits (lower-cased), else one line."""
     from zeus_ros.integrity import parse_sha256
@@ -140,13 +159,13 @@ class ZeusArgumentParser(argparse.ArgumentParser):
 
 
 def flag_or_positional(parser: ZeusArgumentParser, flag: str, *, many: bool,
-                       **kwargs: object) -> None:
+                       **kwargs: Any) -> None:
     """Add `--flag VALUE` plus the old positional spelling, kept as a silent alias.
 
     Call `parser.parse_args` through ZeusArgumentParser.parse_args, which merges the two.
     """
     dest = flag.lstrip('-').replace('-', '_')
     parser.add_argument(flag, nargs='+' if many else None, dest=dest, **kwargs)
-    parser.add_argument(f'_{dest}', nargs='*', help=argparse.SUPPRESS,
-                        type=kwargs.get('type'))
+    typed = {'type': kwargs['type']} if 'type' in kwargs else {}
+    parser.add_argument(f'_{dest}', nargs='*', help=argparse.SUPPRESS, **typed)
     parser._zeus_aliases.append((flag, dest, many))

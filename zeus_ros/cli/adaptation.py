@@ -14,7 +14,13 @@ __all__ = ['main']
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus adaptation`."""
-    from zeus_ros.cli_args import EXPECT_SHA256_HELP, ZeusArgumentParser, at_least, sha256_arg
+    from zeus_ros.cli_args import (
+        EXPECT_SHA256_HELP,
+        ZeusArgumentParser,
+        at_least,
+        seed_arg,
+        sha256_arg,
+    )
 
     parser = ZeusArgumentParser(prog='zeus adaptation', description=adaptation.__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -26,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="'zoo' (the family's zoo checkpoint, default), 'none', or a file")
     parser.add_argument('--episodes', type=at_least(1), default=3,
                         help='episodes per context value')
-    parser.add_argument('--seed', type=at_least(0), default=EVAL_SEED, help='evaluation seed')
+    parser.add_argument('--seed', type=seed_arg, default=EVAL_SEED, help='evaluation seed')
     parser.add_argument('--threads', type=at_least(1), default=1,
                         help='torch CPU threads (default 1: the networks act on one observation '
                         "at a time; torch's default of one per core took 33 min where one "

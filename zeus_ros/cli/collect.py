@@ -15,7 +15,7 @@ import time
 from typing import Any
 
 from zeus_ros.bags.writer import StepBagWriter
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg, task_name
 from zeus_ros.offline.rollout import (
     SCHEDULE_HELP,
     AgentPolicy,
@@ -41,7 +41,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--task', '--task-file', required=True, type=task_name, help=TASK_HELP)
     parser.add_argument('--schedule', default='constant', help='see below (default: constant)')
     parser.add_argument('--steps', type=at_least(1), required=True, help='control steps to record')
-    parser.add_argument('--seed', type=at_least(0), default=0,
+    parser.add_argument('--seed', type=seed_arg, default=0,
                         help='seeds task, schedule and policy')
     parser.add_argument('--out', type=Path, required=True, help='directory for the bag(s)')
     parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')

@@ -36,7 +36,13 @@ from zeus_ros.cli.demo_summary import (
 )
 from zeus_ros.cli.inspect_topics import Inspector
 from zeus_ros.cli.launch import NodeProcess, Supervisor, node_argv
-from zeus_ros.cli_args import EXPECT_SHA256_HELP, ZeusArgumentParser, at_least, sha256_arg
+from zeus_ros.cli_args import (
+    EXPECT_SHA256_HELP,
+    ZeusArgumentParser,
+    at_least,
+    seed_arg,
+    sha256_arg,
+)
 from zeus_ros.step_log import format_segments, percentile, plot_inspection
 from zeus_ros.system.launch_defaults import (
     RECORDED_ANSWERS,
@@ -149,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='control steps per run (default 400 for 40-step episodes, else 2000)')
     parser.add_argument('--every', type=at_least(1),
                         help="steps between switches (default: the family's demo schedule)")
-    parser.add_argument('--seed', type=at_least(0), default=0, help='first schedule seed')
+    parser.add_argument('--seed', type=seed_arg, default=0, help='first schedule seed')
     parser.add_argument('--seeds', type=at_least(1), default=3,
                         help='schedule seeds, each run live and frozen (paired; default 3)')
     parser.add_argument('--record', action='store_true', help='also record a bag under --out')

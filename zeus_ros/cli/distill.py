@@ -21,7 +21,7 @@ __all__ = ['main']
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, task_name
+    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, seed_arg, task_name
 
     parser = ZeusArgumentParser(prog='zeus distill', description=library.__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -31,7 +31,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=Path, required=True, help='folder for student.pt')
     parser.add_argument('--config', type=Path, default=DEFAULT_CONFIG,
                         help='pixel network config (default: params/train/pixels_student.yaml)')
-    parser.add_argument('--seed', type=int, help='override the config seed')
+    parser.add_argument('--seed', type=seed_arg, help='override the config seed')
     parser.add_argument('--data-cache', type=Path,
                         help="round 0's teacher data: read when the file exists, else "
                         'written (the seeds of a comparison share it)')
@@ -75,6 +75,19 @@ def main(argv: list[str] | None = None) -> int:
                        resume=args.resume)
     except (CheckpointError, ConfigError, ValueError) as error:
         print(f'zeus distill: {error}', file=sys.stderr)
+        return 2
+    except Exception as error:  # torch wraps ENOSPC in a RuntimeError: look behind it
+        from zeus_ros.atomic_file import disk_full_message
+
+        full = disk_full_message(error, args.out)
+        if full is None:
+            raise
+        from zeus_ros.offline.training.distill_resume import RESUME_FILE
+
+        again = ('run it again with --resume (it continues after the last finished round)'
+                 if (args.out / RESUME_FILE).exists()
+                 else 'run it again (no round finished: nothing to resume)')
+        print(f'zeus distill: {full}; free some space and {again}', file=sys.stderr)
         return 2
     print(f'wrote {path}')
     return 0

@@ -17,6 +17,7 @@ from zeus_ros.cli_args import (
     TASK_HELP,
     ZeusArgumentParser,
     at_least,
+    seed_arg,
     sha256_arg,
     task_name,
 )
@@ -52,7 +53,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         help='episodes of the switching run')
     parser.add_argument('--probe-steps', type=at_least(0), default=4000,
                         help='random-policy steps for the identifiability probe (0: skip)')
-    parser.add_argument('--seed', type=at_least(0), default=100)
+    parser.add_argument('--seed', type=seed_arg, default=100)
     parser.add_argument('--out', type=Path,
                         help='output folder (default: eval_<split>/ next to the checkpoint); '
                         'zeus export and zeus report find the results in any folder below the '

@@ -52,6 +52,14 @@ def main(argv: list[str] | None = None) -> int:
     except (CheckpointError, ValueError) as error:
         print(f'zeus export: {error}', file=sys.stderr)
         return 2
+    except Exception as error:  # torch wraps ENOSPC in a RuntimeError: look behind it
+        from zeus_ros.atomic_file import disk_full_message
+
+        full = disk_full_message(error, args.out)
+        if full is None:
+            raise
+        print(f'zeus export: {full}; free some space and run it again', file=sys.stderr)
+        return 2
     before, after = args.checkpoint.stat().st_size, pt.stat().st_size
     print(f'zeus export: {pt} ({after / 1e6:.2f} MB, {before / after:.1f}x smaller) and {card}')
     scored = ', '.join(f'{split} ({path.parent})' for split, path in summaries.items())

@@ -10,7 +10,14 @@ import sys
 from typing import Any
 
 from zeus_ros.cli.train import own_flags
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, input_path, task_name
+from zeus_ros.cli_args import (
+    TASK_HELP,
+    ZeusArgumentParser,
+    at_least,
+    input_path,
+    seed_arg,
+    task_name,
+)
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.methods import METHODS
 from zeus_ros.offline.rollout import DEFAULT_SCHEDULE, SCHEDULE_HELP, parse_schedule
@@ -66,7 +73,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--set', nargs='+', action='extend', metavar='KEY=VALUE',
                         help=f'{SET_HELP}; on --resume added to the stored ones')
     parser.add_argument('--method', choices=METHODS, help='override the config method')
-    parser.add_argument('--seed', type=at_least(0), help='override the config seed')
+    parser.add_argument('--seed', type=seed_arg, help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
                         help='continue the loop in --out up to --rounds with its stored flags')

@@ -8,7 +8,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
+from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.config import METHODS
 from zeus_ros.learning.errors import ConfigError
@@ -57,7 +57,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--updates', type=at_least(0),
                         help='total updates of the run (overrides num_updates; a resumed run '
                         'counts from its checkpoint step)')
-    parser.add_argument('--seed', type=at_least(0), help='override the config seed')
+    parser.add_argument('--seed', type=seed_arg, help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
                         help='continue from OUT/checkpoint.pt (optimizers and step count)')
@@ -134,8 +134,12 @@ def main(argv: list[str] | None = None) -> int:
         full = disk_full_message(error, args.out)
         if full is None:
             raise
-        print(f'zeus train: {full}; --resume continues from the last checkpoint written',
-              file=sys.stderr)
+        from zeus_ros.offline.training.train import CHECKPOINT
+
+        again = (f'--resume continues from {args.out / CHECKPOINT}'
+                 if (args.out / CHECKPOINT).exists() else
+                 'run it again (no checkpoint was written yet: nothing to resume)')
+        print(f'zeus train: {full}; free some space, then {again}', file=sys.stderr)
         return 2
     finally:
         warnings.showwarning = default_showwarning

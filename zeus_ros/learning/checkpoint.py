@@ -142,8 +142,10 @@ def _write(payload: dict[str, Any], path: Path) -> Path:
     not the temp file's name (which holds the pid): the same payload gives the same bytes, and
     re-exporting a checkpoint leaves its sha256 (named on its card) unchanged.
     """
-    with atomic_write(path, 'wb') as handle:
-        torch.save(payload, handle)
+    buffer = io.BytesIO()  # its size first: a full disk then names what the whole file needs
+    torch.save(payload, buffer)
+    with atomic_write(path, 'wb', size=buffer.getbuffer().nbytes) as handle:
+        handle.write(buffer.getbuffer())
     return path
 
 

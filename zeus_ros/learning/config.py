@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from zeus_ros.cli_args import SEED_MAX
 from zeus_ros.learning.context import AGGREGATIONS, CONTEXT_HEADS
 from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.methods import METHOD_REGISTRY, METHODS, method_objective
@@ -324,8 +325,12 @@ class ZeusConfig:
                 self.device in ('auto', 'cpu', 'cuda') or self.device.startswith('cuda:')):
             raise ConfigError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', "
                               f'got {self.device!r}')
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
-            raise ConfigError(f'seed must be an integer, got {self.seed!r}')
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) \
+                or not 0 <= self.seed <= SEED_MAX:
+            raise ConfigError(f"seed must be an integer in [0, {SEED_MAX}] (numpy's seed "
+                              f'range), got {self.seed!r}')
+
+        _check_memory(self)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data copy (for YAML, checkpoints and logs)."""
@@ -334,6 +339,70 @@ class ZeusConfig:
     def replace(self, **changes: Any) -> ZeusConfig:
         """Copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
+
+
+def memory_estimate(config: ZeusConfig) -> dict[str, int]:
+    """Bytes the networks and one batch need at least, by the config key that sizes them.
+
+    A lower bound, from the widths alone (observation and action sizes count as 1): each
+    trained parameter takes 4 bytes 4 times (the weight, Adam's two moments, its gradient),
+    each target copy 4 bytes; a batch's activations 4 bytes each, twice (their gradients).
+    """
+    trained, word = 4 * 4, 4
+    h, f, c = config.hidden_dim, config.feature_dim, config.context_dim
+    policy_in = f + c
+    actor = policy_in * h + h * h
+    critic = 2 * (policy_in * h + h * h)  # two Q heads, and a target copy of both
+    sizes = {'hidden_dim': (actor + critic) * trained + critic * word}
+    m = config.model_hidden_dim
+    sizes['model_hidden_dim'] = ((policy_in + 1) * m * 2 + 2 * m * f + m) * trained
+    ch, t = config.context_hidden_dim, config.transition_dim
+    sizes['context_hidden_dim'] = (2 * ch * ch + ch * (t + c + f)) * trained
+    if config.obs_kind == 'pixels':
+        side = max(1, 41 - 2 * (config.num_conv_layers - 1))  # 84x84 frames, see encoders.py
+        nf = config.num_filters
+        encoder = 9 * nf * nf * config.num_conv_layers + nf * side * side * f
+        sizes['num_filters'] = encoder * (2 * trained + word)  # phi, its decoder, target phi
+        frame = 9 * 84 * 84
+    else:
+        sizes['encoder_hidden_dim'] = config.encoder_hidden_dim * (f + 1) * (trained + word)
+        frame = 1
+    activations = (config.k + 2) * (frame + config.encoder_hidden_dim + 2 * ch) + 6 * h + 2 * m
+    sizes['batch_size'] = config.batch_size * activations * word * 2
+    return sizes
+
+
+def memory_limit() -> int:
+    """Bytes of physical memory of this machine (0 where it cannot be asked)."""
+    import os
+
+    try:
+        return int(os.sysconf('SC_PAGE_SIZE')) * int(os.sysconf('SC_PHYS_PAGES'))
+    except (AttributeError, OSError, ValueError):
+        return 0
+
+
+def _check_memory(config: ZeusConfig) -> None:
+    """Refuse sizes whose networks could not fit in this machine's memory: one line."""
+    limit = memory_limit()
+    sizes = memory_estimate(config)
+    total = sum(sizes.values())
+    if limit <= 0 or total <= limit:
+        return
+    key = max(sizes, key=lambda name: sizes[name])
+    default = getattr(ZeusConfig, key)
+    raise ConfigError(f'{key}={getattr(config, key)}: the networks and a batch would need at '
+                      f'least {_bytes_text(total)} (parameters x 4 bytes x weights, Adam moments '
+                      f'and gradients), more than the {_bytes_text(limit)} of memory of this '
+                      f'machine; use a smaller {key} (default {default})')
+
+
+def _bytes_text(size: float) -> str:
+    for unit in ('bytes', 'KiB', 'MiB', 'GiB', 'TiB'):
+        if size < 1024 or unit == 'TiB':
+            return f'{size:.0f} {unit}' if unit == 'bytes' else f'{size:.1f} {unit}'
+        size /= 1024
+    return f'{size:.1f} TiB'  # pragma: no cover - the loop returns
 
 
 def _check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:

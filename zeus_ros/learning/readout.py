@@ -296,8 +296,7 @@ def store_train_mean(checkpoint: str | os.PathLike[str], mean: np.ndarray) -> Pa
     payload = torch.load(path, map_location='cpu', weights_only=True)
     payload['extra'] = {**payload.get('extra', {}),
                         TRAIN_MEAN_KEY: [float(v) for v in np.asarray(mean).ravel()]}
-    with atomic_write(path, 'wb') as handle:
-        torch.save(payload, handle)
+    _save(payload, path)
     return path
 
 
@@ -320,6 +319,20 @@ def store_readout(checkpoint: str | os.PathLike[str], readout: ContextReadout,
     payload = torch.load(source, map_location='cpu', weights_only=True)
     payload['extra'] = {**payload.get('extra', {}), EXTRA_KEY: readout.to_dict(),
                         **({NOVELTY_KEY: novelty.to_dict()} if novelty is not None else {})}
-    with atomic_write(target, 'wb') as handle:  # a handle: the archive's inner name is fixed
-        torch.save(payload, handle)
+    _save(payload, target)
     return target
+
+
+def _save(payload: dict[str, Any], path: Path) -> None:
+    """torch.save atomically, through a handle (the archive's inner name is fixed).
+
+    Serialized first, so that a full disk names what the whole file needs.
+    """
+    import io
+
+    import torch
+
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    with atomic_write(path, 'wb', size=buffer.getbuffer().nbytes) as handle:
+        handle.write(buffer.getbuffer())
