@@ -343,3 +343,16 @@ def test_nodes_of_one_process_share_the_agent_of_one_checkpoint(tmp_path: Path) 
     gc.collect()
     assert shared() is None  # a redeployed checkpoint's networks do not stay in memory
     assert load_inference_agent('policy', params).agent.reuse_features
+
+
+def test_lock_parameters_goes_to_the_loop_nodes_only() -> None:
+    """--lock-parameters / lock_parameters:=true: bridges, estimator, policy; not the others."""
+    from zeus_ros.system import launch_defaults as d
+
+    locked = {n.name: n.parameters.get('lock_parameters')
+              for n in d.plan(record=True, lock_parameters=True).nodes}
+    assert locked == {'sim_bridge': True, 'context_estimator': True, 'policy': True,
+                      'recorder': None}, locked
+    assert all('lock_parameters' not in n.parameters for n in d.plan(record=True).nodes)
+    from_arguments = d.plan_from_arguments({'lock_parameters': 'true'})
+    assert all(n.parameters['lock_parameters'] for n in from_arguments.nodes)

@@ -221,7 +221,7 @@ def test_live_parameters_apply_or_are_refused_with_the_reason(
 
         described = call(probe, policy.describe_parameters(['noise', 'mode'])).descriptors
         assert 'noise' in described[0].description
-        assert described[0].floating_point_range[0].to_value == pytest.approx(1.0)
+        assert described[0].floating_point_range[0].to_value == pytest.approx(0.5)  # NOISE_MAX
         assert described[1].read_only and 'lockstep' in described[1].additional_constraints
 
         refused = {

@@ -400,6 +400,10 @@ def main(argv: list[str] | None = None) -> int:
                         'after it died (default 1, doubling); N=0: never. Over the params '
                         "file's /**/zeus_launch respawn: section. Default: context_estimator, "
                         'policy and recorder 3/60/1 (recorder 0.5 s), the bridges never')
+    parser.add_argument('--lock-parameters', action='store_true',
+                        help='deployment: the bridges, estimator and policy declare their '
+                        'safety-relevant parameters (action_timeout, noise, ...) read-only, so '
+                        'no process can change them live; the checkpoint stays live')
     parser.add_argument('--no-progress', action='store_true',
                         help='no status line (steps, rate, episode, segment return; rewritten '
                         'in place on a terminal, a line every 10 s otherwise)')
@@ -412,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
             log_level=args.log_level,
             nodes=names, robot=args.robot, single_process=args.single_process,
             intra_process=not args.no_intra_process, continual=args.continual,
-            clock=args.clock, obs=args.obs)
+            clock=args.clock, obs=args.obs, lock_parameters=args.lock_parameters)
         known = [*NODES, CONTAINER]
         policies = parse_cli(args.respawn, known, policies_from_params(
             launch_defaults.read_params(launch.params_file), known))

@@ -34,7 +34,7 @@ from zeus_ros.nodes.health import (
 from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
-from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import steady_timer
 from zeus_ros.nodes.spin import run_node
 from zeus_ros.nodes.topics import TOPICS, publisher_qos, step_qos
@@ -51,6 +51,7 @@ SPECS: dict[str, Spec] = {
     'torch_threads': Spec(1, 'torch intra-op threads', low=1),
     **HEARD_SPECS,
     **latency_specs(20.0, 200.0, 'observation -> context'),
+    **LOCK_SPECS,
 }
 WARN_COUNTS = ('gaps', 'rejected', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
@@ -108,8 +109,8 @@ class ContextEstimatorNode(Node):
         self._novel_steps = [0, 0]  # steps scored above / at or below the threshold, per second
         self._last_novelty = float('nan')
         steady_timer(self, 1.0, self._publish_diagnostics)
-        serve_live_changes(self, SPECS, self.params, self._apply_live,
-                           prepare=self._prepare_live)
+        self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
+                                        prepare=self._prepare_live)
         self.get_logger().info(
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
             f'k={self.agent.k}, context dim {self.agent.context_dim}): loaded '
@@ -228,9 +229,9 @@ class ContextEstimatorNode(Node):
         self.counts['foreign'] = self.inputs.refused
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{p50:.2f}',
                   'latency_p99_ms': f'{p99:.2f}', 'dropped': self.assembler.dropped,
-                  'late': self.assembler.late, **self.counts}
+                  'late': self.assembler.late, **self.counts, **self._live.values()}
         grown = self._window.delta(self.counts)
-        problems = self._window.problems(grown, WARN_COUNTS)
+        problems = [*self._window.problems(grown, WARN_COUNTS), *self._live.problems()]
         _, stalled = rate_problems(self._rate.rate, grown['estimates'], 0.0, 0.0,
                                    self.counts['estimates'] > 0, what='estimates')
         slow, late = latency_problems(p99, self.params['latency_warn_ms'],

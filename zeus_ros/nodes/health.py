@@ -141,8 +141,9 @@ def latency_specs(warn_ms: float, error_ms: float, what: str, zero_warn: str = '
 
     return {
         'latency_warn_ms': Spec(warn_ms, f'/diagnostics: WARN when the {what} p99 of the last '
-                                f'second exceeds it (0: {zero_warn})', live=True, low=0.0),
+                                f'second exceeds it (0: {zero_warn})', live=True, low=0.0,
+                                safety=True),
         'latency_error_ms': Spec(error_ms, f'/diagnostics: ERROR when the {what} p99 of the '
                                  f'last second exceeds it (0: {zero_error})', live=True,
-                                 low=0.0),
+                                 low=0.0, safety=True),
     }

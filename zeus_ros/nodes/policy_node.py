@@ -42,11 +42,18 @@ from zeus_ros.nodes.health import (
 from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
-from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import WaitReport, count_publishers, steady_timer
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
 from zeus_ros.nodes.spin import run_node
 from zeus_ros.nodes.topics import TOPICS, action_qos, step_qos
+
+NOISE_MAX = 0.5
+"""The most exploration noise (std as a fraction of half the action range): 0.5 already makes
+every action noisy (test_ros_citizen); issue 49's 1.0 quadrupled the per-step loss."""
+CONTEXT_TIMEOUT_FLOOR = 0.1
+"""Seconds: the least context_timeout; below it a context a few steps late would make the
+policy publish the safe action instead (as sim_bridge's ACTION_TIMEOUT_FLOOR)."""
 
 SPECS: dict[str, Spec] = {
     'checkpoint': Spec('', 'checkpoint to act with (empty: seeded uniform-random policy); a '
@@ -55,28 +62,31 @@ SPECS: dict[str, Spec] = {
     'task': Spec('', 'task the checkpoint must be for (required without a checkpoint)'),
     'mode': Spec('lockstep', "sim_bridge's mode (sets the action QoS)",
                  choices=('lockstep', 'realtime')),
-    'deterministic': Spec(True, "act with the actor's mean (false: sample)", live=True),
+    'deterministic': Spec(True, "act with the actor's mean (false: sample)", live=True,
+                          safety=True),
     'noise': Spec(0.0, 'exploration noise, a fraction of half the action range', live=True,
-                  low=0.0, high=1.0),
+                  low=0.0, high=NOISE_MAX, safety=True),
     'seed': Spec(0, 'seeds sampling, noise and the random policy', low=0),
     'context_deadline': Spec(0.2, 'seconds to wait for context k before acting on the newest',
-                             live=True, low=0.0),
+                             live=True, low=0.0, safety=True),
     'context_lag': Spec(0, 'act on observation k with context k - context_lag (from this '
                         "episode only) instead of waiting for context k: the estimator leaves "
-                        "the step's critical path", live=True, low=0, high=MAX_CONTEXT_LAG),
+                        "the step's critical path", live=True, low=0, high=MAX_CONTEXT_LAG,
+                        safety=True),
     'context_timeout': Spec(2.0, 'no context for this long: publish the safe action',
-                            live=True, low=0.001),
+                            live=True, low=CONTEXT_TIMEOUT_FLOOR, safety=True),
     'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
     'device': Spec('cpu', 'torch device'),
     'torch_threads': Spec(1, 'torch intra-op threads', low=1),
     'frozen_context': Spec('', 'comma-separated context values used at every step instead of '
                            'the live estimate (value of adaptation); empty: live context',
-                           live=True),
+                           live=True, safety=True),
     'context_source': Spec('', 'node whose contexts are used, e.g. /r1/context_estimator '
                            '(empty: the only publisher of zeus/context at the first context); '
                            'any other is refused and an ERROR (docs/security.md)'),
     **HEARD_SPECS,
     **latency_specs(40.0, 200.0, 'observation -> action'),
+    **LOCK_SPECS,
 }
 WARN_COUNTS = ('stale', 'safe', 'rejected', 'mismatched', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
@@ -158,9 +168,10 @@ class PolicyNode(Node):
                                             self._check_deadline)
         self._deadline_timer.cancel()
         steady_timer(self, 1.0, self._publish_diagnostics)
-        serve_live_changes(self, SPECS, self.params, self._apply_live,
-                           check=lambda values: self._parse_frozen(values['frozen_context']),
-                           prepare=self._prepare_live)
+        self._live = serve_live_changes(
+            self, SPECS, self.params, self._apply_live,
+            check=lambda values: self._parse_frozen(values['frozen_context']),
+            prepare=self._prepare_live)
         source = 'random policy' if self.loaded is None else \
             f'{self.loaded.agent.method} checkpoint for {self.loaded.agent.task}: loaded ' \
             f'{self.loaded.describe()}'
@@ -360,9 +371,9 @@ class PolicyNode(Node):
         (p50, p99), _ = self._latency.report()
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
                   'context_lag': self.params['context_lag'], 'latency_p50_ms': f'{p50:.2f}',
-                  'latency_p99_ms': f'{p99:.2f}', **self.counts}
+                  'latency_p99_ms': f'{p99:.2f}', **self.counts, **self._live.values()}
         grown = self._window.delta(self.counts)
-        problems = self._window.problems(grown, WARN_COUNTS)
+        problems = [*self._window.problems(grown, WARN_COUNTS), *self._live.problems()]
         _, stalled = rate_problems(self._rate.rate, grown['actions'], 0.0, 0.0,
                                    self.counts['actions'] > 0, what='actions')
         slow, late = latency_problems(p99, self.params['latency_warn_ms'],

@@ -40,7 +40,7 @@ from zeus_ros.nodes.health import (
 )
 from zeus_ros.nodes.messages import diagnostics_message, image_from_array
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
-from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import WaitReport, missing_peers, steady_timer
 from zeus_ros.nodes.robot_io import (
     COMMAND_TYPES,
@@ -53,6 +53,10 @@ from zeus_ros.nodes.robot_io import (
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
 from zeus_ros.nodes.spin import run_node
 from zeus_ros.nodes.topics import TOPICS, image_qos, step_qos
+
+MIN_PERIODS = 2
+"""A nonzero input_timeout or stale_action_age must span at least this many control periods:
+shorter, and most steps would send the safe command."""
 
 SPECS: dict[str, Spec] = {
     'task': Spec('', "the robot's task name, written into every step (bags and checkpoints "
@@ -70,7 +74,8 @@ SPECS: dict[str, Spec] = {
                        low=1, high=1024),
     'control_rate': Spec(50.0, 'control steps per second (wall clock)', low=0.1, high=1000.0),
     'input_timeout': Spec(0.0, 'an input older than this skips the step and sends the safe '
-                          'command (0: 5 control periods)', live=True, low=0.0),
+                          'command (0: 5 control periods)', live=True, low=0.0, safety=True,
+                          allowed=f'0, or at least {MIN_PERIODS} control periods'),
     'episode_length': Spec(1000, 'steps per episode (the history is cleared between)', low=1),
     'reward': Spec('', 'velocity:JOINT, tracking:JOINT=TARGET,... or package.module:function',
                    required=True),
@@ -87,10 +92,13 @@ SPECS: dict[str, Spec] = {
     'action_sender': Spec('', 'node whose actions drive the robot, e.g. /policy (empty: the only '
                           'action publisher at step 0); others are refused (docs/security.md)'),
     'stale_action_age': Spec(0.0, 'an older action is replaced by the safe command '
-                             '(0: 3 control periods)', live=True, low=0.0),
+                             '(0: 3 control periods)', live=True, low=0.0, safety=True,
+                             allowed=f'0, or at least {MIN_PERIODS} control periods'),
     'context': Spec('', "known context as 'NAME=VALUE,...' (e.g. the payload you mounted), "
-                    'published as the true context; values live, names fixed', live=True),
-    'max_steps': Spec(0, 'stop after this many steps (0: run until stopped)', live=True, low=0),
+                    'published as the true context; values live, names fixed', live=True,
+                    safety=True),
+    'max_steps': Spec(0, 'stop after this many steps (0: run until stopped)', live=True, low=0,
+                      safety=True),
     'wait_for_peers': Spec(True, 'start once a policy publishes actions and someone observes'),
     'peer_grace': Spec(0.5, 'seconds between seeing the peers and publishing step 0',
                        live=True, low=0.0),
@@ -100,9 +108,10 @@ SPECS: dict[str, Spec] = {
                       '(launchers: the group; empty: min_observers alone counts)', live=True),
     'log_every': Spec(0, 'log step and episode every N steps (0: never)', live=True, low=0),
     'rate_tolerance': Spec(0.1, '/diagnostics: fraction the step rate may miss control_rate by '
-                           'before it WARNs', live=True, low=0.0, high=1.0),
+                           'before it WARNs', live=True, low=0.0, high=1.0, safety=True),
     **latency_specs(0.0, 0.0, 'observation -> action', 'one control period',
                     'five control periods'),
+    **LOCK_SPECS,
 }
 COUNTS = ('steps', 'ok', 'clipped', 'rejected', 'stale', 'late_inputs', 'missing_inputs',
           'rejected_inputs', 'bad_rewards', 'foreign')
@@ -177,8 +186,9 @@ class RobotBridgeNode(Node):
         self._wait_report = WaitReport(self)
         steady_timer(self, self.period, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
-        serve_live_changes(self, SPECS, self.params, self._apply_live,
-                           check=self._check_live)
+        self._check_periods(self.params)
+        self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
+                                        check=self._check_live)
         self.get_logger().info(
             f'{self.spec.task}: {len(self.spec.joints)} joints x {list(self.spec.observe)} + '
             f'{len(self.spec.extra_inputs)} extra input(s) = {self.spec.state_dim} values at '
@@ -191,6 +201,15 @@ class RobotBridgeNode(Node):
         if names != set(self.spec.context):
             raise ValueError(f'robot_bridge: context names are fixed at start '
                              f'({sorted(self.spec.context)}); only values change live')
+        self._check_periods(values)
+
+    def _check_periods(self, values: dict[str, Any]) -> None:
+        """A nonzero input_timeout or stale_action_age of fewer than MIN_PERIODS periods."""
+        for key in ('input_timeout', 'stale_action_age'):
+            if 0 < values[key] < MIN_PERIODS * self.period:
+                raise ValueError(f'robot_bridge: parameter {key} must be 0 or >= '
+                                 f'{MIN_PERIODS * self.period:g} s ({MIN_PERIODS} control '
+                                 f'periods), got {values[key]}')
 
     def _apply_live(self, changed: dict[str, Any]) -> None:
         if 'context' in changed:
@@ -397,9 +416,9 @@ class RobotBridgeNode(Node):
         self.counts['foreign'] = self._senders.refused
         values = {'task': self.spec.task, 'rate_hz': f'{self._rate.rate:.1f}',
                   'action_sender': str(self._senders.paired),
-                  **self._latency.diagnostics_values(), **self.counts}
+                  **self._latency.diagnostics_values(), **self.counts, **self._live.values()}
         grown = self._window.delta(self.counts)
-        problems = self._window.problems(grown, COUNTS[3:])
+        problems = [*self._window.problems(grown, COUNTS[3:]), *self._live.problems()]
         warn, stalled = rate_problems(self._rate.rate, grown['steps'],
                                       self.params['control_rate'], self.params['rate_tolerance'],
                                       self._started, upper=True)

@@ -36,7 +36,7 @@ from zeus_ros.nodes.health import (
 )
 from zeus_ros.nodes.messages import diagnostics_message, image_from_array, stamp_from_seconds
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
-from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import WaitReport, missing_peers, steady_timer
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
 from zeus_ros.nodes.spin import run_node
@@ -45,6 +45,13 @@ from zeus_ros.nodes.topics import TOPICS, image_qos, publisher_qos, step_qos
 MODES = ('lockstep', 'realtime')
 ACTION_BACKLOG = 1000  # reader history of zeus/action: room for a flood between two takes
 SCHEDULE_PREFIX = 'schedule.'
+ACTION_TIMEOUT_FLOOR = 0.1
+"""Seconds: the least action_timeout. A policy answers within its latency_error_ms (200 ms by
+default, p99 40 ms); below 0.1 s nearly every step would run the safe action (issue 49: 0.001
+made 1,166 of 1,217 steps safe)."""
+STALE_PERIODS = 2
+"""A nonzero stale_action_age must span at least this many control periods (realtime)."""
+
 SPECS: dict[str, Spec] = {
     'task': Spec('Cheetah-Run-v0', 'contextual MuJoCo task: ' + ', '.join(TASK_NAMES) +
                  ', or a task file (.yaml, sim_bridge/mjcf_task.py)'),
@@ -54,11 +61,13 @@ SPECS: dict[str, Spec] = {
     'pixels': Spec(False, 'also publish rgb8 frames on zeus/observation/image'),
     'image_size': Spec(84, 'frame height and width in pixels', low=1, high=1024),
     'action_timeout': Spec(2.0, 'lockstep: seconds to wait for Action k before the safe action',
-                           live=True, low=0.001),
+                           live=True, low=ACTION_TIMEOUT_FLOOR, safety=True),
     'control_rate': Spec(0.0, "realtime: steps per second (0: the task's own rate)", low=0.0),
     'stale_action_age': Spec(0.0, 'realtime: an older action is replaced (0: 3 periods)',
-                             live=True, low=0.0),
-    'max_steps': Spec(0, 'stop after this many steps (0: run until stopped)', live=True, low=0),
+                             live=True, low=0.0, safety=True,
+                             allowed=f'0, or at least {STALE_PERIODS} control periods'),
+    'max_steps': Spec(0, 'stop after this many steps (0: run until stopped)', live=True, low=0,
+                      safety=True),
     'wait_for_peers': Spec(True, 'start once a policy publishes actions and someone observes'),
     'peer_grace': Spec(0.5, 'seconds between seeing the peers and publishing step 0',
                        live=True, low=0.0),
@@ -72,11 +81,13 @@ SPECS: dict[str, Spec] = {
                       live=True, low=0),
     'expected_rate': Spec(0.0, "/diagnostics: steps per second expected (0: the task's control "
                           'rate, realtime: control_rate); slower by more than rate_tolerance: '
-                          'WARN', live=True, low=0.0),
+                          'WARN', live=True, low=0.0, safety=True),
     'rate_tolerance': Spec(0.1, '/diagnostics: fraction the rate may fall short of (realtime: '
-                           'also exceed) expected_rate', live=True, low=0.0, high=1.0),
+                           'also exceed) expected_rate', live=True, low=0.0, high=1.0,
+                           safety=True),
     **latency_specs(0.0, 0.0, 'observation -> action', 'one control period',
                     'five control periods'),
+    **LOCK_SPECS,
 }
 WARN_COUNTS = ('timeouts', 'rejected', 'stale', 'unexpected', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
@@ -144,7 +155,9 @@ class SimBridgeNode(Node):
         self._tick = steady_timer(self, tick, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
         self._wait_report = WaitReport(self)
-        serve_live_changes(self, SPECS, self.params, lambda _changed: None)
+        self._check_live(self.params)
+        self._live = serve_live_changes(self, SPECS, self.params, lambda _changed: None,
+                                        check=self._check_live)
         self.get_logger().info(
             f'{self.params["task"]} in {self.mode} mode, contexts {list(task.context_names)}, '
             f'pixels={self.params["pixels"]}; waiting for peers on {self._sub_action.topic_name}'
@@ -152,6 +165,14 @@ class SimBridgeNode(Node):
         )
 
     # -- parameters -------------------------------------------------------------------------
+    def _check_live(self, values: dict[str, Any]) -> None:
+        """A nonzero stale_action_age below STALE_PERIODS periods would make most steps safe."""
+        age = values['stale_action_age']
+        if self.mode == 'realtime' and 0 < age < STALE_PERIODS * self._period:
+            raise ValueError(f'sim_bridge: parameter stale_action_age must be 0 or >= '
+                             f'{STALE_PERIODS * self._period:g} s ({STALE_PERIODS} control '
+                             f'periods), got {age}')
+
     def _schedule_config(self) -> dict[str, Any]:
         """Collect the `schedule.*` parameters into the plain dict the schedule code reads."""
         config: dict[str, Any] = {}
@@ -336,8 +357,10 @@ class SimBridgeNode(Node):
         self.counts['foreign'] = self._senders.refused
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
-                  **self._latency.diagnostics_values(), **self.counts}
+                  **self._latency.diagnostics_values(), **self.counts,
+                  **self._live.values()}
         problems, errors = self._checks(float(values['latency_p99_ms']))
+        problems = [*problems, *self._live.problems()]
         self._pub_diag.publish(diagnostics_message(self, 'step loop', values, problems, errors))
 
     def _checks(self, p99_ms: float) -> tuple[list[str], list[str]]:

@@ -154,7 +154,13 @@ ARGUMENTS: tuple[LaunchArgument, ...] = (
                    'one process on one executor (the recorder stays separate)'),
     LaunchArgument('intra_process', 'true', 'single_process: its nodes hand each other '
                    'messages as Python objects (false: through DDS, as between processes)'),
+    LaunchArgument('lock_parameters', 'false', 'deployment: the bridges, estimator and policy '
+                   'declare their safety-relevant parameters read-only (lock_parameters:=true), '
+                   'so no process can change them live; the checkpoint stays live '
+                   '(docs/security.md)'),
 )
+LOCKABLE = ('sim_bridge', 'robot_bridge', 'context_estimator', 'policy')
+"""The nodes with a `lock_parameters` parameter (params.LOCK_SPECS)."""
 
 
 @dataclass(frozen=True)
@@ -572,6 +578,7 @@ def plan(
     continual: bool = False,
     clock: str = '',
     obs: str = '',
+    lock_parameters: bool = False,
 ) -> LaunchPlan:
     """Which nodes to start with which parameter overrides (ValueError on a bad argument).
 
@@ -590,6 +597,7 @@ def plan(
     with (`pairing_parameters`) unless the params file names one. `obs` 'pixels' turns on
     sim_bridge's frames and, without `checkpoint`, deploys the family's zoo pixel checkpoint
     (with `robot`: the robot's camera, `image_topic`, must be set; the robot task's checkpoint).
+    `lock_parameters` makes the safety-relevant parameters of the LOCKABLE nodes read-only.
     """
     if not intra_process and not single_process:
         raise ValueError('intra_process:=false (--no-intra-process) applies to single_process '
@@ -651,6 +659,8 @@ def plan(
             overrides['task'] = str(path)  # the robot's params file declares its task
         if use_sim_time:
             overrides['use_sim_time'] = True
+        if lock_parameters and name in LOCKABLE:
+            overrides['lock_parameters'] = True
         planned.append(NodePlan(name, overrides))
     if TRAINER in names:
         planned = _continual_plan(planned, params, task)
@@ -725,4 +735,5 @@ def plan_from_arguments(values: Mapping[str, str]) -> LaunchPlan:
                 single_process=parse_bool('single_process', get['single_process']),
                 intra_process=parse_bool('intra_process', get['intra_process']),
                 continual=parse_bool('continual', get['continual']), clock=get['clock'],
-                obs=get['obs'])
+                obs=get['obs'],
+                lock_parameters=parse_bool('lock_parameters', get['lock_parameters']))
