@@ -1,7 +1,7 @@
 """Issue 35: how adaptation degrades with the distance from the training range, as a curve.
 
     OMP_NUM_THREADS=1 nice -n 10 python experiments/heldout_distance.py \
-        --task Cheetah-Bias-v0 [--episodes 10] [--threads 1] [--out docs/results/heldout]
+        --task Cheetah-Bias-v0 [--episodes 10] [--threads 1] [--out docs/results/heldout] [--reuse]
 
 Every preset split (params/contexts/<task>.yaml) has chosen something: the train values trained
 the policies, the interpolation and extrapolation values picked the defaults. This evaluates the
@@ -14,8 +14,12 @@ initial states), the context live and, for context methods, frozen at the checkp
 context over the train values (as `experiments/beyond_range.py` freezes it), which says whether
 what the policy gains at that distance is adaptation.
 
-Rows land in <out>/<task>_50k_runs.csv after every checkpoint; a rerun skips the rows it has
-(stop it any time). Then <out>/<task>_50k.csv (per method and distance: return, paired gain
+Every value is measured anew by default (the committed rows are replaced as the new ones come:
+a reader who runs it reproduces the numbers, not re-reads them); `--reuse` keeps the rows
+<out>/<task>_50k_runs.csv already holds for this --episodes and measures only the missing ones
+(to resume a stopped run, or to redraw the table and figure). Each line says how many values
+were measured and how many reused. Rows land in <out>/<task>_50k_runs.csv after every
+checkpoint. Then <out>/<task>_50k.csv (per method and distance: return, paired gain
 over no_context, share of the oracle's headroom, value of adaptation; mean ± s.e. over seeds,
 paired by seed) and <out>/<task>_50k.png.
 """
@@ -222,33 +226,41 @@ def _cell(entry: dict[str, Any], key: str, digits: int = 1) -> str:
     return f'{entry[key]:.{digits}f} ± {entry[key + "_se"]:.{digits}f}'
 
 
-def main() -> None:
-    """Measure what is missing, then write the summary table and the plot."""
+def main(argv: list[str] | None = None) -> None:
+    """Measure every value (with --reuse: the missing ones), then write the table and plot."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--task', choices=sorted(GRIDS), default='Cheetah-Bias-v0')
     parser.add_argument('--episodes', type=int, default=10, help='episodes per context value')
     parser.add_argument('--threads', type=int, default=1, help='torch threads')
     parser.add_argument('--out', type=Path, default=Path('docs/results/heldout'))
-    args = parser.parse_args()
+    parser.add_argument('--reuse', action='store_true',
+                        help='keep the rows OUT/<task>_50k_runs.csv holds for these --episodes '
+                        'and measure only the missing values (resume a stopped run; default: '
+                        'measure every value anew)')
+    args = parser.parse_args(argv)
     import torch
 
     torch.set_num_threads(args.threads)
     stem = args.out / f'{args.task.lower().replace("-", "_")}_50k'
     runs = Path(f'{stem}_runs.csv')
     rows = read_rows(runs)
+    if not args.reuse:  # re-measure: only rows of other --episodes stay (not in this table)
+        rows = [r for r in rows if r['episodes'] != args.episodes]
     points = grid(args.task)
+    measured = reused = 0
     todo = checkpoints(args.task)
     started = time.monotonic()
     for index, (method, seed, path) in enumerate(todo, 1):
         have = {(r['value'], r['episodes']) for r in rows if r['checkpoint'] == str(path)}
         missing = [p for p in points if (p[1], args.episodes) not in have]
+        measured, reused = measured + len(missing), reused + len(points) - len(missing)
         if missing:
             rows += measure(args.task, method, seed, path, missing, args.episodes)
             args.out.mkdir(parents=True, exist_ok=True)
             write_csv(runs, rows, RUN_COLUMNS)
         elapsed = time.monotonic() - started
         print(f'[{index}/{len(todo)}] {path} ({len(missing)} values measured, '
-              f'{elapsed:.0f} s so far)', flush=True)
+              f'{len(points) - len(missing)} reused, {elapsed:.0f} s so far)', flush=True)
     rows = [r for r in rows if r['episodes'] == args.episodes]
     table = summary(rows)
     write_csv(stem.with_suffix('.csv'), table)
@@ -259,6 +271,8 @@ def main() -> None:
     for e in table:
         print(f'| {e["distance"]:+g} | {e["method"]} | {e["seeds"]} | {_cell(e, "return")} | '
               f'{_cell(e, "gain")} | {_cell(e, "share", 2)} | {_cell(e, "voa_train_mean")} |')
+    print(f'{measured} values measured, {reused} reused'
+          + (f' (rows kept from {runs}: --reuse)' if reused else ''))
     print(f'wrote {runs}, {stem}.csv and {stem}.png')
 
 

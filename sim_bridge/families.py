@@ -43,6 +43,8 @@ class TaskFamily:
     """Context values per split (SPLITS), each as {parameter: value}."""
     training: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_TRAINING))
     """What `alpha_psi: auto` and `adam_beta1: auto` resolve to for this family."""
+    declared_training: frozenset[str] = frozenset()
+    """The keys of `training` the file declares; the rest are DEFAULT_TRAINING, a guess."""
     checkpoint: str | None = None
     """The zoo checkpoint it deploys, relative to checkpoints/ (None: not in the zoo)."""
     varies: str = ''
@@ -180,8 +182,8 @@ def _family(name: str, path: Path, data: Mapping[str, Any],
     if checkpoint is not None and not isinstance(checkpoint, str):
         raise ValueError(f'{where}: checkpoint must be a path under checkpoints/')
     return TaskFamily(name=name, source=path, specs=specs, presets=presets, training=training,
-                      checkpoint=checkpoint, varies=str(data.get('varies', '')),
-                      demo_values=values, demo_every=every)
+                      declared_training=frozenset(raw_training), checkpoint=checkpoint,
+                      varies=str(data.get('varies', '')), demo_values=values, demo_every=every)
 
 
 def _number(value: Any, where: str) -> float:

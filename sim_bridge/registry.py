@@ -12,9 +12,8 @@ import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sim_bridge.core import ContextualTask
-
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # not at run time: sim_bridge.core imports numpy, a --help does not need it
+    from sim_bridge.core import ContextualTask
     from sim_bridge.task_files import DeclaredTask
 
 __all__ = ['TASK_NAMES', 'declared_task', 'is_simulated', 'is_task_file', 'make_task',

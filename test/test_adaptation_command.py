@@ -32,6 +32,8 @@ def test_the_zoo_policy_adapts_and_plain_sac_has_nothing_to_freeze() -> None:
 def test_a_missing_checkpoint_is_one_line_exit_2(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """The error names the file; nothing else is measured."""
-    assert main(['--checkpoint', str(tmp_path / 'nope.pt'), '--no-progress']) == 2
+    with pytest.raises(SystemExit) as stop:  # refused while parsing, before torch loads
+        main(['--checkpoint', str(tmp_path / 'nope.pt'), '--no-progress'])
+    assert stop.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith('zeus adaptation: ') and 'nope.pt' in err and len(err.splitlines()) == 1

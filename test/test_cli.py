@@ -66,6 +66,7 @@ def test_a_bad_value_is_one_line_naming_the_flag_and_the_choices(
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
     """Exit 2, one stderr line `zeus <cmd>: ... <flag> ... <choices/nearest>`, no traceback."""
     monkeypatch.chdir(tmp_path)
+    (tmp_path / 'b').mkdir()  # --bags b exists: a missing path is refused before --set is read
     assert _run(command, argv) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1, err

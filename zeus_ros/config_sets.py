@@ -10,20 +10,30 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 import dataclasses
-from typing import Any
+from functools import cache
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from zeus_ros.cli_args import nearest
-from zeus_ros.learning.config import ZeusConfig, config_from_dict
 from zeus_ros.learning.errors import ConfigError
+
+if TYPE_CHECKING:
+    from zeus_ros.learning.config import ZeusConfig
 
 __all__ = ['SET_HELP', 'apply_sets', 'parse_set', 'parse_set_grid', 'parse_sets', 'refuse_both',
            'set_items']
 
 SET_HELP = ('override training-config fields, e.g. --set k=7 batch_size=256 (YAML values, '
             'validated like the config file)')
-FIELDS = tuple(field.name for field in dataclasses.fields(ZeusConfig))
+
+
+@cache
+def config_fields() -> tuple[str, ...]:
+    """The training-config field names (learning/config.py: torch, so read on first use)."""
+    from zeus_ros.learning.config import ZeusConfig
+
+    return tuple(field.name for field in dataclasses.fields(ZeusConfig))
 
 
 def parse_set(item: str, *, flag: str = '--set', grid: bool = False) -> tuple[str, list[Any]]:
@@ -33,8 +43,9 @@ def parse_set(item: str, *, flag: str = '--set', grid: bool = False) -> tuple[st
     if not sep or not key or not text:
         raise ConfigError(f'{flag} {item}: expected KEY=VALUE{"[,VALUE...]" if grid else ""}, '
                           f'e.g. {example}')
-    if key not in FIELDS:
-        raise ConfigError(f"{flag} {item}: unknown config field '{key}'{nearest(key, FIELDS)} "
+    fields = config_fields()
+    if key not in fields:
+        raise ConfigError(f"{flag} {item}: unknown config field '{key}'{nearest(key, fields)} "
                           '(the fields are the keys of params/train/state_cpu.yaml)')
     texts = text.split(',') if grid else [text]
     try:
@@ -71,6 +82,8 @@ def apply_sets(config: ZeusConfig, sets: dict[str, Any], flag: str = '--set') ->
     """`config` with `sets` applied, validated as a config file would be (ConfigError if not)."""
     if not sets:
         return config
+    from zeus_ros.learning.config import config_from_dict
+
     source = f'{flag} ' + ' '.join(f'{key}={_show(value)}' for key, value in sets.items())
     return config_from_dict({**config.to_dict(), **sets}, source=source)
 

@@ -1,4 +1,8 @@
-"""`zeus adaptation`: the command line of the value-of-adaptation check (adaptation.py)."""
+"""`zeus adaptation`: the command line of the value-of-adaptation check (adaptation.py).
+
+The library (numpy, torch, MuJoCo) is imported once the arguments are parsed and the
+checkpoints found: --help and a wrong path answer at once (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -6,8 +10,8 @@ import argparse
 from pathlib import Path
 import sys
 
-from zeus_ros.offline.evaluation import adaptation
-from zeus_ros.offline.evaluation.adaptation import EVAL_SEED, format_reports, measure_adaptation
+EVAL_SEED = 200
+"""The default --seed: offline/evaluation/adaptation.EVAL_SEED (a test keeps the two equal)."""
 
 __all__ = ['main']
 
@@ -18,11 +22,13 @@ def main(argv: list[str] | None = None) -> int:
         EXPECT_SHA256_HELP,
         ZeusArgumentParser,
         at_least,
+        module_doc,
         seed_arg,
         sha256_arg,
     )
 
-    parser = ZeusArgumentParser(prog='zeus adaptation', description=adaptation.__doc__,
+    parser = ZeusArgumentParser(prog='zeus adaptation',
+                                description=module_doc('zeus_ros.offline.evaluation.adaptation'),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--checkpoint', type=Path, required=True, help='your checkpoint')
     parser.add_argument('--expect-sha256', type=sha256_arg, metavar='SHA256',
@@ -38,10 +44,15 @@ def main(argv: list[str] | None = None) -> int:
                         "at a time; torch's default of one per core took 33 min where one "
                         'took 36 s on a busy 2-core machine)')
     parser.add_argument('--no-progress', action='store_true')
+    parser.must_exist('--checkpoint')
     args = parser.parse_args(argv)
     if args.episodes < 1:
         parser.error(f'--episodes {args.episodes}: give at least 1')
+    if args.against not in ('zoo', 'none') and not Path(args.against).exists():
+        parser.error(f'argument --against: {args.against}: no such file (looked in {Path.cwd()})')
     import torch
+
+    from zeus_ros.offline.evaluation.adaptation import format_reports, measure_adaptation
 
     torch.set_num_threads(args.threads)
     from zeus_ros.learning.errors import CheckpointError

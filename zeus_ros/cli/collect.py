@@ -1,7 +1,8 @@
 """`zeus collect`: run a scheduled task in-process (no ROS) and write bags like the recorder.
 
 The rollout itself is zeus_ros/offline/rollout.py (`collect`, the policies) and, with
---workers, zeus_ros/offline/training/collect_workers.py; this module reads the command line.
+--workers, zeus_ros/offline/training/collect_workers.py; this module reads the command line
+and checks it before those (numpy, bags, MuJoCo) are imported: --help answers at once (issue 52).
 """
 
 from __future__ import annotations
@@ -12,21 +13,13 @@ import shutil
 import signal
 import sys
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from zeus_ros.bags.writer import StepBagWriter
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg, task_name
-from zeus_ros.offline.rollout import (
-    SCHEDULE_HELP,
-    AgentPolicy,
-    CollectDiskFull,
-    collect,
-    disk_full_line,
-    next_bag_path,
-    parse_schedule,
-    random_policy,
-)
-from zeus_ros.offline.training.collect_workers import CollectJob, run_workers
+from zeus_ros.offline.schedule_text import SCHEDULE_HELP
+
+if TYPE_CHECKING:
+    from zeus_ros.bags.writer import StepBagWriter
 
 __all__ = ['main']
 
@@ -46,7 +39,8 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--out', type=Path, required=True, help='directory for the bag(s)')
     parser.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     parser.add_argument('--pixels', action='store_true', help='also record 84x84 rgb8 frames')
-    parser.add_argument('--checkpoint', type=Path, help='act with this agent, not at random')
+    parser.add_argument('--checkpoint', type=Path,
+                        help='act with this agent, not at random')
     parser.add_argument('--noise', type=at_least(0.0, float), default=0.0,
                         help='Gaussian exploration noise for --checkpoint, as a fraction of '
                         'half the action range (actions are clipped to the bounds)')
@@ -62,6 +56,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--ray', action='store_true',
                         help='run the workers as Ray tasks (RAY_ADDRESS: on that cluster, '
                         '--out shared), not as local processes')
+    parser.must_exist('--checkpoint')
     return parser
 
 
@@ -82,6 +77,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f'zeus collect: --workers must be between 1 and --steps ({args.steps}), got '
               f'{args.workers}', file=sys.stderr)
         return 2
+    from zeus_ros.bags.writer import StepBagWriter
+    from zeus_ros.offline.rollout import (
+        AgentPolicy,
+        CollectDiskFull,
+        collect,
+        disk_full_line,
+        next_bag_path,
+        parse_schedule,
+        random_policy,
+    )
+
     try:
         schedule_config = parse_schedule(args.schedule)
         bag = next_bag_path(args.out, append=args.append)
@@ -165,6 +171,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def main_workers(args: Any, schedule: dict[str, Any], bag: Path) -> int:
     """`zeus collect --workers N` after main checked every flag; the exit code."""
+    from zeus_ros.offline.training.collect_workers import CollectJob, run_workers
+
     template = CollectJob(args.task, schedule, bag, args.steps, args.seed,
                           checkpoint=args.checkpoint, noise=args.noise, pixels=args.pixels,
                           storage=args.storage, context_lag=args.context_lag)

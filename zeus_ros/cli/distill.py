@@ -1,7 +1,8 @@
 """`zeus distill`: the command line of a pixel student from a state teacher.
 
 The distillation itself (DAgger rounds, the regression, the student) is
-zeus_ros/offline/training/distill.py; this module reads the command line.
+zeus_ros/offline/training/distill.py; this module reads the command line, checks its paths,
+and only then imports torch and the library (issue 52: --help and a wrong path answer at once).
 """
 
 from __future__ import annotations
@@ -11,19 +12,23 @@ from dataclasses import asdict
 from pathlib import Path
 import sys
 
-import torch
-
 from zeus_ros.learning.errors import CheckpointError, ConfigError
-from zeus_ros.offline.training import distill as library
-from zeus_ros.offline.training.distill import DEFAULT_CONFIG, DistillSettings, distill
+from zeus_ros.offline.training.distill_settings import DEFAULT_CONFIG, DistillSettings
 
 __all__ = ['main']
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, seed_arg, task_name
+    from zeus_ros.cli_args import (
+        TASK_HELP,
+        ZeusArgumentParser,
+        module_doc,
+        seed_arg,
+        task_name,
+    )
 
-    parser = ZeusArgumentParser(prog='zeus distill', description=library.__doc__,
+    parser = ZeusArgumentParser(prog='zeus distill',
+                                description=module_doc('zeus_ros.offline.training.distill'),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--task', required=True, type=task_name, help=TASK_HELP)
     parser.add_argument('--teacher', type=Path, required=True,
@@ -48,13 +53,19 @@ def _build_parser() -> argparse.ArgumentParser:
                         '(same arguments; --rounds may grow)')
     parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
     parser.add_argument('--no-progress', action='store_true')
+    parser.must_exist('--teacher')
+    parser.must_exist('--config', share=True)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus distill`; one line on stderr for bad input."""
     args = _build_parser().parse_args(argv)
+    import torch
+
+    from zeus_ros.cli_args import input_path
     from zeus_ros.learning.config import load_config
+    from zeus_ros.offline.training.distill import distill
 
     torch.set_num_threads(args.threads)
     try:
@@ -67,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
         print('zeus distill: --rounds, --first-steps and --window must be >= 1', file=sys.stderr)
         return 2
     try:
-        config = load_config(args.config)
+        config = load_config(input_path(args.config, '--config'))
         if args.seed is not None:
             config = config.replace(seed=args.seed)
         path = distill(args.task, args.teacher, config, settings, args.out,

@@ -2,7 +2,9 @@
 
 The library is zeus_ros/offline/evaluation/evaluate.py (`evaluate(checkpoint, split=...)` for
 one checkpoint) and eval_batch.py (`evaluate_many` for several, then the tables over seeds);
-this module only reads the arguments, calls one of them and prints what came back.
+this module only reads the arguments, calls one of them and prints what came back. The
+libraries (torch, MuJoCo) are imported once the arguments are parsed and the checkpoints found,
+so --help and a wrong path answer at once (issue 52).
 """
 
 from __future__ import annotations
@@ -21,8 +23,6 @@ from zeus_ros.cli_args import (
     sha256_arg,
     task_name,
 )
-from zeus_ros.offline.evaluation.evaluate import evaluate, parse_values
-from zeus_ros.offline.evaluation.metrics import format_table
 
 __all__ = ['main']
 
@@ -68,6 +68,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         'several times slower on a busy machine; the nodes and --jobs use 1 '
                         'too, so the numbers agree)')
     parser.add_argument('--no-progress', action='store_true')
+    parser.must_exist('--checkpoint')
     return parser
 
 
@@ -80,9 +81,6 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             print(f'zeus eval: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
-    import torch
-
-    torch.set_num_threads(args.threads)
     if args.values is not None and args.split == 'all':
         print('zeus eval: --values replaces the split: drop --split all', file=sys.stderr)
         return 2
@@ -91,6 +89,12 @@ def main(argv: list[str] | None = None) -> int:
         print('zeus eval: --expect-sha256 pins one checkpoint file (one split): pin several '
               'with a sidecar FILE.sha256 each', file=sys.stderr)
         return 2
+    import torch
+
+    from zeus_ros.offline.evaluation.evaluate import evaluate, parse_values
+    from zeus_ros.offline.evaluation.metrics import format_table
+
+    torch.set_num_threads(args.threads)
     if many:
         return _main_many(args)
     try:
@@ -131,6 +135,7 @@ def _main_many(args: argparse.Namespace) -> int:
     """Several checkpoints (or all splits): evaluate each, then the tables over seeds."""
     from zeus_ros.learning.errors import CheckpointError
     from zeus_ros.offline.evaluation.eval_batch import evaluate_many, find_checkpoints
+    from zeus_ros.offline.evaluation.evaluate import parse_values
     from zeus_ros.offline.evaluation.report import markdown_table
 
     if args.out is None:

@@ -1,4 +1,8 @@
-"""`zeus ingest`: the command line of reading bags as training does (offline/data/ingest.py)."""
+"""`zeus ingest`: the command line of reading bags as training does (offline/data/ingest.py).
+
+The bag reader (numpy, rosbags) is imported after the arguments are parsed and the paths
+found, so --help and a mistyped path answer at once (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,6 @@ import warnings
 
 from zeus_ros.bags.errors import BagError, IngestError
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
-from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
 
 __all__ = ['main']
 
@@ -27,7 +30,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--strict', action='store_true', help='any issue is an error')
     parser.add_argument('--skip-corrupt', action='store_true',
                         help='skip (and list) bags that cannot be read')
+    parser.must_exist('--bags')
     args = parser.parse_args(argv)
+    from zeus_ros.offline.data.ingest import IngestWarning, ingest_bags
+
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter('always', IngestWarning)

@@ -1,4 +1,8 @@
-"""`zeus loop`: the command line of collect -> train rounds (offline/training/loop.run_loop)."""
+"""`zeus loop`: the command line of collect -> train rounds (offline/training/loop.run_loop).
+
+The flags are parsed and checked before torch and the loop's code are imported, so --help and
+a wrong path answer at once (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -19,16 +23,8 @@ from zeus_ros.cli_args import (
     task_name,
 )
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
-from zeus_ros.learning.methods import METHODS
-from zeus_ros.offline.rollout import DEFAULT_SCHEDULE, SCHEDULE_HELP, parse_schedule
-from zeus_ros.offline.training.loop import run_loop
-from zeus_ros.offline.training.train import (
-    CHECKPOINT,
-    TrainError,
-    apply_overrides,
-    check_device,
-    read_config,
-)
+from zeus_ros.learning.method_names import METHOD_NAMES
+from zeus_ros.offline.schedule_text import DEFAULT_SCHEDULE, SCHEDULE_HELP
 
 __all__ = ['main']
 
@@ -72,7 +68,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         'policy learns to adapt (docs/results.md, session 7); grammar below)')
     parser.add_argument('--set', nargs='+', action='extend', metavar='KEY=VALUE',
                         help=f'{SET_HELP}; on --resume added to the stored ones')
-    parser.add_argument('--method', choices=METHODS, help='override the config method')
+    parser.add_argument('--method', choices=METHOD_NAMES, help='override the config method')
     parser.add_argument('--seed', type=seed_arg, help='override the config seed')
     parser.add_argument('--device', help='override the config device: auto, cpu, cuda[:N]')
     parser.add_argument('--resume', action='store_true',
@@ -80,6 +76,7 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--no-eval', action='store_true', default=None,
                         help='skip periodic evaluation')
     parser.add_argument('--no-progress', action='store_true', help='hide progress bars')
+    parser.must_exist('--config', share=True)
     return parser
 
 
@@ -134,6 +131,16 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, flag) < 1:
             print(f'zeus loop: --{flag.replace("_", "-")} must be >= 1', file=sys.stderr)
             return 2
+    from zeus_ros.offline.rollout import parse_schedule
+    from zeus_ros.offline.training.loop import run_loop
+    from zeus_ros.offline.training.train import (  # torch: once the flags are good
+        CHECKPOINT,
+        TrainError,
+        apply_overrides,
+        check_device,
+        read_config,
+    )
+
     started = (args.out / 'run' / CHECKPOINT).exists() or any((args.out / 'bags').glob('bag_*'))
     if started and not args.resume:
         print(f'zeus loop: {args.out} already holds a loop run (bags or a checkpoint); pass '

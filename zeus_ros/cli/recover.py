@@ -1,4 +1,8 @@
-"""`zeus recover`: restore bags cut off by a crash (the library is zeus_ros/bags/recover.py)."""
+"""`zeus recover`: restore bags cut off by a crash (the library is zeus_ros/bags/recover.py).
+
+The bag libraries (numpy, rosbags) are imported after the arguments are parsed: --help answers
+at once (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -7,8 +11,6 @@ import sqlite3
 import sys
 
 from zeus_ros.bags.errors import BagError
-from zeus_ros.bags.recording import find_bags
-from zeus_ros.bags.recover import recover_bag
 from zeus_ros.cli_args import ZeusArgumentParser, flag_or_positional
 
 __all__ = ['main']
@@ -16,6 +18,8 @@ __all__ = ['main']
 
 def _bag_dirs(path: Path) -> list[Path]:
     """The bag folders at or below `path` (bags.recording.find_bags: a bag, or folders of bags)."""
+    from zeus_ros.bags.recording import find_bags
+
     return list(dict.fromkeys(bag.parent if bag.is_file() else bag for bag in find_bags(path)))
 
 
@@ -33,6 +37,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--keep-original', action='store_true',
                         help='keep the damaged mcap next to the rebuilt one as *.mcap.orig')
     args = parser.parse_args(argv)
+    from zeus_ros.bags.recover import recover_bag
+
     failed = 0
     for root in args.bags:
         try:

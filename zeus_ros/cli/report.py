@@ -33,6 +33,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='folder for CSV, MD and PNG (default: FOLDER/report; a continual '
                         'run: its _continual folder)')
     parser.add_argument('--title', help="plot title (default: the folder's task name)")
+    parser.must_exist('--folder')
     args = parser.parse_args(argv)
     from zeus_ros.offline.evaluation.continual_report import continual_folders
 

@@ -1,4 +1,8 @@
-"""`zeus sweep`: the command line of a sweep (offline/training/sweep.py: plan, run_sweep)."""
+"""`zeus sweep`: the command line of a sweep (offline/training/sweep.py: plan, run_sweep).
+
+The library (torch, Ray) is imported once the flags are parsed and checked: --help and a wrong
+path answer at once (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -7,34 +11,27 @@ from pathlib import Path
 import signal
 import sys
 
-from zeus_ros.offline.runs import RunStateError
-from zeus_ros.offline.training import sweep
-from zeus_ros.offline.training.sweep import (
-    SweepError,
-    default_config,
-    parse_seeds,
-    parse_sets,
-    plan,
-    run_sweep,
-    write_status,
-    write_tables,
-)
-from zeus_ros.offline.training.trial import LoopProtocol, trial_done
-
 __all__ = ['main']
 
 
 def _build_parser() -> argparse.ArgumentParser:
-    from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, task_name
-    from zeus_ros.learning.methods import METHODS
+    from zeus_ros.cli_args import (
+        TASK_HELP,
+        ZeusArgumentParser,
+        at_least,
+        module_doc,
+        task_name,
+    )
+    from zeus_ros.learning.method_names import METHOD_NAMES
 
+    doc = module_doc('zeus_ros.offline.training.sweep')
     parser = ZeusArgumentParser(
         prog='zeus sweep', formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=sweep.__doc__.split('\n\n')[0].split(': ', 1)[1],
-        epilog=sweep.__doc__.split('\n\n', 2)[2])
+        description=doc.split('\n\n')[0].split(': ', 1)[1],
+        epilog=doc.split('\n\n', 2)[2])
     parser.add_argument('--tasks', nargs='+', required=True, type=task_name,
                         help=f'{TASK_HELP}; several')
-    parser.add_argument('--methods', nargs='+', required=True, choices=METHODS,
+    parser.add_argument('--methods', nargs='+', required=True, choices=METHOD_NAMES,
                         help='%(choices)s; several')
     parser.add_argument('--seeds', default='0', help='e.g. 0-4 or 0,2,5 (default: 0)')
     parser.add_argument('--set', action='append', default=[], metavar='KEY=V1[,V2...]',
@@ -66,15 +63,28 @@ def _build_parser() -> argparse.ArgumentParser:
                         'none: a local loopback-only instance)')
     parser.add_argument('--retries', type=at_least(0), default=1, help='retries of a failed trial')
     parser.add_argument('--dry-run', action='store_true', help='list the trials and stop')
+    parser.must_exist('--config', share=True)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus sweep`; returns 0, 1 (a trial failed) or 2 (bad input)."""
-    from zeus_ros.learning.errors import ConfigError
-    from zeus_ros.offline.training.train import read_config
-
     args = _build_parser().parse_args(argv)
+    from zeus_ros.learning.errors import ConfigError
+    from zeus_ros.offline.runs import RunStateError
+    from zeus_ros.offline.training.sweep import (  # torch and Ray: once the flags are good
+        SweepError,
+        default_config,
+        parse_seeds,
+        parse_sets,
+        plan,
+        run_sweep,
+        write_status,
+        write_tables,
+    )
+    from zeus_ros.offline.training.train import read_config
+    from zeus_ros.offline.training.trial import LoopProtocol, trial_done
+
     try:
         for flag in ('rounds', 'random_steps', 'steps', 'updates', 'cpus_per_trial'):
             if getattr(args, flag) < 1:

@@ -1,4 +1,8 @@
-"""`zeus train`: the command line of training from bags (offline/training/train.py: `train`)."""
+"""`zeus train`: the command line of training from bags (offline/training/train.py: `train`).
+
+The arguments are parsed and their paths checked before torch and the training code are
+imported, so `--help` and a mistyped path answer at once even on a busy machine (issue 52).
+"""
 
 from __future__ import annotations
 
@@ -10,16 +14,8 @@ from typing import Any
 
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
-from zeus_ros.learning.config import METHODS
 from zeus_ros.learning.errors import ConfigError
-from zeus_ros.offline.training.train import (
-    NonFiniteError,
-    TrainError,
-    apply_overrides,
-    check_device,
-    read_config,
-    train,
-)
+from zeus_ros.learning.method_names import METHOD_NAMES
 
 __all__ = ['main', 'own_flags']
 
@@ -53,7 +49,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         'instead of dropping the affected transitions and their histories')
     parser.add_argument('--set', nargs='+', action='extend', default=[], metavar='KEY=VALUE',
                         help=SET_HELP)
-    parser.add_argument('--method', choices=METHODS, help='override the config method')
+    parser.add_argument('--method', choices=METHOD_NAMES, help='override the config method')
     parser.add_argument('--updates', type=at_least(0),
                         help='total updates of the run (overrides num_updates; a resumed run '
                         'counts from its checkpoint step)')
@@ -65,6 +61,9 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--threads', type=at_least(0), default=0,
                         help='torch CPU threads (0: torch default)')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
+    parser.must_exist('--bags')
+    parser.must_exist('--config', share=True)
+    parser.must_exist('--task-file')
     return parser
 
 
@@ -90,6 +89,14 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus train`; returns the process exit code."""
     args = _build_parser().parse_args(argv)
     from zeus_ros.bags.errors import BagError, IngestError
+    from zeus_ros.offline.training.train import (  # torch: only once the arguments are good
+        NonFiniteError,
+        TrainError,
+        apply_overrides,
+        check_device,
+        read_config,
+        train,
+    )
 
     try:
         sets = parse_sets(args.set)

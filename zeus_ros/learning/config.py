@@ -31,6 +31,7 @@ __all__ = [
     'config_from_dict',
     'load_config',
     'resolve_config',
+    'undeclared_defaults',
     'upgrade_stored_config',
 ]
 
@@ -489,6 +490,33 @@ def _read_config_data(path: Path, children: tuple[Path, ...]) -> Any:
         raise ConfigError(f'{path}: base {base} leads back to itself '
                           f'({" -> ".join(str(p) for p in (*chain, base_path))})')
     return {**_read_config_data(base_path, chain), **data}
+
+
+def undeclared_defaults(config: ZeusConfig, task: str) -> str | None:
+    """One line when `alpha_psi: auto` takes a value the task's family does not declare.
+
+    A family file without `training: alpha_psi` (a user's own task file) gets
+    DEFAULT_TRAINING's 1.0, a guess: the built-in families declare 0.0 to 2.0, and on the
+    Cheetah dynamics families 1.0 saturates psi so the actor ignores it. Not refused (a task
+    file that trains is kept working), but said, with the value and where to declare one.
+    """
+    if config.alpha_psi != 'auto':
+        return None
+    from sim_bridge.families import family
+
+    try:
+        declared = family(task)
+    except ValueError:
+        return None  # resolve_config refuses this one with its own message
+    objective = method_objective(config.method)
+    if ('alpha_psi' in declared.declared_training or not objective.reads('alpha_psi')
+            or 'alpha_psi' in objective.fixed):
+        return None  # declared, or a method that never weighs the context loss
+    return (f"alpha_psi auto -> {declared.training['alpha_psi']} for {task}: "
+            f'{declared.source} declares no `training: {{alpha_psi: ...}}`, so this is the '
+            "paper's most common value, not a measured one (the built-in families use 0.0-2.0; "
+            'on Cheetah-Bias/Motor 1.0 saturates psi and the actor ignores it): declare it in '
+            'the task file or pass --set alpha_psi=VALUE')
 
 
 def resolve_config(config: ZeusConfig, task: str) -> ZeusConfig:

@@ -8,6 +8,7 @@ Nothing outside the objectives compares method names: ask the objective instead
 
 from __future__ import annotations
 
+from zeus_ros.learning.method_names import METHOD_NAMES
 from zeus_ros.learning.objectives.base import Objective
 from zeus_ros.learning.objectives.cadm import Cadm
 from zeus_ros.learning.objectives.no_context import NoContext
@@ -30,6 +31,9 @@ METHOD_REGISTRY: dict[str, Objective] = {objective.name: objective for objective
 
 METHODS = tuple(METHOD_REGISTRY)
 """The shipped method names, in table order (a test may register more in METHOD_REGISTRY)."""
+if METHODS != METHOD_NAMES:  # the torch-free copy the command lines offer as choices
+    raise ImportError(f'learning/method_names.py lists {METHOD_NAMES}, the registry {METHODS}: '
+                      'give a new method in both')
 
 
 def method_objective(name: str) -> Objective:

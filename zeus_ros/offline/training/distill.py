@@ -28,7 +28,7 @@ without psi); `extra['distill']` says how it was trained.
 from __future__ import annotations
 
 import csv
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 import hashlib
 from pathlib import Path
 import time
@@ -57,58 +57,18 @@ from zeus_ros.offline.training.distill_resume import (
     round_data_path,
     save_resume,
 )
+from zeus_ros.offline.training.distill_settings import (
+    DEFAULT_CONFIG,
+    HEADS,
+    TEACHER_HEAD_WITHOUT_PSI,
+    DistillSettings,
+)
 
-__all__ = ['DistillSettings', 'distill', 'distill_loss', 'make_student',
-           'random_shift']
+__all__ = ['DEFAULT_CONFIG', 'HEADS', 'DistillSettings', 'distill', 'distill_loss',
+           'make_student', 'random_shift']
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / 'params' / 'train' / 'pixels_student.yaml'
 SCHEDULE = 'switch:train:every_episodes=1'
 """One train value per episode, in turn, as `zeus loop` collects."""
-
-
-@dataclass(frozen=True)
-class DistillSettings:
-    """What the regression and the DAgger rounds do (the networks are the ZeusConfig's)."""
-
-    rounds: int = 3
-    """DAgger rounds: round 0 the teacher acts, rounds 1.. the student acts."""
-    first_steps: int = 4000
-    """Rendered steps of round 0."""
-    round_steps: int = 1000
-    """Rendered steps of every later round."""
-    updates: int = 2000
-    """Regression updates after each round (on everything stored)."""
-    window: int = 20
-    """Consecutive observations per sampled window (batch_size // window windows)."""
-    psi_weight: float = 1.0
-    """Weight of the psi regression (in units of the teacher psi's variance)."""
-    noise: float = 0.1
-    """Exploration noise of whoever acts, a fraction of half the action range."""
-    shift: int = 4
-    """Random-shift padding in pixels (0: no augmentation)."""
-    max_steps: int = 20000
-    """Stored observations at most (about 21 kB each)."""
-    no_context: bool = False
-    """A student without psi (the pixel `no_context` reference)."""
-    head: str = 'own'
-    """'own': the student's psi and actor are learnt; 'teacher': the teacher's, frozen."""
-    feature_weight: float = 1.0
-    """Weight of the phi(o) -> phi_T(s) regression (teacher head only)."""
-    tune_head: float = 0.0
-    """Teacher head: learning-rate factor of the copied psi and actor (0: frozen)."""
-
-    def __post_init__(self) -> None:
-        if self.head not in HEADS:
-            raise _fail(f"head must be one of {', '.join(HEADS)}, not {self.head!r}")
-        if self.head == 'teacher' and self.no_context:
-            raise _fail(TEACHER_HEAD_WITHOUT_PSI)
-        if self.tune_head and self.head != 'teacher':
-            raise _fail('tune_head tunes the teacher head: give head teacher')
-
-
-HEADS = ('own', 'teacher')
-"""Who owns psi and the actor of the student (DistillSettings.head)."""
-TEACHER_HEAD_WITHOUT_PSI = 'the teacher head acts on psi: it cannot be a no_context student'
 
 
 def _fail(message: str) -> ConfigError:

@@ -23,7 +23,12 @@ from tqdm import tqdm
 import yaml
 
 from zeus_ros.cli_args import input_path
-from zeus_ros.learning.config import ZeusConfig, load_config, resolve_config
+from zeus_ros.learning.config import (
+    ZeusConfig,
+    load_config,
+    resolve_config,
+    undeclared_defaults,
+)
 from zeus_ros.learning.errors import CheckpointError, ConfigError
 from zeus_ros.learning.spec import PIXEL_SHAPE, AgentSpec
 from zeus_ros.offline.evaluation.metrics import (
@@ -35,7 +40,7 @@ from zeus_ros.offline.evaluation.metrics import (
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
-           'build_spec', 'check_device', 'read_config', 'train']
+           'build_spec', 'check_device', 'read_config', 'run_warnings', 'train']
 
 CHECKPOINT = 'checkpoint.pt'
 FINAL = 'final.pt'
@@ -236,6 +241,23 @@ def _config_differences(stored: ZeusConfig, wanted: ZeusConfig, step: int) -> li
             and not (key == LATER_FIELD and not_reached(old[key]) and not_reached(new[key]))]
 
 
+def run_warnings(config: ZeusConfig, task: str, transitions: int) -> list[str]:
+    """What this run guesses or lacks, one line each: it goes ahead, but not silently.
+
+    An `alpha_psi: auto` the task's family does not declare (learning/config.py), and fewer
+    transitions than `seed_steps`, the uniform-random steps the paper collects before its
+    first update: a run on less fits a few hundred steps and says nothing of the method.
+    """
+    warnings = [note] if (note := undeclared_defaults(config, task)) else []
+    if transitions < config.seed_steps:
+        warnings.append(f'the bags hold {transitions} transitions, fewer than seed_steps '
+                        f'{config.seed_steps} (the random steps the paper collects before '
+                        'learning starts): expect a policy fitted to these few; record more '
+                        f'(zeus collect --steps {config.seed_steps}) or --set '
+                        f'seed_steps={transitions} to say this is meant')
+    return warnings
+
+
 def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
                device: Any, seed: int, namespace: str = '', strict: bool = False
                ) -> tuple[Any, Any]:
@@ -334,6 +356,8 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
         f'{replay.num_episodes} episodes from {len(dataset.report.bags)} bag(s); '
         f'updates {start} -> {cfg.num_updates} on {device}')
     _report_cut_bags(dataset.report.bags, log)
+    for warning in run_warnings(config, dataset.task, len(replay)):
+        log(f'train: warning: {warning}')
     metrics = MetricsLog.resume(out / 'metrics.csv', up_to_step=start) if resume \
         else MetricsLog(out / 'metrics.csv')
     evals = MetricsLog.resume(out / 'eval.csv', up_to_step=start) if resume \
