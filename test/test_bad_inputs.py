@@ -73,7 +73,8 @@ def test_distill_on_a_full_disk_is_one_line(tmp_path: Path, monkeypatch: pytest.
     def full(*_args: Any, **_kwargs: Any) -> Any:
         raise _torch_enospc(out / 'resume.pt')
 
-    monkeypatch.setattr(distill, 'distill', full)
+    monkeypatch.setattr('zeus_ros.offline.training.distill.distill', full)
+    (tmp_path / 'teacher.pt').write_bytes(b'x')  # the paths are checked before any work
     argv = ['--task', 'Cheetah-Run-v0', '--teacher', str(tmp_path / 'teacher.pt'),
             '--out', str(out), '--no-progress']
     code = distill.main(argv)
@@ -104,7 +105,7 @@ def test_train_on_a_full_disk_names_the_checkpoint_size_and_resumes_only_a_check
     def full(*_args: Any, **_kwargs: Any) -> None:
         raise DiskFullError(target, 3 << 20)
 
-    monkeypatch.setattr(train, 'train', full)
+    monkeypatch.setattr('zeus_ros.offline.training.train.train', full)
     config = write_config(tmp_path / 'minimal.yaml', MINIMAL)
     argv = ['--bags', str(tmp_path), '--config', str(config), '--out', str(out),
             '--no-progress', '--no-eval']
