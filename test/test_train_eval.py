@@ -404,8 +404,11 @@ def test_eval_of_several_checkpoints_writes_tables_over_seeds(tmp_path: Path,
     capsys.readouterr()
     assert main(argv) == 0
     assert '0 evaluation(s) to run' in capsys.readouterr().out
-    assert main(['--checkpoint', str(paths[0]), str(paths[0].with_name('x.pt')),
-                 '--out', str(out)]) == 2
+    with pytest.raises(SystemExit) as missing:  # a missing file: refused while parsing
+        main(['--checkpoint', str(paths[0]), str(paths[0].with_name('x.pt')),
+              '--out', str(out)])
+    assert missing.value.code == 2
+    assert 'x.pt: no such file or folder' in capsys.readouterr().err
 
 
 @pytest.mark.slow
