@@ -13,7 +13,7 @@ help:
 	@echo 'make bench  set up, then run the benchmarks (prints numbers)'
 	@echo 'make faults set up, then run the whole fault matrix (test/faults; make test skips its long rows)'
 	@echo 'make soak   set up, then run the three-node loop for an hour (RSS growth, step gaps)'
-	@echo 'make test-continual  only the live continual run (swap + refusal; also in make test)'
+	@echo 'make test-continual  the live continual runs (tiny budget, also in make test; and the defaults, 3-7 min)'
 
 setup:
 	@bash scripts/setup.sh
