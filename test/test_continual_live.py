@@ -157,10 +157,14 @@ def test_continual_with_the_defaults_refuses_and_swaps_beyond_the_range(
         'mode': 'realtime', 'control_rate': 50.0,
         'schedule': {'kind': 'switch', 'every': 200, 'values': DRIFT}})
     params['/**/recorder']['ros__parameters']['output'] = str(tmp_path / 'rec')
+    from zeus_ros.system.launch_defaults import zoo_checkpoint
+
+    for node in ('context_estimator', 'policy'):  # (--task would set its demo schedule)
+        params[f'/**/{node}']['ros__parameters']['checkpoint'] = str(
+            zoo_checkpoint('Cheetah-Bias-v0'))
     (tmp_path / 'params.yaml').write_text(yaml.safe_dump(params))
     history = tmp_path / 'rec_continual' / 'history.jsonl'
-    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--task', 'Cheetah-Bias-v0',
-            '--continual', '--params', str(tmp_path / 'params.yaml'), '--no-progress',
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--continual', '--params', str(tmp_path / 'params.yaml'), '--no-progress',
             '--timeout', '480']
     text, events = _launch_until_refused_and_checked(argv, tmp_path, history, 470)
     gates = [e for e in events if e['event'] == 'gate']
