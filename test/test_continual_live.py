@@ -164,8 +164,8 @@ def test_continual_with_the_defaults_refuses_and_swaps_beyond_the_range(
             zoo_checkpoint('Cheetah-Bias-v0'))
     (tmp_path / 'params.yaml').write_text(yaml.safe_dump(params))
     history = tmp_path / 'rec_continual' / 'history.jsonl'
-    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--continual', '--params', str(tmp_path / 'params.yaml'), '--no-progress',
-            '--timeout', '480']
+    argv = [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--continual', '--params',
+            str(tmp_path / 'params.yaml'), '--no-progress', '--timeout', '480']
     text, events = _launch_until_refused_and_checked(argv, tmp_path, history, 470)
     gates = [e for e in events if e['event'] == 'gate']
     assert 'refuse' in [g['decision'] for g in gates], text[-3000:]
