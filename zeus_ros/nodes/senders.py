@@ -84,7 +84,10 @@ class SenderPairing:
         self.what = what
         self.setting = setting
         self.paired: Sender | None = None
-        self.refused = 0
+        self._refused = 0
+        self._early: dict[bytes, int] = {}  # a possible restart's messages before its hello
+        self.before_hello = 0
+        """Messages of a restart refused before its hello was checked: its own, not foreign."""
         self.takeover_after = takeover_after
         self._handshake = handshake_of(node)
         self._agreed: Hello | None = None  # the paired node's hello (its start nonce)
@@ -96,6 +99,19 @@ class SenderPairing:
         self._newcomers: dict[bytes, float] = {}  # same-name GIDs: first seen (monotonic)
         self._waiting: set[bytes] = set()  # unkeyed newcomers named as waiting (WARN, once)
         self._settling: tuple[frozenset[bytes], float] = (frozenset(), 0.0)
+
+    @property
+    def refused(self) -> int:
+        """Messages refused from publishers other than the pair (`foreign` in /diagnostics).
+
+        A restart's messages that came before its hello was checked count only once its
+        introduction has failed (INTRODUCTION_S after it was first seen); those of the restart
+        that did pair are `before_hello`.
+        """
+        now = time.monotonic()
+        late = sum(count for gid, count in self._early.items()
+                   if now - self._newcomers.get(gid, -INTRODUCTION_S) >= INTRODUCTION_S)
+        return self._refused + late
 
     @property
     def expected(self) -> str:
@@ -180,6 +196,7 @@ class SenderPairing:
         if sender is not None and self._may_take_over(sender, graph):
             self.paired = sender
             self._heard = time.monotonic()
+            self.before_hello += self._early.pop(sender.gid, 0)
             if old is not None:
                 self._retired.add(old.gid)
                 self._agreed = self._handshake.hello_of(sender.gid)
@@ -191,10 +208,15 @@ class SenderPairing:
                     f'pid {self._agreed.pid or "?"}, {how})'
                     if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
-        self.refused += 1
         if sender is not None and not self._introducing(sender, graph):
+            self._refused += 1 + self._early.pop(sender.gid, 0)
             self._name_once(sender, graph)
-        elif sender is not None and sender.node and sender.gid not in self._waiting and \
+            return False
+        if sender is None:
+            self._refused += 1
+        else:  # foreign only if it turns out not to be the restart (see `refused`)
+            self._early[sender.gid] = self._early.get(sender.gid, 0) + 1
+        if sender is not None and sender.node and sender.gid not in self._waiting and \
                 self._restart_state(sender, graph) == 'waiting':
             self._waiting.add(sender.gid)
             self._node.get_logger().warning(

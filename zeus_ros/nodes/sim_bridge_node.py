@@ -355,6 +355,7 @@ class SimBridgeNode(Node):
 
     def _publish_diagnostics(self) -> None:
         self.counts['foreign'] = self._senders.refused
+        self.counts['before_hello'] = self._senders.before_hello
         values = {'mode': self.mode, 'task': self.params['task'],
                   'rate_hz': f'{self._rate.rate:.1f}', 'action_sender': str(self._senders.paired),
                   **self._latency.diagnostics_values(), **self.counts,
