@@ -7,6 +7,7 @@ import contextlib
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -191,3 +192,27 @@ def spin_until(node: Any, predicate: Callable[[], bool], timeout: float) -> bool
         return True
     finally:
         executor.remove_node(node)
+
+
+def logged_at(text: str, needle: str = '') -> float:
+    """The wall-clock stamp of the first ROS log line holding `needle` (nan: none).
+
+    With no needle, the node's first line: it logs its checkpoint once the node exists.
+    """
+    for line in text.splitlines():
+        stamp = re.match(r'\[\w+\] \[(\d+\.\d+)\]', line)
+        if stamp and needle in line:
+            return float(stamp.group(1))
+    return float('nan')
+
+
+def first_error_after(diagnostics: list[Any], heard: list[float], name: str, needle: str,
+                 since: float) -> float:
+    """Seconds from `since` to the first ERROR of `name` holding `needle` (inf: never)."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    for at, array in zip(heard, diagnostics, strict=True):
+        if at >= since and any(s.name.startswith(f'{name}:') and s.level == DiagnosticStatus.ERROR
+                               and needle in s.message for s in array.status):
+            return at - since
+    return float('inf')

@@ -108,10 +108,12 @@ class SenderPairing:
         introduction has failed (INTRODUCTION_S after it was first seen); those of the restart
         that did pair are `before_hello`.
         """
-        now = time.monotonic()
-        late = sum(count for gid, count in self._early.items()
-                   if now - self._newcomers.get(gid, -INTRODUCTION_S) >= INTRODUCTION_S)
-        return self._refused + late
+        return self._refused + sum(count for gid, count in self._early.items()
+                                   if self._late(gid))
+
+    def _late(self, gid: bytes) -> bool:
+        """A possible restart first seen INTRODUCTION_S ago or more (its grace is over)."""
+        return time.monotonic() - self._newcomers.get(gid, -INTRODUCTION_S) >= INTRODUCTION_S
 
     @property
     def expected(self) -> str:
@@ -196,7 +198,11 @@ class SenderPairing:
         if sender is not None and self._may_take_over(sender, graph):
             self.paired = sender
             self._heard = time.monotonic()
-            self.before_hello += self._early.pop(sender.gid, 0)
+            early = self._early.pop(sender.gid, 0)
+            if self._late(sender.gid):  # already counted as refused (`refused`): stays so
+                self._refused += early
+            else:
+                self.before_hello += early
             if old is not None:
                 self._retired.add(old.gid)
                 self._agreed = self._handshake.hello_of(sender.gid)
@@ -208,14 +214,14 @@ class SenderPairing:
                     f'pid {self._agreed.pid or "?"}, {how})'
                     if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
+        if sender is not None and self._within_introduction(sender, graph):
+            # foreign only if it turns out not to be the restart (see `refused`)
+            self._early[sender.gid] = self._early.get(sender.gid, 0) + 1
+        else:
+            self._refused += 1 + (self._early.pop(sender.gid, 0) if sender else 0)
         if sender is not None and not self._introducing(sender, graph):
-            self._refused += 1 + self._early.pop(sender.gid, 0)
             self._name_once(sender, graph)
             return False
-        if sender is None:
-            self._refused += 1
-        else:  # foreign only if it turns out not to be the restart (see `refused`)
-            self._early[sender.gid] = self._early.get(sender.gid, 0) + 1
         if sender is not None and sender.node and sender.gid not in self._waiting and \
                 self._restart_state(sender, graph) == 'waiting':
             self._waiting.add(sender.gid)
@@ -268,10 +274,8 @@ class SenderPairing:
         That is one within INTRODUCTION_S of its handshake, or (unkeyed) one waiting for the
         paired publisher to leave the graph.
         """
-        state = self._restart_state(sender, graph)
-        if state == 'possible':
-            return time.monotonic() - self._newcomers[sender.gid] < INTRODUCTION_S
-        return state == 'waiting'
+        return self._within_introduction(sender, graph) or \
+            self._restart_state(sender, graph) == 'waiting'
 
     def others(self) -> list[Sender]:
         """Publishers on the topic besides the paired one (each is named once in the log)."""
@@ -279,10 +283,23 @@ class SenderPairing:
         if self.paired is None:  # one publisher is the one to pair with; more are ambiguous
             return list(graph.values()) if len(graph) > 1 else []
         found = [s for gid, s in graph.items() if gid not in self._retired
-                 and gid != self.paired.gid and not self._introducing(s, graph)]
+                 and gid != self.paired.gid and not self._within_introduction(s, graph)]
         for sender in found:
-            self._name_once(sender, graph)
+            if self._restart_state(sender, graph) != 'waiting':  # that one had its WARN line
+                self._name_once(sender, graph)
         return found
+
+    def _within_introduction(self, sender: Sender, graph: dict[bytes, Sender]) -> bool:
+        """A possible restart still inside its INTRODUCTION_S: not yet an ERROR anywhere.
+
+        Unlike `_introducing`, an unkeyed newcomer waiting for the paired publisher to leave
+        the graph is not spared /diagnostics: its messages are refused meanwhile, whoever it
+        is (a stall impostor or a restart waiting out the DDS lease), and the operator sees it
+        at the next status, not only once the paired node talks again.
+        """
+        state = self._restart_state(sender, graph)
+        return state == 'possible' and \
+            time.monotonic() - self._newcomers[sender.gid] < INTRODUCTION_S
 
     def errors(self) -> list[str]:
         """The /diagnostics ERROR line while other publishers exist (empty: none)."""
