@@ -51,9 +51,14 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--resume', action='store_true',
                         help='continue the stopped run in --out after its last finished round '
                         '(same arguments; --rounds may grow)')
+    parser.add_argument('--refresh', type=Path, metavar='STUDENT',
+                        help='no distillation: write --out/student.pt, the `--head teacher` '
+                        "STUDENT acting with --teacher's actor (a continual round's candidate "
+                        "of STUDENT's teacher: the same psi), in a second")
     parser.add_argument('--threads', type=int, default=1, help='torch threads (default: 1)')
     parser.add_argument('--no-progress', action='store_true')
     parser.must_exist('--teacher')
+    parser.must_exist('--refresh')
     parser.must_exist('--config', share=True)
     return parser
 
@@ -68,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.offline.training.distill import distill
 
     torch.set_num_threads(args.threads)
+    if args.refresh is not None:
+        return _refresh(args.refresh, args.teacher, args.out, args.task)
     try:
         settings = DistillSettings(**{name: getattr(args, name)
                                       for name in DistillSettings.__dataclass_fields__})
@@ -99,6 +106,19 @@ def main(argv: list[str] | None = None) -> int:
                  if (args.out / RESUME_FILE).exists()
                  else 'run it again (no round finished: nothing to resume)')
         print(f'zeus distill: {full}; free some space and {again}', file=sys.stderr)
+        return 2
+    print(f'wrote {path}')
+    return 0
+
+
+def _refresh(student: Path, teacher: Path, out: Path, task: str) -> int:
+    """`--refresh`: the student takes the retrained teacher's actor (student_refresh.py)."""
+    from zeus_ros.offline.training.student_refresh import refresh_student
+
+    try:
+        path = refresh_student(student, teacher, out / 'student.pt', task=task)
+    except (CheckpointError, ValueError) as error:
+        print(f'zeus distill: {error}', file=sys.stderr)
         return 2
     print(f'wrote {path}')
     return 0

@@ -30,7 +30,8 @@ from zeus_ros.learning.errors import CheckpointError, CheckpointIntegrityError, 
 from zeus_ros.learning.spec import AgentSpec
 
 __all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_deployment',
-           'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint', 'verify_checkpoint']
+           'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint', 'save_deployment',
+           'verify_checkpoint']
 
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
@@ -300,10 +301,18 @@ def export_for_deployment(source: str | Path, target: str | Path) -> Path:
     """
     source, target = Path(source), Path(target)
     loaded = load_checkpoint(source, load_optimizers=False)
-    agent = loaded.agent
+    return save_deployment(target, loaded.agent, step=loaded.step, extra=loaded.extra)
+
+
+def save_deployment(path: str | Path, agent: ZeusAgent, *, step: int,
+                    extra: dict[str, Any]) -> Path:
+    """Write the acting networks of `agent` (DEPLOY_MODULES) as a deployment export (atomic)."""
     keep = [name for name in DEPLOY_MODULES if name in agent.modules]
-    payload = _payload(agent, step=loaded.step, extra=loaded.extra)
+    payload = _payload(agent, step=step, extra=extra)
     payload['deploy'] = True
     payload['state'] = {'modules': {name: agent.modules[name].state_dict() for name in keep},
                         'optimizers': {}, 'log_alpha': agent.log_alpha.detach().cpu()}
-    return _write(payload, target)
+    bad = _nonfinite_message(payload['state'])
+    if bad is not None:
+        raise _fail(Path(path), f'not saved: {bad}')
+    return _write(payload, Path(path))
