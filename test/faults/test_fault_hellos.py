@@ -41,7 +41,8 @@ START_UP_S = 20.0
 
 
 def _statuses(diagnostics: list[Any], name: str) -> list[Any]:
-    return [s for array in diagnostics for s in array.status if s.name.startswith(f'{name}:')]
+    return [s for array in diagnostics for s in array.status  # the node's own, not its peers'
+            if s.name.startswith(f'{name}: ') and ': peer ' not in s.name]
 
 
 def _errors(diagnostics: list[Any], name: str) -> list[str]:

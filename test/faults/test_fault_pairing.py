@@ -37,11 +37,12 @@ def _errors(diagnostics: list[Any], name: str) -> list[str]:
     from diagnostic_msgs.msg import DiagnosticStatus
 
     return [s.message for array in diagnostics for s in array.status
-            if s.name.startswith(f'{name}:') and s.level == DiagnosticStatus.ERROR]
+            if s.name.startswith(f'{name}: ') and s.level == DiagnosticStatus.ERROR]
 
 
 def _newest(diagnostics: list[Any], name: str) -> dict[str, str]:
-    found = [s for array in diagnostics for s in array.status if s.name.startswith(f'{name}:')]
+    found = [s for array in diagnostics for s in array.status  # the node's own, not its peers'
+             if s.name.startswith(f'{name}: ') and ': peer ' not in s.name]
     return {kv.key: kv.value for kv in found[-1].values} if found else {}
 
 

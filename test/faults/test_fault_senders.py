@@ -31,7 +31,7 @@ FLOOD_SECONDS = 5
 
 def _bridge_statuses(diagnostics: list[Any]) -> list[Any]:
     return [s for array in diagnostics for s in array.status
-            if s.name.lstrip('/').startswith('sim_bridge')]
+            if s.name.lstrip('/').startswith('sim_bridge') and ': peer ' not in s.name]
 
 
 def _watch(probe: Any, steps: list[tuple[float, Any]], diagnostics: list[Any]) -> None:

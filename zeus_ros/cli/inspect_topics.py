@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Iterator, Sequence
 import contextlib
+from dataclasses import dataclass
 import os
 from pathlib import Path
 import signal
@@ -33,6 +34,10 @@ from zeus_ros.step_log import (
     plot_inspection,
 )
 
+DIAGNOSTICS_STALE_S = 5.0
+"""Seconds without a node's status before the view calls it STALE (diagnostic_aggregator's
+GenericAnalyzer `timeout` default; the nodes publish every 1 s, the trainer every 5 s)."""
+LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 DISCOVERY_SETTLE_S = 2.0
 """Seconds after the first step before a step without an estimate means 'no estimator'."""
 NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the same '
@@ -90,6 +95,8 @@ class Inspector:
         self.executor.add_node(self.node)
         self.log = StepLog()
         self.health: dict[str, dict[str, str]] = {}
+        self.statuses: dict[str, HeardStatus] = {}
+        """Every /diagnostics status by name: level, message, when it last arrived."""
         # As deep as the publishers' history (and the recorder's): an inspector starved of CPU
         # for a second (a busy machine) must not lose steps, or the demo's per-segment
         # returns of the live and the frozen run stop being comparable.
@@ -166,8 +173,14 @@ class Inspector:
         self.log.record(msg.step).t_action = received_s(info)
 
     def _on_diag(self, msg: object) -> None:
+        now = time.monotonic()
         for status in msg.status:
             self.health[status.name] = {kv.key: kv.value for kv in status.values}
+            heard = self.statuses.get(status.name)
+            self.statuses[status.name] = HeardStatus(
+                int.from_bytes(status.level, 'little') if isinstance(status.level, bytes)
+                else int(status.level), status.message, status.hardware_id, now,
+                now - heard.at if heard else 0.0)
 
     def spin(self, duration: float | None, steps: int | None, refresh: float,
              quiet: bool) -> None:
@@ -296,7 +309,13 @@ class Inspector:
             + f'latency p50 {percentile(latency, 50):.1f} ms p99 '
             f'{percentile(latency, 99):.1f} ms',
         ]
+        now = time.monotonic()
         for name, values in sorted(self.health.items()):
+            heard = self.statuses.get(name)
+            state = heard.state(now) if heard else ''
+            if state.startswith('STALE'):  # its counters are old news
+                lines.append(f'          {name}: {state}')
+                continue
             # A node's rate is 0.0 until its window holds two events: not shown until then.
             shown = ', '.join(f'{k}={v}' for k, v in values.items()
                               if k in ('rate_hz', 'timeouts', 'rejected', 'stale', 'safe',
@@ -305,8 +324,8 @@ class Inspector:
                                        'round_phase_eta_s', 'swaps', 'refusals',
                                        'rollbacks')
                               and not (k == 'rate_hz' and _is_zero(v)))
-            if shown:
-                lines.append(f'          {name}: {shown}')
+            if shown or state:
+                lines.append(f'          {name}: ' + ' | '.join(filter(None, (state, shown))))
         return '\n'.join(lines)
 
     def close(self) -> None:
@@ -337,6 +356,33 @@ def stop_on_signals(inspector: Inspector) -> Iterator[None]:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler if inspector.stop_signal is None else signal.SIG_IGN)
+
+
+@dataclass
+class HeardStatus:
+    """One /diagnostics status as the inspector last heard it."""
+
+    level: int
+    message: str
+    hardware_id: str
+    at: float  # monotonic time it arrived
+    interval: float  # seconds since the one before (0: the first)
+
+    def silent_after(self) -> float:
+        """Seconds without it before it is STALE: DIAGNOSTICS_STALE_S, or 3 of its periods."""
+        return max(DIAGNOSTICS_STALE_S, 3 * self.interval)
+
+    def state(self, now: float) -> str:
+        """'' while it arrives and is OK; else one line: STALE, or its level and summary."""
+        from zeus_ros.nodes.diagnostics import summary
+
+        silent = now - self.at
+        if silent > self.silent_after():
+            return (f'STALE: no /diagnostics for {silent:.0f} s (was {LEVELS.get(self.level, "?")}'
+                    f' [{self.hardware_id}])')
+        if self.level == 0:
+            return ''
+        return f'{LEVELS.get(self.level, str(self.level))}: {summary(self.message)}'
 
 
 def _is_zero(text: str) -> bool:

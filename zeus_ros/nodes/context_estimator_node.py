@@ -251,7 +251,8 @@ class ContextEstimatorNode(Node):
             self._pub_diag.publish(diagnostics_message(
                 self, 'context novelty', {'novelty': f'{last:.3f}',
                                           'threshold': f'{threshold:.3f}',
-                                          'novel_steps': novel, 'steps': novel + usual}, warn))
+                                          'novel_steps': novel, 'steps': novel + usual}, warn,
+                peers=False))
 
 
     def destroy_node(self) -> None:

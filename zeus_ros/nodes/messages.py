@@ -1,17 +1,12 @@
-"""Message conversions every node shares: stamps, rgb8 images and /diagnostics statuses."""
+"""Message conversions every node shares: stamps and rgb8 images (/diagnostics: diagnostics.py)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
-
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from sensor_msgs.msg import Image
 
-if TYPE_CHECKING:
-    from rclpy.node import Node
+from zeus_ros.nodes.diagnostics import diagnostics_message
 
 __all__ = [
     'array_from_image',
@@ -67,31 +62,3 @@ def array_from_image(msg: Image, expect_shape: tuple[int, int] | None = None) ->
             f'{msg.height}x{msg.width} rgb8 needs {expected}'
         )
     return np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.width, 3)
-
-
-def diagnostics_message(
-    node: Node, name: str, values: dict[str, object], problems: Sequence[str] = (),
-    errors: Sequence[str] = (),
-) -> DiagnosticArray:
-    """One DiagnosticStatus (ERROR with `errors`, WARN with `problems`, else OK) in an array.
-
-    `problems` are faults the node covers and counts; `errors` need someone to act. A node
-    with a start handshake also reports its pairing mode ('keyed' / 'unkeyed'), the hellos it
-    refused, and an ERROR naming their senders (handshake.py): the same in every node.
-    """
-    from zeus_ros.nodes.handshake import pairing_diagnostics
-
-    pairing_values, pairing_errors = pairing_diagnostics(node)
-    values = {**values, **pairing_values}
-    errors = [*errors, *pairing_errors]
-    status = DiagnosticStatus()
-    status.name = f'{node.get_fully_qualified_name()}: {name}'
-    status.hardware_id = 'zeus_ros'
-    status.level = (DiagnosticStatus.ERROR if errors else
-                    DiagnosticStatus.WARN if problems else DiagnosticStatus.OK)
-    status.message = '; '.join([*errors, *problems]) or 'ok'
-    status.values = [KeyValue(key=key, value=str(value)) for key, value in values.items()]
-    array = DiagnosticArray()
-    array.header.stamp = node.get_clock().now().to_msg()
-    array.status = [status]
-    return array

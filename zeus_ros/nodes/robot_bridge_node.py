@@ -30,6 +30,7 @@ from zeus_msgs.msg import Action, ContextTruth, StateVector, StepFeedback
 from sim_bridge.actions import ActionStatus, check_action
 from sim_bridge.rewards import JointObservation, load_reward
 from sim_bridge.robot import RobotSpec, parse_context
+from zeus_ros.nodes.diagnostics import set_device
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -126,6 +127,7 @@ class RobotBridgeNode(Node):
         super().__init__('robot_bridge', **node_options)
         self.params = declare_specs(self, SPECS)
         self.spec = RobotSpec.from_params(self.params)
+        set_device(self, f'robot:{self.spec.task}')  # hardware_id: <namespace>/robot:<task>
         self.reward_fn = load_reward(self.params['reward'], self.spec.joints, self.spec.observe)
         self.low, self.high = self.spec.action_low, self.spec.action_high
         self.safe = parse_safe_command(self.params['safe_command'], self.low, self.high)

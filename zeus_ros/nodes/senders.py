@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import time
 from typing import TYPE_CHECKING
 
+from zeus_ros.nodes.diagnostics import watch_peer
 from zeus_ros.nodes.handshake import Hello, handshake_of
 from zeus_ros.nodes.rcl_bindings import GID_SIZE
 from zeus_ros.nodes.sender_subscription import SenderSubscription
@@ -92,6 +93,9 @@ class SenderPairing:
         self._handshake = handshake_of(node)
         self._agreed: Hello | None = None  # the paired node's hello (its start nonce)
         self._heard = time.monotonic()
+        self.last_message: float | None = None
+        """When the paired publisher's last message was accepted (monotonic; None: not yet)."""
+        watch_peer(node, self)  # its silence is a STALE peer status (diagnostics.py)
         self._retired: set[bytes] = set()  # earlier paired publishers (a restarted node's)
         self._graph: dict[bytes, Sender] = {}
         self._graph_at = -1.0
@@ -188,7 +192,7 @@ class SenderPairing:
     def accepts(self, gid: bytes) -> bool:
         """True for the paired publisher (re-pairing after a restart); else count and name."""
         if self.paired is not None and gid == self.paired.gid:
-            self._heard = time.monotonic()
+            self._heard = self.last_message = time.monotonic()
             return True
         graph = self.publishers(max_age=0.1)
         if gid not in graph:
@@ -197,7 +201,7 @@ class SenderPairing:
         old = self.paired  # before _may_take_over: its pair() sets self.paired on first contact
         if sender is not None and self._may_take_over(sender, graph):
             self.paired = sender
-            self._heard = time.monotonic()
+            self._heard = self.last_message = time.monotonic()
             early = self._early.pop(sender.gid, 0)
             if self._late(sender.gid):  # already counted as refused (`refused`): stays so
                 self._refused += early

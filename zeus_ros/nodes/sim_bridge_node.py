@@ -26,6 +26,7 @@ from sim_bridge.actions import ActionStatus
 from sim_bridge.env import EnvStep, ScheduledEnv
 from sim_bridge.registry import TASK_NAMES, make_task
 from sim_bridge.schedules import schedule_from_config
+from zeus_ros.nodes.diagnostics import set_device
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -105,6 +106,7 @@ class SimBridgeNode(Node):
         except ValueError as error:
             raise ValueError(f'sim_bridge: parameter task: {error}') from None
         self.params['task'] = task.name  # a task file's declared name, as steps carry it
+        set_device(self, f'sim:{task.name}')  # /diagnostics hardware_id: <namespace>/sim:<task>
         schedule = schedule_from_config(self._schedule_config(), task, self.params['seed'])
         self.env = ScheduledEnv(task, schedule)
         self.mode: str = self.params['mode']
