@@ -5,8 +5,8 @@ r"""ROS 2 launch file: sim_bridge, context_estimator and policy (+ recorder), se
         checkpoint:=/path/to/ckpt.pt params_file:=/path/to/params.yaml log_level:=debug
     ros2 launch zeus_ros zeus.launch.py single_process:=true   # the loop's nodes in one process
     ros2 launch zeus_ros zeus.launch.py continual:=true   # record, retrain, gate, swap live
-    ros2 launch zeus_ros zeus.launch.py namespace:=r1 use_sim_time:=true clock:=namespace
-        # a second simulated system beside another: its own /r1/clock
+    ros2 launch zeus_ros zeus.launch.py namespace:=r1 use_sim_time:=true
+        # a second simulated system beside another: its own /r1/clock (clock:=global: /clock)
 
 Runs from any folder with only the installed files: the params file defaults to
 share/zeus_ros/params/zeus.yaml and its relative checkpoint resolves against the params file's

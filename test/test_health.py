@@ -53,7 +53,7 @@ def test_counts_warn_per_window_and_clear_when_the_cause_has() -> None:
 def test_a_restart_is_believed_only_through_its_hello() -> None:
     """New nonce, same checkpoint, the key's proof: re-paired; anything else says why not."""
     import rclpy
-    from std_msgs.msg import String
+    from zeus_msgs.msg import PairingHello
 
     from zeus_ros.nodes.handshake import Hello, handshake_of
 
@@ -69,7 +69,7 @@ def test_a_restart_is_believed_only_through_its_hello() -> None:
             assert 'no valid hello' in handshake.introduces(new_gid, '/policy', agreed)
 
             def heard(hello: Hello) -> str | None:
-                handshake._on_hello(String(data=hello.to_text()), new_gid)
+                handshake._on_hello(hello.to_msg(), new_gid)
                 return handshake.introduces(new_gid, '/policy', agreed)
 
             gids = frozenset({new_gid.hex()})
@@ -84,7 +84,7 @@ def test_a_restart_is_believed_only_through_its_hello() -> None:
                 Hello('/policy', 'n2', 'abc', gids).signed(b'other'))
             assert heard(Hello('/policy', 'n2', 'abc', gids).signed(b'launch key')) is None
             assert handshake.refused == 2, 'the two unproven hellos were refused on receipt'
-            handshake._on_hello(String(data='{not json'), new_gid)
+            handshake._on_hello(PairingHello(), new_gid)
             assert handshake.malformed == 1
         finally:
             node.destroy_node()
@@ -96,7 +96,6 @@ def test_hellos_are_checked_on_receipt_and_their_senders_named() -> None:
     Counted, never stored (the pair's hello stays the genuine one), the sender named in full.
     """
     import rclpy
-    from std_msgs.msg import String
 
     from zeus_ros.nodes.handshake import Hello, handshake_of, pairing_diagnostics
 
@@ -111,14 +110,14 @@ def test_hellos_are_checked_on_receipt_and_their_senders_named() -> None:
         try:
             handshake = handshake_of(node)
             handshake.key = key
-            handshake._on_hello(String(data=genuine.to_text()), policy)
+            handshake._on_hello(genuine.to_msg(), policy)
             assert handshake.hello_of(policy) == genuine
             relayed = Hello('/policy', 'n9', 'f' * 64, genuine.gids, genuine.proof, 42)
             claiming = Hello('/policy', 'n9', 'f' * 64, frozenset({policy.hex(),
                                                                   poisoner.hex()})).signed(key)
             unproven = Hello('/policy', 'n9', 'f' * 64, frozenset({poisoner.hex()}), pid=7)
             for hello in (relayed, claiming, unproven):
-                handshake._on_hello(String(data=hello.to_text()), poisoner)
+                handshake._on_hello(hello.to_msg(), poisoner)
             assert handshake.hello_of(policy) == genuine, 'a refused hello overwrote the pair'
             assert handshake.hello_of(poisoner) is None
             assert handshake.refused == 3
@@ -139,9 +138,16 @@ def test_hellos_are_checked_on_receipt_and_their_senders_named() -> None:
             node.destroy_node()
 
 
-@pytest.mark.parametrize('text', ['', '[]', '{"node": 1}', 'null'])
-def test_a_malformed_hello_is_never_trusted(text: str) -> None:
-    """Anything but a complete hello reads as None."""
-    from zeus_ros.nodes.handshake import Hello
+@pytest.mark.parametrize('fields', [{}, {'node': 'policy'}, {'nonce': ''},
+                                    {'publisher_gids': []}, {'publisher_gids': ['01' * 15]},
+                                    {'publisher_gids': ['zz' * 16]}])
+def test_a_malformed_hello_is_never_trusted(fields: dict[str, object]) -> None:
+    """Anything but a complete hello (name, nonce, 16-byte hex GIDs) is MalformedHelloError."""
+    from zeus_msgs.msg import PairingHello
 
-    assert Hello.from_text(text) is None
+    from zeus_ros.nodes.handshake import Hello, MalformedHelloError
+
+    complete = {'node': '/policy', 'nonce': 'n1', 'publisher_gids': ['01' * 16]}
+    assert Hello.from_msg(PairingHello(**complete)).node == '/policy'
+    with pytest.raises(MalformedHelloError):
+        Hello.from_msg(PairingHello(**({**complete, **fields} if fields else {})))

@@ -12,7 +12,7 @@ poisons and `relayed N` at the end (SIGINT, SIGTERM or after SECONDS).
 
 from __future__ import annotations
 
-import json
+import copy
 import secrets
 import signal
 import sys
@@ -20,37 +20,29 @@ import time
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import String
+from zeus_msgs.msg import PairingHello
 
-from zeus_ros.nodes.handshake import PAIRING_TOPIC
+from zeus_ros.nodes.handshake import PAIRING_TOPIC, QOS
 
 WRONG_SHA256 = 'f' * 64
-QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,  # the hellos' own (handshake.py)
-                 reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def main(seconds: float) -> int:
     """Poison for `seconds` (or until signalled); return 0."""
     rclpy.init()
     node = rclpy.create_node('poisoner')
-    heard: dict[str, dict[str, object]] = {}  # node name -> its newest genuine hello
+    heard: dict[str, PairingHello] = {}  # node name -> its newest genuine hello
     ours: set[str] = set()  # the nonces we made up: never relayed again
 
-    def on_hello(msg: String) -> None:
-        try:
-            data = json.loads(msg.data)
-        except ValueError:
+    def on_hello(msg: PairingHello) -> None:
+        if msg.nonce in ours or not msg.node:
             return
-        if data.get('nonce') in ours or not isinstance(data.get('node'), str):
-            return
-        if data['node'] not in heard:
-            print(f'relaying {data["node"]}', flush=True)
-        heard[data['node']] = data
+        if msg.node not in heard:
+            print(f'relaying {msg.node}', flush=True)
+        heard[msg.node] = msg
 
-    node.create_subscription(String, PAIRING_TOPIC, on_hello, QOS)
-    publisher = node.create_publisher(String, PAIRING_TOPIC, QOS)
+    node.create_subscription(PairingHello, PAIRING_TOPIC, on_hello, QOS)
+    publisher = node.create_publisher(PairingHello, PAIRING_TOPIC, QOS)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     stop = {'now': False}
@@ -64,11 +56,12 @@ def main(seconds: float) -> int:
         if time.monotonic() < next_relay:
             continue
         next_relay = time.monotonic() + 0.05
-        for data in list(heard.values()):
-            nonce = secrets.token_hex(8)
-            ours.add(nonce)
-            publisher.publish(String(data=json.dumps({**data, 'nonce': nonce,
-                                                      'sha256': WRONG_SHA256})))
+        for genuine in list(heard.values()):
+            forged = copy.copy(genuine)  # same name, pid, GIDs and proof
+            forged.nonce = secrets.token_hex(8)
+            forged.checkpoint_sha256 = WRONG_SHA256
+            ours.add(forged.nonce)
+            publisher.publish(forged)
             relayed += 1
     print(f'relayed {relayed}', flush=True)
     node.destroy_node()

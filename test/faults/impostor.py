@@ -80,20 +80,16 @@ def main(name: str, kind: str, seconds: float, sha256: str = '') -> int:
 
 def _send_hello(node: Node, sha256: str) -> None:
     """Announce `node` as a restart of its name would: a checked hello, only the key missing."""
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-    from std_msgs.msg import String
+    from zeus_msgs.msg import PairingHello
 
-    from zeus_ros.nodes.handshake import PAIRING_TOPIC, Hello
+    from zeus_ros.nodes.handshake import PAIRING_TOPIC, QOS, Hello
     from zeus_ros.nodes.rcl_bindings import publisher_gid
 
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    publisher = node.create_publisher(String, PAIRING_TOPIC, qos)
+    publisher = node.create_publisher(PairingHello, PAIRING_TOPIC, QOS)
     gids = frozenset(publisher_gid(p).hex() for p in node.publishers)
     forged = Hello(node.get_fully_qualified_name(), secrets.token_hex(8), sha256, gids,
                    pid=os.getpid())
-    publisher.publish(String(data=forged.to_text()))
+    publisher.publish(forged.to_msg())
 
 
 if __name__ == '__main__':

@@ -2,9 +2,11 @@
 
 The issue's run: `namespace:=r1 use_sim_time:=true` beside a default /r2 stalled /r1 (both
 sim_bridges published on the one global /clock, so every node's time jumped between them).
-With `zeus launch --clock namespace` each system's clock is <namespace>/clock: here two
-`zeus launch --sim-time` groups in one domain both step, each clock is monotonic and moves
-with its own steps only, and no node reports a second publisher on its clock.
+With `zeus launch --clock namespace`, and by default for a namespaced launch on simulation
+time (issue 48, item 7), each system's clock is <namespace>/clock: here two
+`zeus launch --sim-time` groups in one domain (/r1 as in the issue's run, no --clock; /r2
+with --clock namespace) both step, each clock is monotonic and moves with its own steps only,
+and no node reports a second publisher on its clock.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.faults_only]
 
 
 def test_two_namespaced_sim_time_systems_each_keep_their_own_clock(tmp_path: Path) -> None:
-    """/r1 and /r2, each `zeus launch --sim-time --clock namespace`: both step, own clocks."""
+    """/r1 (`zeus launch --sim-time`, the default clock) and /r2 (`--clock namespace`)."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from rosgraph_msgs.msg import Clock
     from zeus_msgs.msg import StepFeedback
@@ -49,10 +51,11 @@ def test_two_namespaced_sim_time_systems_each_keep_their_own_clock(tmp_path: Pat
         + f'/**/recorder:\n  ros__parameters:\n    output: {out}\n')
     domain = fresh_domain_id()
     # /r1 as in the issue's run: one process for the loop, recording; /r2 as processes.
-    flags = {'r1': ['--single-process', '--record'], 'r2': []}
+    # /r1 forgets --clock, as the issue's run did: the default is its own clock now.
+    flags = {'r1': ['--single-process', '--record'], 'r2': ['--clock', 'namespace']}
     launches = {ns: subprocess.Popen(
         [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params),
-         '--namespace', ns, '--sim-time', '--clock', 'namespace', '--no-progress',
+         '--namespace', ns, '--sim-time', '--no-progress',
          '--domain-id', str(domain), *flags[ns]],
         cwd=REPO, env=ros_environment(domain), stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL, start_new_session=True) for ns in ('r1', 'r2')}

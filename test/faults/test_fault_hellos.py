@@ -109,8 +109,12 @@ def test_hello_poisoning_cannot_stop_a_restart_from_re_pairing(
         # 1. The policy is killed and started again, the poisoner relaying all the while.
         restarted = len(steps)
         policy_started = _restart(ros_processes, 'policy', policy_argv, key)
-        assert spin_until(probe, lambda: sum(m.action_status == m.ACTION_OK
-                                             for m in steps[restarted:]) > 20, 60), \
+        # Counted only once the restart drives and takes contexts: under load the probe
+        # still receives steps the killed policy answered (and the estimator must be paired
+        # with policy2 before it is killed, or its restart is policy2's first pairing).
+        assert spin_until(probe, lambda: '/policy restarted' in ros_processes.log_text(
+            'sim_bridge') and 'on /zeus/context' in ros_processes.log_text('policy2') and sum(
+                m.action_status == m.ACTION_OK for m in steps[restarted:]) > 20, 60), \
             ros_processes.log_text('sim_bridge')[-3000:]
 
         # 2. The estimator likewise: the policy must take the restart's contexts.

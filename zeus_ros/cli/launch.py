@@ -383,10 +383,11 @@ def main(argv: list[str] | None = None) -> int:
                         help='stop everything after this many seconds')
     parser.add_argument('--namespace', default='',
                         help='run the group in this namespace (zeus/* topics move with it; '
-                        '/clock and /diagnostics stay global)')
-    parser.add_argument('--clock', default='global',
+                        '/diagnostics stays global, /clock too unless --sim-time: --clock)')
+    parser.add_argument('--clock', default='',
                         help='with --sim-time: global (/clock), namespace (<namespace>/clock: '
-                        'several simulated systems in one domain) or an absolute topic')
+                        'several simulated systems in one domain) or an absolute topic '
+                        '(default: namespace with --namespace and --sim-time, else global)')
     parser.add_argument('--sim-time', action='store_true',
                         help='every node sets use_sim_time (sim_bridge publishes /clock)')
     parser.add_argument('--single-process', action='store_true',
@@ -424,7 +425,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         print(f'zeus launch: {error}', file=sys.stderr)
         return 2
-    print(f'[zeus launch] params {launch.params_file}; ' + '; '.join(
+    clock = f'clock {launch.clock}; ' if launch.clock else ''  # every node remapped to it
+    print(f'[zeus launch] params {launch.params_file}; {clock}' + '; '.join(
         f'{node.name} {node.parameters}' for node in launch.nodes if node.parameters),
         flush=True)
     env = {**ros_env(args.domain_id), **launch_defaults.launch_env()}  # + the pairing key

@@ -2,22 +2,25 @@
 
 Why: pairing by publisher GID (senders.py) refuses a second publisher, but a node that comes
 back after a crash publishes under a new GID and the same name, and a name is all an impostor
-needs to claim. So each zeus node announces itself once per start on `zeus/pairing` (transient
-local, so a late joiner gets it): its fully qualified name, a random start nonce, the sha256 of
-its checkpoint ('' for none), its pid and the GIDs of its publishers; with `$ZEUS_PAIRING_KEY`
-set (the launch file and `zeus launch` set one per launch) also an HMAC of these under the key.
-A consumer re-pairs with a newcomer under the paired node's name only when a hello lists the
-newcomer's GID, carries a start nonce other than the one agreed at pairing, the same checkpoint
-sha256, and (with a key) a proof that checks: an explicit handshake, never the name alone.
+needs to claim. So each zeus node announces itself once per start on `zeus/pairing`
+(zeus_msgs/msg/PairingHello, transient local, so a late joiner gets it): its fully qualified
+name, a random start nonce, the sha256 of its checkpoint ('' for none), its pid and the GIDs
+of its publishers; with `$ZEUS_PAIRING_KEY` set (the launch file and `zeus launch` set one
+per launch) also an HMAC of these under the key. A consumer re-pairs with a newcomer under
+the paired node's name only when a hello lists the newcomer's GID, carries a start nonce
+other than the one agreed at pairing, the same checkpoint sha256, and (with a key) a proof
+that checks: an explicit handshake, never the name alone.
 
 A hello is checked when it arrives, not when it is used, and is stored only if it passes: it
 must list its own sender (the publisher GID of the message, which a process cannot choose), list
 only publishers of its sender's DDS participant (a GID is a 12-byte participant prefix and a
-4-byte entity id), and with a key carry the key's proof. So a bystander that re-publishes the
-hellos it hears (another nonce, another sha256) or claims another node's GIDs changes nothing
-a pairing reads: the pair's reference is only ever written by the paired node's own process.
-Each refused hello is counted and its sender named (full GID, the node the graph gives it, the
-pid its hello claims) in the log and, for 5 s, as an ERROR on /diagnostics.
+4-byte entity id), and with a key carry the key's proof; one with an empty name or nonce, no
+GID, or a GID that is not 16 bytes of hex is malformed (refused and counted too). So a
+bystander that re-publishes the hellos it hears (another nonce, another sha256) or claims
+another node's GIDs changes nothing a pairing reads: the pair's reference is only ever
+written by the paired node's own process. Each refused hello is counted and its sender named
+(full GID, the node the graph gives it, the pid its hello claims) in the log and, for 5 s, as
+an ERROR on /diagnostics.
 
 Without a key ('unkeyed', said once as a WARN at start and on /diagnostics) this stops
 mistakes and stray processes (a test script, a node started by hand under a taken name), not
@@ -32,31 +35,36 @@ import hashlib
 import hmac
 import json
 import os
+import re
 import secrets
 import time
 from typing import TYPE_CHECKING, Any
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import String
+from zeus_msgs.msg import PairingHello
+
+from zeus_ros.nodes.rcl_bindings import GID_SIZE
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from rclpy.node import Node
 
-__all__ = ['KEY_ENV', 'PAIRING_TOPIC', 'Handshake', 'Hello', 'Refusal', 'handshake_of',
-           'new_key', 'pairing_diagnostics', 'participant']
+__all__ = ['KEY_ENV', 'PAIRING_TOPIC', 'QOS', 'Handshake', 'Hello', 'MalformedHelloError',
+           'Refusal', 'handshake_of', 'new_key', 'pairing_diagnostics', 'participant']
 
 PAIRING_TOPIC = 'zeus/pairing'
 """Relative: a namespaced system hears only its own nodes' hellos."""
 KEY_ENV = 'ZEUS_PAIRING_KEY'
 """The environment variable holding the launch's shared key (hex; empty: no proofs)."""
-_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                  reliability=ReliabilityPolicy.RELIABLE,
-                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                 reliability=ReliabilityPolicy.RELIABLE,
+                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""The hellos' QoS: transient local, so a late joiner gets each node's newest."""
 RESEND_S = 1.0
 """Seconds between two sends of an unchanged hello."""
 _KEPT = 4096  # GIDs remembered (a node restarting a hundred times forgets its oldest ones)
+_GID_HEX = re.compile(f'[0-9a-f]{{{2 * GID_SIZE}}}')
 _PREFIX = 12  # bytes of a DDS GUID (the rmw's GID) that name the participant
 _NAME_WAIT_S = 2.0  # how long a refusal's log line waits for the graph to name its sender
 _REPEAT_S = 30.0  # a sender that goes on: one line per this many seconds with its count
@@ -81,7 +89,7 @@ def new_key() -> str:
 
 @dataclass(frozen=True)
 class Hello:
-    """One node's announcement of one start."""
+    """One node's announcement of one start (on the wire: zeus_msgs/msg/PairingHello)."""
 
     node: str
     nonce: str
@@ -91,6 +99,7 @@ class Hello:
     pid: int = 0  # the process that sent it (0: not said); proven only with the key
 
     def _body(self) -> bytes:
+        """What the proof covers: every field but the proof, in one fixed order."""
         return json.dumps([self.node, self.nonce, self.sha256, sorted(self.gids),
                            self.pid]).encode()
 
@@ -103,21 +112,35 @@ class Hello:
         """True without a key; with one, when the proof is the key's."""
         return not key or hmac.compare_digest(self.signed(key).proof, self.proof)
 
-    def to_text(self) -> str:
-        """The JSON carried in a std_msgs/String."""
-        return json.dumps({'node': self.node, 'nonce': self.nonce, 'sha256': self.sha256,
-                           'gids': sorted(self.gids), 'proof': self.proof, 'pid': self.pid})
+    def to_msg(self) -> PairingHello:
+        """The message sent on zeus/pairing (GIDs sorted, as the proof covers them)."""
+        return PairingHello(node=self.node, nonce=self.nonce, checkpoint_sha256=self.sha256,
+                            pid=self.pid, publisher_gids=sorted(self.gids), proof=self.proof)
 
     @staticmethod
-    def from_text(text: str) -> Hello | None:
-        """The hello in `text`, or None for anything malformed (never trusted, never raised)."""
-        try:
-            data = json.loads(text)
-            return Hello(str(data['node']), str(data['nonce']), str(data['sha256']),
-                         frozenset(map(str, data['gids'])), str(data.get('proof', '')),
-                         int(data.get('pid', 0)))
-        except (ValueError, KeyError, TypeError, AttributeError):
-            return None
+    def from_msg(msg: PairingHello) -> Hello:
+        """The hello `msg` carries; MalformedHelloError says why it is not one.
+
+        Why: the middleware checks only the types; an empty name or nonce, no publisher, or a
+        GID that is not GID_SIZE bytes as lowercase hex would otherwise reach the checks (or
+        be stored under a key no publisher has).
+        """
+        if not msg.node.startswith('/'):
+            raise MalformedHelloError(f'node {msg.node!r} is not a fully qualified name')
+        if not msg.nonce:
+            raise MalformedHelloError('its start nonce is empty')
+        if not msg.publisher_gids:
+            raise MalformedHelloError('it lists no publisher GID')
+        bad = [gid for gid in msg.publisher_gids if not _GID_HEX.fullmatch(gid)]
+        if bad:
+            raise MalformedHelloError(f'GID {bad[0][:80]!r} is not {GID_SIZE} bytes as '
+                                      'lowercase hex')
+        return Hello(msg.node, msg.nonce, msg.checkpoint_sha256, frozenset(msg.publisher_gids),
+                     msg.proof, int(msg.pid))
+
+
+class MalformedHelloError(ValueError):
+    """A PairingHello that is not a hello at all (refused and counted as malformed)."""
 
 
 @dataclass
@@ -161,8 +184,8 @@ class Handshake:
         self.malformed = 0
         self.refused = 0
         self.refusals: dict[bytes, Refusal] = {}
-        self._pub = node.create_publisher(String, PAIRING_TOPIC, _QOS)
-        self._sub = SenderSubscription(node, String, PAIRING_TOPIC, _QOS, self._on_hello,
+        self._pub = node.create_publisher(PairingHello, PAIRING_TOPIC, QOS)
+        self._sub = SenderSubscription(node, PairingHello, PAIRING_TOPIC, QOS, self._on_hello,
                                        admit=lambda _gid: True, with_sender=True)
         global _warned_unkeyed
         if not self.key and not _warned_unkeyed:  # once per process (a container: per group)
@@ -201,7 +224,7 @@ class Handshake:
                 return
         hello = Hello(self.name, self.nonce, sha256, frozenset(gids),
                       pid=os.getpid()).signed(self.key)
-        self._pub.publish(String(data=hello.to_text()))
+        self._pub.publish(hello.to_msg())
         self._sent, self._sent_at = (len(publishers), sha256), now
 
     def check(self, hello: Hello, sender: bytes) -> str | None:
@@ -224,22 +247,16 @@ class Handshake:
             return f'it has no valid proof of the launch key (${KEY_ENV})'
         return None
 
-    def _on_hello(self, msg: String, sender: bytes) -> None:
-        hello = Hello.from_text(msg.data)
-        if hello is None:
-            self.malformed += 1
-            self._refuse(sender, 'it is malformed (not a hello)', '')
-            return
+    def _on_hello(self, msg: PairingHello, sender: bytes) -> None:
         try:
-            bytes.fromhex(''.join(hello.gids))
-        except ValueError:
+            hello = Hello.from_msg(msg)
+        except MalformedHelloError as error:
             self.malformed += 1
-            self._refuse(sender, 'it lists GIDs that are not hex', '')
+            self._refuse(sender, f'it is malformed: {error}', _claims(msg.node, msg.pid))
             return
         why = self.check(hello, sender)
         if why is not None:
-            self._refuse(sender, why, f'{hello.node or "(no name)"}'
-                         + (f' pid {hello.pid}' if hello.pid else ''))
+            self._refuse(sender, why, _claims(hello.node, hello.pid))
             return
         for gid in hello.gids:
             self._by_gid.pop(gid, None)  # re-inserted last: the oldest are forgotten first
@@ -343,6 +360,11 @@ class Handshake:
         if not hello.verified(self.key):
             return f'its hello has no valid proof of the launch key (${KEY_ENV})'
         return None
+
+
+def _claims(node: str, pid: int) -> str:
+    """What a hello says of its sender, for the refusal line (unproven)."""
+    return f'{node[:80] or "(no name)"}' + (f' pid {pid}' if pid else '')
 
 
 def handshake_of(node: Node) -> Handshake:

@@ -125,12 +125,14 @@ class LaunchArgument:
 
 ARGUMENTS: tuple[LaunchArgument, ...] = (
     LaunchArgument('namespace', '', 'namespace of the whole system (zeus/* topics move with it; '
-                   '/clock and /diagnostics stay global)'),
-    LaunchArgument('use_sim_time', 'false', 'every node runs on /clock, which sim_bridge '
-                   'publishes'),
-    LaunchArgument('clock', 'global', 'where the simulation clock goes: global (/clock), '
+                   '/diagnostics stays global, /clock too unless on simulation time: clock)'),
+    LaunchArgument('use_sim_time', 'false', 'every node runs on the simulation clock, which '
+                   'sim_bridge publishes (/clock; namespaced: <namespace>/clock, see clock)'),
+    LaunchArgument('clock', '', 'where the simulation clock goes: global (/clock), '
                    'namespace (<namespace>/clock: several simulated systems in one domain, '
-                   'each on its own time) or an absolute topic; every node is remapped'),
+                   'each on its own time) or an absolute topic; every node is remapped '
+                   '(empty: namespace for a namespaced system on simulation time, else '
+                   'global)'),
     LaunchArgument('params_file', '', 'ROS 2 params file for all nodes (empty: the installed '
                    'share/zeus_ros/params/zeus.yaml)'),
     LaunchArgument('task', '', "task family to run (empty: the params file's): sim_bridge runs "
@@ -242,15 +244,19 @@ class LaunchPlan:
 CLOCK_CHOICES = ('global', 'namespace')
 
 
-def clock_topic(clock: str, namespace: str) -> str:
+def clock_topic(clock: str, namespace: str, sim_time: bool = False) -> str:
     """The clock topic `clock` names in `namespace` ('' for /clock); ValueError says why not.
 
     global: /clock, ROS's one clock; namespace: <namespace>/clock, so two simulated systems in
     one domain each run on their own time (a second publisher on a clock is an ERROR on
-    /diagnostics); an absolute topic: that topic.
+    /diagnostics); an absolute topic: that topic. Unset (''): namespace for a namespaced system
+    on simulation time (`sim_time`), else global. Why: on the shared /clock a second simulated
+    system stalls it and mixes both clocks in its bag, and forgetting an option must not.
     """
     value = clock.strip()
-    if value in ('', 'global', '/clock'):
+    if not value:
+        value = 'namespace' if namespace and sim_time else 'global'
+    if value in ('global', '/clock'):
         return ''
     if value == 'namespace':
         if not namespace:
@@ -593,10 +599,12 @@ def plan(
     another family than the params file's: its demo schedule on sim_bridge, its zoo checkpoint
     on the agent nodes (unless `checkpoint` is given). `continual` records and adds the
     continual trainer, pointed at the recorder's output and the agents' checkpoint. `clock`
-    moves the simulation clock of every node (`clock_topic`). Each node is told whom it pairs
-    with (`pairing_parameters`) unless the params file names one. `obs` 'pixels' turns on
-    sim_bridge's frames and, without `checkpoint`, deploys the family's zoo pixel checkpoint
-    (with `robot`: the robot's camera, `image_topic`, must be set; the robot task's checkpoint).
+    moves the simulation clock of every node (`clock_topic`; unset, a namespaced system on
+    simulation time, by `use_sim_time` or its params file, gets <namespace>/clock). Each node
+    is told whom it pairs with (`pairing_parameters`) unless the params file names one. `obs`
+    'pixels' turns on sim_bridge's frames and, without `checkpoint`, deploys the family's zoo
+    pixel checkpoint (with `robot`: the robot's camera, `image_topic`, must be set; the robot
+    task's checkpoint).
     `lock_parameters` makes the safety-relevant parameters of the LOCKABLE nodes read-only.
     """
     if not intra_process and not single_process:
@@ -634,7 +642,9 @@ def plan(
     if task and not checkpoint:
         checkpoint = str(family_overrides.pop('checkpoint'))
     ns = namespace.strip().strip('/')
-    clock_to = clock_topic(clock, f'/{ns}' if ns else '')
+    sim_time = use_sim_time or any(section.get('use_sim_time') is True for name in names
+                                   for section in _node_sections(params, name))
+    clock_to = clock_topic(clock, f'/{ns}' if ns else '', sim_time)
     planned = []
     loop = [name for name in names if name != TRAINER]
     for name in names:
