@@ -16,6 +16,7 @@ from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg,
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.method_names import METHOD_NAMES
+from zeus_ros.learning.readout import READOUT_STEPS
 
 __all__ = ['main', 'own_flags']
 
@@ -58,6 +59,11 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--resume', action='store_true',
                         help='continue from OUT/checkpoint.pt (optimizers and step count)')
     parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
+    parser.add_argument('--readout-steps', type=at_least(0), default=READOUT_STEPS,
+                        help='steps of the trained policy on the train contexts that fit the '
+                        "context read-out and novelty monitor stored in final.pt (as zeus "
+                        "export's), so it deploys with the estimate in the context's units; "
+                        'default %(default)s, 0: none')
     parser.add_argument('--threads', type=at_least(0), default=0,
                         help='torch CPU threads (0: torch default)')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
@@ -126,7 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         train(args.bags, config, args.out, task=args.task, resume=args.resume,
               evaluate=not args.no_eval, progress=not args.no_progress,
-              namespace=args.namespace, strict=args.strict)
+              namespace=args.namespace, strict=args.strict,
+              readout_steps=args.readout_steps)
     except NonFiniteError as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 1

@@ -362,11 +362,13 @@ def _robot_pixel_checkpoint(params: Mapping[str, Any], path: Path, checkpoint: s
 def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
     """The family's zoo checkpoint (`<family>/<method>.pt`): this checkout's, else the share's.
 
+    A user's family file may name its own: relative to the file's folder (or absolute).
     ValueError naming the families that have one when `task` has none.
     """
-    from sim_bridge.families import family
+    from sim_bridge.families import builtin_family_file, family
 
-    declared = family(task).checkpoint
+    declared_family = family(task)
+    declared = declared_family.checkpoint
     if declared is None:
         from sim_bridge.registry import TASK_NAMES
 
@@ -376,6 +378,8 @@ def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
     relative = Path(declared).with_name(f'{method}.pt') if method != 'zeus' else Path(declared)
     candidates = [Path(__file__).resolve().parents[2] / 'checkpoints' / relative,
                   share_dir() / 'checkpoints' / relative]
+    if declared_family.source.resolve() != builtin_family_file(declared_family.name).resolve():
+        candidates.insert(0, declared_family.source.parent / relative)
     found = next((path for path in candidates if path.is_file()), None)
     if found is None:
         raise ValueError(f'{task}: zoo checkpoint {relative} not found; looked in '
