@@ -3,9 +3,10 @@
 Everything the tools know about a family is read here and nowhere else: its context parameters
 (unit, default, range), the preset value lists per split, the training defaults that a config's
 `auto` values resolve to, the zoo checkpoint it deploys and the schedule its demo runs.
-A built-in family's file names the Python class that simulates it (`builtin:`); a user task file
-declares the model itself (`model:`, sim_bridge/mjcf_task.py) and may carry the same `training:`,
-`checkpoint:` and `demo:` sections.
+A built-in family's file is named after its task, whose Python class simulates it. A user's
+family is either a copy of such a file (`task:` their name, `builtin:` the family whose simulator
+it runs, `declared_copy`) or a task file that declares the model itself (`model:`,
+sim_bridge/mjcf_task.py); both may carry the same `training:`, `checkpoint:` and `demo:` sections.
 """
 
 from __future__ import annotations
@@ -13,20 +14,27 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
-import math
 from pathlib import Path
 from typing import Any
 
 from sim_bridge.core import ContextSpec
-from sim_bridge.presets import SPLITS, find_params_dir
+from sim_bridge.family_schema import (
+    FILE_KEYS,
+    builtin_family_file,
+    declared_copy,
+    number,
+    parse_presets,
+    parse_specs,
+    read_yaml,
+)
+from sim_bridge.presets import SPLITS
 
 __all__ = ['DEFAULT_TRAINING', 'DeclaredSpecs', 'TaskFamily', 'builtin_family_file',
-           'family', 'load_preset', 'parse_presets']
+           'declared_copy', 'family', 'load_preset', 'parse_presets']
 
 DEFAULT_TRAINING: Mapping[str, float] = {'alpha_psi': 1.0, 'adam_beta1': 0.9}
 """Training defaults of a family that declares none: the paper's most common values."""
 
-_FILE_KEYS = {'task', 'varies', 'context', 'presets', 'training', 'checkpoint', 'demo'}
 _TRAINING_KEYS = {'alpha_psi', 'adam_beta1'}
 _DEMO_KEYS = {'values', 'every'}
 
@@ -101,15 +109,9 @@ class DeclaredSpecs:
         return family(owner.name).specs  # type: ignore[attr-defined]
 
 
-def builtin_family_file(task: str) -> Path:
-    """`params/tasks/<task>.yaml` of this checkout or the installed share."""
-    return find_params_dir() / 'tasks' / f'{task}.yaml'
-
-
 def family(task: str) -> TaskFamily:
     """The family of a task name or task file; ValueError naming the file and the entry."""
     from sim_bridge.registry import declared_task
-    from sim_bridge.task_files import read_yaml
 
     declared = declared_task(task)
     if declared is not None:  # read each time: task_files re-reads a file that changed
@@ -125,8 +127,7 @@ def load_preset(task: str, split: str) -> list[dict[str, float]]:
 
 @cache
 def _builtin_family(task: str) -> TaskFamily:
-    from sim_bridge.registry import TASK_NAMES
-    from sim_bridge.task_files import read_yaml
+    from sim_bridge.builtins import TASK_NAMES
 
     if task not in TASK_NAMES:
         raise ValueError(f'unknown task {task!r}: choose one of {", ".join(TASK_NAMES)}, '
@@ -135,14 +136,14 @@ def _builtin_family(task: str) -> TaskFamily:
     data = read_yaml(path, what='task family file')
     if not isinstance(data, Mapping):
         raise ValueError(f'task family file {path}: expected a mapping of keys')
-    unknown = sorted(set(data) - _FILE_KEYS)
+    unknown = sorted(set(data) - FILE_KEYS)
     if unknown:
         raise ValueError(f'task family file {path}: unknown key(s) {unknown}; known: '
-                         f'{sorted(_FILE_KEYS)}')
+                         f'{sorted(FILE_KEYS)}')
     if data.get('task') != task:
         raise ValueError(f'task family file {path}: task is {data.get("task")!r}, '
                          f'expected {task!r} (the file name)')
-    specs = _specs(data.get('context'), f'task family file {path}')
+    specs = parse_specs(data.get('context'), f'task family file {path}')
     return _family(task, path, data, specs)
 
 
@@ -164,7 +165,7 @@ def _family(name: str, path: Path, data: Mapping[str, Any],
         raise ValueError(f'{where}: training: expected a mapping with keys '
                          f'{sorted(_TRAINING_KEYS)}, got {raw_training!r}')
     for key, value in raw_training.items():
-        training[key] = _number(value, f'{where}: training: {key}')
+        training[key] = number(value, f'{where}: training: {key}')
     if not 0.0 <= training['adam_beta1'] < 1.0 or training['alpha_psi'] < 0.0:
         raise ValueError(f'{where}: training: alpha_psi must be >= 0 and adam_beta1 in [0, 1)')
     demo = data.get('demo') or {}
@@ -184,59 +185,3 @@ def _family(name: str, path: Path, data: Mapping[str, Any],
     return TaskFamily(name=name, source=path, specs=specs, presets=presets, training=training,
                       declared_training=frozenset(raw_training), checkpoint=checkpoint,
                       varies=str(data.get('varies', '')), demo_values=values, demo_every=every)
-
-
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
-        raise ValueError(f'{where}: expected a number, got {value!r}')
-    return float(value)
-
-
-def _specs(context: Any, where: str) -> tuple[ContextSpec, ...]:
-    if not isinstance(context, Mapping) or not context:
-        raise ValueError(f'{where}: context: declare each parameter, e.g. motor_bias: '
-                         '{unit: ..., default: 0.0, range: [-1, 1], doc: ...}')
-    specs = []
-    for name, entry in context.items():
-        here = f'{where}: context {name}'
-        if not isinstance(entry, Mapping) or set(entry) - {'unit', 'default', 'range', 'doc'}:
-            raise ValueError(f'{here}: expected a mapping with unit, default, range, doc')
-        bounds = entry.get('range')
-        if not isinstance(bounds, list) or len(bounds) != 2:
-            raise ValueError(f'{here}: range must be [low, high]')
-        low, high = (_number(b, f'{here}: range') for b in bounds)
-        default = _number(entry.get('default'), f'{here}: default')
-        if not low <= default <= high:
-            raise ValueError(f'{here}: default {default} outside range [{low}, {high}]')
-        specs.append(ContextSpec(str(name), default, low, high, str(entry.get('doc', '')),
-                                 unit=str(entry.get('unit', ''))))
-    return tuple(specs)
-
-
-def parse_presets(raw: Any, parameters: tuple[str, ...], where: str
-                  ) -> dict[str, tuple[dict[str, float], ...]]:
-    """Preset lists per split as {parameter: value} dicts (a bare number: the only parameter)."""
-    if not isinstance(raw, Mapping) or set(raw) - set(SPLITS):
-        raise ValueError(f'{where}: presets: splits are {", ".join(SPLITS)}; got '
-                         f'{sorted(raw) if isinstance(raw, Mapping) else raw!r}')
-    single = parameters[0] if len(parameters) == 1 else None
-    presets: dict[str, tuple[dict[str, float], ...]] = {}
-    for split in SPLITS:
-        if split not in raw:
-            continue
-        values = []
-        for entry in raw[split] or []:
-            if isinstance(entry, Mapping):
-                unknown = sorted(set(map(str, entry)) - set(parameters))
-                if unknown:
-                    raise ValueError(f'{where}: presets: {split}: unknown parameter(s) '
-                                     f'{unknown}; this task has {list(parameters)}')
-                values.append({str(k): _number(v, f'{where}: presets: {split}')
-                               for k, v in entry.items()})
-            elif single is not None:
-                values.append({single: _number(entry, f'{where}: presets: {split}')})
-            else:
-                raise ValueError(f'{where}: presets: {split}: with several parameters each '
-                                 f'value is a mapping, e.g. {{{parameters[0]}: ...}}')
-        presets[split] = tuple(values)
-    return presets

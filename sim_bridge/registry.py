@@ -8,28 +8,18 @@ Besides the built-in families, a task can be declared in a YAML file (sim_bridge
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from sim_bridge.builtins import TASK_NAMES, builtin_class
 
 if TYPE_CHECKING:  # not at run time: sim_bridge.core imports numpy, a --help does not need it
     from sim_bridge.core import ContextualTask
     from sim_bridge.task_files import DeclaredTask
 
-__all__ = ['TASK_NAMES', 'declared_task', 'is_simulated', 'is_task_file', 'make_task',
-           'register_task_file', 'task_class']
+__all__ = ['TASK_NAMES', 'builtin_class', 'declared_task', 'is_simulated', 'is_task_file',
+           'make_task', 'register_task_file', 'task_class']
 
-_TASKS: dict[str, tuple[str, str]] = {
-    'Cheetah-Run-v0': ('sim_bridge.cheetah', 'CheetahRunTask'),
-    'Cheetah-Run-v1': ('sim_bridge.cheetah', 'CheetahVelocityTask'),
-    'Cheetah-Motor-v0': ('sim_bridge.cheetah', 'CheetahMotorTask'),
-    'Cheetah-Bias-v0': ('sim_bridge.cheetah', 'CheetahBiasTask'),
-    'Walker-Walk-v0': ('sim_bridge.walker', 'WalkerFrictionTask'),
-    'Walker-Walk-v1': ('sim_bridge.walker', 'WalkerFootTask'),
-    'Finger-Spin-v0': ('sim_bridge.finger', 'FingerSpinTask'),
-    'Sawyer-Peg-v0': ('sim_bridge.sawyer', 'SawyerPegTask'),
-}
-TASK_NAMES: tuple[str, ...] = tuple(_TASKS)
 _FILE_TASKS: dict[str, Path] = {}
 """Task name -> the YAML file that declares it (registered with register_task_file)."""
 
@@ -62,7 +52,7 @@ def declared_task(name: str) -> DeclaredTask | None:
 def is_simulated(name: str) -> bool:
     """False for a task that only a robot can step (declared by robot_bridge params)."""
     declared = declared_task(name)
-    return declared.simulated if declared is not None else name in _TASKS
+    return declared.simulated if declared is not None else name in TASK_NAMES
 
 
 def task_class(name: str) -> Callable[..., ContextualTask]:
@@ -70,14 +60,7 @@ def task_class(name: str) -> Callable[..., ContextualTask]:
     declared = declared_task(name)
     if declared is not None:
         return declared.factory
-    if name not in _TASKS:
-        raise ValueError(f'unknown task {name!r}; valid tasks: {", ".join(TASK_NAMES)}, '
-                         'or a task file (.yaml)')
-    module, cls = _TASKS[name]
-    try:
-        return getattr(importlib.import_module(module), cls)
-    except ImportError as error:
-        raise ValueError(f'task {name!r} is not available here: {error}') from error
+    return builtin_class(name)
 
 
 def make_task(name: str, *, seed: int | None = None,

@@ -2,7 +2,9 @@
 
 One reader for every tool: `make_task('my_task.yaml')` and `--task-file` end up here. A file
 holding a `robot_bridge: ros__parameters:` section declares a robot (sim_bridge/robot.py); a
-file with a `model:` declares a simulated task (sim_bridge/mjcf_task.py).
+file with a `model:` declares a simulated task (sim_bridge/mjcf_task.py); a copy of a built-in
+family file (`task:`, `context:`, no `model:`) is the user's own family on that family's
+simulator (sim_bridge/families.py: `declared_copy`).
 """
 
 from __future__ import annotations
@@ -13,10 +15,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from sim_bridge.builtins import builtin_class
 from sim_bridge.core import ContextualTask
-from zeus_ros.yaml_text import safe_load_params
+from sim_bridge.family_schema import declared_copy, read_yaml
 
 __all__ = ['DeclaredTask', 'TaskFactory', 'load_task_file', 'read_yaml']
 
@@ -51,23 +52,6 @@ class DeclaredTask:
     parameters: tuple[str, ...] = ()
 
 
-def read_yaml(path: Path, what: str = 'task file') -> Any:
-    """The YAML content of `path`; ValueError in one line naming the file."""
-    try:
-        text = path.read_text(encoding='utf-8')
-    except FileNotFoundError:
-        raise ValueError(f'{what} {path} does not exist') from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise ValueError(f'{what} {path}: cannot read it as UTF-8 text ({error})') from None
-    try:
-        return safe_load_params(text)  # a robot's params file, as rcl reads it
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        where = f' line {mark.line + 1}' if mark is not None else ''
-        raise ValueError(f'{what} {path}{where}: not valid YAML '
-                         f'({getattr(error, "problem", None) or error})') from None
-
-
 def _robot(path: Path, params: Mapping[str, Any]) -> DeclaredTask:
     from sim_bridge.robot import RobotSpec, RobotTask
 
@@ -99,6 +83,18 @@ def _mjcf(path: Path, data: Mapping[str, Any]) -> DeclaredTask:
                         parameters=tuple(p.spec.name for p in spec.context))
 
 
+def _family_copy(path: Path, data: Mapping[str, Any]) -> DeclaredTask:
+    """A copied family file: the built-in's class under the file's name and context specs."""
+    name, builtin, specs, presets = declared_copy(path, data)
+    base: Any = builtin_class(builtin)
+    cls = type(base.__name__, (base,), {
+        'name': name, 'specs': specs, '__module__': base.__module__,
+        '__doc__': f'{name} ({path}): {builtin} simulates it'})
+    factory = TaskFactory(cls, name, int(base.episode_length), specs)
+    return DeclaredTask(name, factory, path, presets=presets,
+                        parameters=tuple(spec.name for spec in specs))
+
+
 _READ: dict[Path, tuple[float, DeclaredTask]] = {}
 """Task files read so far, with their modification time (a file is validated once)."""
 
@@ -127,5 +123,8 @@ def _load(path: Path) -> DeclaredTask:
         return _robot(path, robot)
     if isinstance(data, Mapping) and 'model' in data:
         return _mjcf(path, data)
+    if isinstance(data, Mapping) and 'task' in data and 'context' in data:
+        return _family_copy(path, data)
     raise ValueError(f'task file {path}: expected a robot_bridge: ros__parameters: section '
-                     '(a robot) or a MuJoCo task (model:, observation:, context:)')
+                     '(a robot), a MuJoCo task (model:, observation:, context:) or a copy of a '
+                     'family file (task:, context:, e.g. params/tasks/Cheetah-Bias-v0.yaml)')

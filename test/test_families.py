@@ -42,14 +42,14 @@ def test_no_task_name_table_is_left_in_the_learning_core() -> None:
 def test_a_broken_family_file_is_named_with_the_bad_entry(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """A preset outside the parameter's range names the file, the split and the range."""
-    from sim_bridge import families
+    from sim_bridge import families, family_schema
 
     params = tmp_path / 'params'
     (params / 'tasks').mkdir(parents=True)
     data = yaml.safe_load((ROOT / 'params' / 'tasks' / 'Cheetah-Bias-v0.yaml').read_text())
     data['presets']['extrapolation'] = [1.5]
     (params / 'tasks' / 'Cheetah-Bias-v0.yaml').write_text(yaml.safe_dump(data))
-    monkeypatch.setattr(families, 'find_params_dir', lambda: params)
+    monkeypatch.setattr(family_schema, 'find_params_dir', lambda: params)
     families._builtin_family.cache_clear()
     try:
         with pytest.raises(ValueError, match=r'Cheetah-Bias-v0.yaml: presets: extrapolation: '

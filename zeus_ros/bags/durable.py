@@ -20,6 +20,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from ruamel.yaml import YAML
 
 from zeus_ros.atomic_file import injected_write_fault, replace_text
+from zeus_ros.bags.kinds import BagLabel
 from zeus_ros.bags.writer import (
     BAG_VERSION,
     ROS_DISTRO,
@@ -83,8 +84,9 @@ class DurableBagWriter(StepBagWriter):
     """
 
     def __init__(self, path: Path | str, *, storage: Storage = 'mcap', pixels: bool,
-                 offered_qos: QosSource | None = None) -> None:
-        super().__init__(path, storage=storage, pixels=pixels, offered_qos=offered_qos)
+                 offered_qos: QosSource | None = None, label: BagLabel | None = None) -> None:
+        super().__init__(path, storage=storage, pixels=pixels, offered_qos=offered_qos,
+                         label=label)
         assert self._writer is not None
         self._writer.set_custom_data(STATE_KEY, 'closed')
         self.flushes = 0

@@ -17,7 +17,8 @@ from typing import Any
 from zeus_ros.bags.errors import BagError
 from zeus_ros.bags.schema import TOPIC_STEP
 
-__all__ = ['BAG_FILES', 'CLOSED_STATES', 'closed_splits', 'find_bags', 'split_steps']
+__all__ = ['BAG_FILES', 'CLOSED_STATES', 'bag_metadata', 'closed_splits', 'find_bags',
+           'split_steps']
 
 BAG_FILES = ('.mcap', '.db3')
 """Storage files of rosbag2 bags (mcap, sqlite3)."""
@@ -82,6 +83,16 @@ CLOSED_STATES = ('closed', 'recovered', None)
 """A split in one of these states is complete. None: metadata without a zeus state, written by
 a writer that writes it only at close (`zeus collect`, `ros2 bag record`); 'provisional' (the
 recorder's bag being written) and 'unfinished' (no metadata) may still grow."""
+
+
+def bag_metadata(bag: Path) -> dict[str, Any]:
+    """The rosbag2_bagfile_information of a bag folder's metadata.yaml ({} when it has none)."""
+    import yaml
+
+    try:
+        return _metadata(bag)
+    except (OSError, ValueError, AttributeError, yaml.YAMLError):
+        return {}
 
 
 def _metadata(bag: Path) -> dict[str, Any]:

@@ -25,6 +25,7 @@ from ruamel.yaml import YAML
 
 from zeus_ros.atomic_file import injected_write_fault
 from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.kinds import BagLabel, write_label
 from zeus_ros.bags.schema import (
     MSGTYPES,
     OFFERED_QOS,
@@ -92,8 +93,8 @@ class JazzyWriter(Writer):
         storage = self.storage
         assert storage is not None
         close_storage = storage.close
-        storage.close = lambda version, text: close_storage(  # type: ignore[method-assign]
-            version, jazzy_metadata(text))
+        storage.close = lambda version, metadata: close_storage(  # type: ignore[method-assign]
+            version, jazzy_metadata(metadata))
         super().close()
         self.metapath.write_text(jazzy_metadata(self.metapath.read_text('utf8')), 'utf8')
 
@@ -122,8 +123,11 @@ class StepBagWriter:
     """
 
     def __init__(self, path: Path | str, *, storage: Storage = 'mcap', pixels: bool,
-                 offered_qos: QosSource | None = None, start_ns: int | None = None) -> None:
+                 offered_qos: QosSource | None = None, start_ns: int | None = None,
+                 label: BagLabel | None = None) -> None:
         """Open the bag; topics are added as their first message arrives.
+
+        `label`: what the bag is (bags/kinds.py), written into its folder as it opens.
 
         `offered_qos(topic)`: the publishers' QoS profiles (default: what the zeus nodes offer
         in lockstep, as the ROS graph reports them); `start_ns`: the wall-clock time that
@@ -145,6 +149,8 @@ class StepBagWriter:
             injected_write_fault(self.path)
             writer = JazzyWriter(self.path, version=BAG_VERSION, storage_plugin=_PLUGINS[storage])
             writer.open()
+            if label is not None:
+                write_label(self.path, label)
         except Exception as exc:  # rosbags raises WriterError, OSError
             raise BagError(self.path, f'cannot create bag: {exc}') from exc
         self._writer = writer

@@ -16,6 +16,8 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
                 'run a task in-process and write bags (no ROS)'),
     'ingest': ('zeus_ros.cli.ingest',
                'read bags as training does; report what they hold'),
+    'bags': ('zeus_ros.cli.bags',
+             'list bags: kind (manual, collected, continual, rehearsal), task, steps, when'),
     'train': ('zeus_ros.cli.train', 'train a checkpoint from bags'),
     'eval': ('zeus_ros.cli.evaluate', 'evaluate checkpoints in-process (+ tables)'),
     'adaptation': ('zeus_ros.cli.adaptation',

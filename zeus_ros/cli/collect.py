@@ -98,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
     from zeus_ros.learning.errors import CheckpointError
+    from zeus_ros.offline.training.collect_workers import collected_label
 
     try:
         task = make_task(args.task, seed=args.seed)
@@ -149,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     writer: StepBagWriter | None = None
     try:
         args.out.mkdir(parents=True, exist_ok=True)
-        with StepBagWriter(bag, storage=args.storage, pixels=args.pixels) as writer:
+        with StepBagWriter(bag, storage=args.storage, pixels=args.pixels,
+                           label=collected_label(task.name, args.checkpoint)) as writer:
             stats = collect(env, task, policy, writer, args.steps, progress=not args.no_progress)
     except KeyboardInterrupt:
         print(f'zeus collect: interrupted; the steps written so far are in {bag}',

@@ -6,6 +6,7 @@ from pathlib import Path
 import sys
 
 from zeus_ros.cli_args import ZeusArgumentParser, at_least
+from zeus_ros.learning.readout import READOUT_STEPS
 from zeus_ros.offline.evaluation import export as library
 from zeus_ros.offline.evaluation.export import export, find_evaluations
 
@@ -28,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
                         help='command that trained it, for checkpoints that did not record one')
     parser.add_argument('--commit',
                         help='source commit it was trained on, for checkpoints without one')
-    parser.add_argument('--readout-steps', type=at_least(0), default=2000,
+    parser.add_argument('--readout-steps', type=at_least(0), default=READOUT_STEPS,
                         help='steps of the policy on the train contexts that calibrate the '
                         'context read-out (psi -> context units, on zeus/context_readout) and '
                         'the novelty monitor (distance from the training contexts, on '

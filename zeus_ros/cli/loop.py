@@ -24,6 +24,7 @@ from zeus_ros.cli_args import (
 )
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both, set_items
 from zeus_ros.learning.method_names import METHOD_NAMES
+from zeus_ros.learning.readout import READOUT_STEPS
 from zeus_ros.offline.schedule_text import DEFAULT_SCHEDULE, SCHEDULE_HELP
 
 __all__ = ['main']
@@ -76,6 +77,10 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--no-eval', action='store_true', default=None,
                         help='skip periodic evaluation')
     parser.add_argument('--no-progress', action='store_true', help='hide progress bars')
+    parser.add_argument('--readout-steps', type=at_least(0), default=READOUT_STEPS,
+                        help="after the last round, steps of the policy that fit run/final.pt's "
+                        'context read-out and novelty monitor (as zeus export does); default '
+                        '%(default)s, 0: none')
     parser.must_exist('--config', share=True)
     return parser
 
@@ -165,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
                  random_steps=args.random_steps, steps=args.steps,
                  updates=args.updates or config.num_updates, noise=args.noise,
                  schedule=schedule, seed=config.seed, progress=not args.no_progress,
-                 evaluate=not args.no_eval, resume=args.resume)
+                 evaluate=not args.no_eval, resume=args.resume,
+                 readout_steps=args.readout_steps)
     except (TrainError, ConfigError, CheckpointError, BagError, IngestError,
             ValueError) as error:
         print(f'zeus loop: {error}', file=sys.stderr)

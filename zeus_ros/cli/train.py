@@ -12,10 +12,12 @@ from pathlib import Path
 import sys
 from typing import Any
 
+from zeus_ros.bags.kinds import DEFAULT_KINDS, KINDS
 from zeus_ros.cli_args import TASK_HELP, ZeusArgumentParser, at_least, seed_arg, task_name
 from zeus_ros.config_sets import SET_HELP, apply_sets, parse_sets, refuse_both
 from zeus_ros.learning.errors import ConfigError
 from zeus_ros.learning.method_names import METHOD_NAMES
+from zeus_ros.learning.readout import READOUT_STEPS
 
 __all__ = ['main', 'own_flags']
 
@@ -27,12 +29,26 @@ def own_flags(args: argparse.Namespace) -> list[tuple[str, str, Any]]:
         ('seed', '--seed', 'seed'), ('device', '--device', 'device'))]
 
 
+def _kinds(text: str) -> tuple[str, ...]:
+    """The argparse type of --kinds: comma-separated kinds of bags."""
+    kinds = tuple(k.strip() for k in text.split(',') if k.strip())
+    wrong = [k for k in kinds if k not in KINDS]
+    if wrong or not kinds:
+        raise argparse.ArgumentTypeError(f'{text!r}: choose from {", ".join(KINDS)}')
+    return kinds
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = ZeusArgumentParser(
         prog='zeus train', description='Train a ZeUS (or baseline) agent from bags.')
     parser.add_argument('--bags', nargs='+', required=True,
                         help='bag directories, .mcap/.db3 files, or folders of bags (searched '
                         'at any depth: bags/ of `zeus launch --record` works)')
+    parser.add_argument('--kinds', type=_kinds, default=DEFAULT_KINDS, metavar='KIND[,KIND]',
+                        help=f'which bags to take, by what they are ({", ".join(KINDS)}; zeus '
+                        f'bags lists them); default {",".join(DEFAULT_KINDS)}: not the continual '
+                        "trainer's "
+                        'rehearsal. A bag that does not say counts as manual')
     parser.add_argument('--config', type=Path, required=True,
                         help='training config YAML, e.g. params/train/state_cpu.yaml')
     parser.add_argument('--out', type=Path, required=True, help='run directory, e.g. runs/x')
@@ -58,6 +74,11 @@ def _build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--resume', action='store_true',
                         help='continue from OUT/checkpoint.pt (optimizers and step count)')
     parser.add_argument('--no-eval', action='store_true', help='skip periodic evaluation')
+    parser.add_argument('--readout-steps', type=at_least(0), default=READOUT_STEPS,
+                        help='steps of the trained policy on the train contexts that fit the '
+                        "context read-out and novelty monitor stored in final.pt (as zeus "
+                        "export's), so it deploys with the estimate in the context's units; "
+                        'default %(default)s, 0: none')
     parser.add_argument('--threads', type=at_least(0), default=0,
                         help='torch CPU threads (0: torch default)')
     parser.add_argument('--no-progress', action='store_true', help='hide the progress bar')
@@ -89,6 +110,15 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `zeus train`; returns the process exit code."""
     args = _build_parser().parse_args(argv)
     from zeus_ros.bags.errors import BagError, IngestError
+    from zeus_ros.bags.kinds import choose_bags
+    from zeus_ros.bags.recording import find_bags
+
+    try:
+        bags = choose_bags(find_bags(args.bags), args.kinds,
+                           lambda line: print(f'zeus train: {line}', file=sys.stderr))
+    except (BagError, ValueError) as error:
+        print(f'zeus train: --bags: {error}', file=sys.stderr)
+        return 2
     from zeus_ros.offline.training.train import (  # torch: only once the arguments are good
         NonFiniteError,
         TrainError,
@@ -124,9 +154,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     default_showwarning = _print_ingest_warnings()
     try:
-        train(args.bags, config, args.out, task=args.task, resume=args.resume,
+        train(bags, config, args.out, task=args.task, resume=args.resume,
               evaluate=not args.no_eval, progress=not args.no_progress,
-              namespace=args.namespace, strict=args.strict)
+              namespace=args.namespace, strict=args.strict,
+              readout_steps=args.readout_steps)
     except NonFiniteError as error:
         print(f'zeus train: {error}', file=sys.stderr)
         return 1

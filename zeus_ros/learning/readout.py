@@ -35,6 +35,7 @@ from zeus_ros.atomic_file import atomic_write
 __all__ = [
     'EXTRA_KEY',
     'NOVELTY_KEY',
+    'READOUT_STEPS',
     'TRAIN_MEAN_KEY',
     'ContextReadout',
     'NoveltyMonitor',
@@ -52,6 +53,8 @@ __all__ = [
 
 EXTRA_KEY = 'context_readout'
 NOVELTY_KEY = 'context_novelty'
+READOUT_STEPS = 2000
+"""Steps of the policy on its train contexts that fit both (`zeus export`, `zeus train`)."""
 TRAIN_MEAN_KEY = 'train_mean_context'
 """The agent's mean context over its train values: what a frozen-context run freezes to."""
 RIDGE = 1e-3

@@ -47,6 +47,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from zeus_ros.atomic_file import replace_text
+from zeus_ros.bags.kinds import REHEARSAL_FOLDER
 from zeus_ros.bags.recording import closed_splits, split_steps
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.system.continual_settings import (
@@ -150,7 +151,7 @@ ROUND_COMMAND = (sys.executable, '-m', 'zeus_ros.cli', 'continual-round')
 """The child process of a round (`zeus continual-round --request FILE`)."""
 STOP_GRACE_S = 5.0
 """How long a round's child gets after SIGTERM (shutdown) before SIGKILL."""
-REHEARSAL_ROOT = 'continual_rehearsal'
+REHEARSAL_ROOT = REHEARSAL_FOLDER
 """Beside the recording: one rehearsal per first checkpoint and size, kept across launches."""
 TICK_S = 2.0
 """How often a running round's progress is published on /diagnostics."""

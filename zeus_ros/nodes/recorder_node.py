@@ -39,6 +39,7 @@ from rosbags.interfaces import (
 
 from zeus_ros.bags.durable import DurableBagWriter
 from zeus_ros.bags.errors import BagError
+from zeus_ros.bags.kinds import BagLabel
 from zeus_ros.bags.recover import STEP_TOPICS, stamp_from_cdr, step_from_cdr
 from zeus_ros.bags.schema import MSGTYPES, OFFERED_QOS, TOPIC_IMAGE, TOPIC_STEP
 from zeus_ros.nodes.messages import diagnostics_message
@@ -75,6 +76,12 @@ SPECS: dict[str, Spec] = {
                               'short and subscribe to the steps anyway', low=0.0),
     'retry_s': Spec(1.0, 'first wait before a new bag after a write failed (disk full, '
                     'permission); doubles per failed try', low=0.05, high=MAX_FLUSH_PERIOD_S),
+    'kind': Spec('manual', 'what its bags are, written into each (zeus bags lists them, zeus '
+                 'train --bags chooses by kind): manual, or continual (launch --continual)',
+                 choices=('manual', 'continual')),
+    'label_task': Spec('', "the task named in each bag's label (launchers set it)"),
+    'label_checkpoint': Spec('', "the checkpoint named in each bag's label: the one deployed "
+                             'when the recording started (launchers set it)'),
     'retry_max_s': Spec(30.0, 'longest wait between tries of a new bag', low=0.05,
                         high=3600.0),
 }
@@ -263,7 +270,9 @@ class RecorderNode(Node):
             self.output.mkdir(parents=True, exist_ok=True)
             self._writer = DurableBagWriter(
                 path, storage=cast('Storage', self.storage), pixels=TOPIC_IMAGE in self.topics,
-                offered_qos=self._offered_qos)
+                offered_qos=self._offered_qos, label=BagLabel(
+                    self.params['kind'], task=self.params['label_task'],
+                    checkpoint=self.params['label_checkpoint']))
         except WRITE_ERRORS:
             shutil.rmtree(path, ignore_errors=True)
             raise

@@ -368,11 +368,13 @@ def _robot_pixel_checkpoint(params: Mapping[str, Any], path: Path, checkpoint: s
 def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
     """The family's zoo checkpoint (`<family>/<method>.pt`): this checkout's, else the share's.
 
+    A user's family file may name its own: relative to the file's folder (or absolute).
     ValueError naming the families that have one when `task` has none.
     """
-    from sim_bridge.families import family
+    from sim_bridge.families import builtin_family_file, family
 
-    declared = family(task).checkpoint
+    declared_family = family(task)
+    declared = declared_family.checkpoint
     if declared is None:
         from sim_bridge.registry import TASK_NAMES
 
@@ -382,6 +384,8 @@ def zoo_checkpoint(task: str, method: str = 'zeus') -> Path:
     relative = Path(declared).with_name(f'{method}.pt') if method != 'zeus' else Path(declared)
     candidates = [Path(__file__).resolve().parents[2] / 'checkpoints' / relative,
                   share_dir() / 'checkpoints' / relative]
+    if declared_family.source.resolve() != builtin_family_file(declared_family.name).resolve():
+        candidates.insert(0, declared_family.source.parent / relative)
     found = next((path for path in candidates if path.is_file()), None)
     if found is None:
         raise ValueError(f'{task}: zoo checkpoint {relative} not found; looked in '
@@ -672,12 +676,45 @@ def plan(
         if lock_parameters and name in LOCKABLE:
             overrides['lock_parameters'] = True
         planned.append(NodePlan(name, overrides))
+    planned = _label_recordings(planned, params, path, task, TRAINER in names)
     if TRAINER in names:
         planned = _continual_plan(planned, params, task)
     return LaunchPlan(namespace=f'/{ns}' if ns else '', params_file=path,
                       log_level=log_level.lower(), nodes=tuple(planned),
                       single_process=single_process, intra_process=intra_process,
                       clock=clock_to)
+
+
+def _label_recordings(planned: list[NodePlan], params: Mapping[str, Any], path: Path,
+                      task: str, continual: bool) -> list[NodePlan]:
+    """Tell the recorder what its bags are: kind, task, the checkpoint deployed at the start.
+
+    What `zeus bags` lists and `zeus train --bags` chooses by (bags/kinds.py); a params file's
+    own values win.
+    """
+    checkpoint = next((str(node.parameters['checkpoint']) for node in planned
+                       if node.name == 'policy' and node.parameters.get('checkpoint')), '')
+    if not checkpoint:
+        checkpoint = next((str(s['checkpoint']) for s in _node_sections(params, 'policy')
+                           if s.get('checkpoint')), '')
+    source = 'robot_bridge' if any(node.name == 'robot_bridge' for node in planned) \
+        else 'sim_bridge'
+    if not task:
+        try:
+            task = _params_task(params, path, source)
+        except ValueError:
+            task = ''
+    if task:
+        from sim_bridge.registry import declared_task
+
+        declared = declared_task(task)
+        task = declared.name if declared is not None else task
+    label = {'kind': 'continual' if continual else 'manual', 'label_task': task,
+             'label_checkpoint': checkpoint}
+    sections = _node_sections(params, 'recorder')
+    return [NodePlan(node.name, {**node.parameters, **{
+        key: value for key, value in label.items() if not any(key in s for s in sections)}})
+        if node.name == 'recorder' else node for node in planned]
 
 
 def _frames_best_effort(params: Mapping[str, Any], robot: bool) -> bool:
@@ -702,6 +739,8 @@ def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: st
     """
     import time
 
+    from zeus_ros.bags.kinds import CONTINUAL_PREFIX
+
     agents = {node.name: node for node in planned if node.name in AGENT_NODES}
     checkpoint = agents.get('policy', NodePlan('policy')).parameters.get('checkpoint')
     if len(agents) < 2 or not checkpoint:
@@ -710,7 +749,7 @@ def _continual_plan(planned: list[NodePlan], params: Mapping[str, Any], task: st
                          'or set one in the params file')
     recorder = _node_sections(params, 'recorder')
     output = next((s['output'] for s in reversed(recorder) if s.get('output')), '') or \
-        f'bags/continual_{time.strftime("%Y%m%d_%H%M%S")}'
+        f'bags/{CONTINUAL_PREFIX}{time.strftime("%Y%m%d_%H%M%S")}'
     split = next((s['split_duration_s'] for s in reversed(recorder)
                   if s.get('split_duration_s')), CONTINUAL_SPLIT_S)
     output = os.path.abspath(os.path.expanduser(str(output)))

@@ -13,16 +13,17 @@ import numpy as np
 
 from zeus_ros.learning.readout import (
     NOVELTY_WINDOW,
+    READOUT_STEPS,
     ContextReadout,
     NoveltyMonitor,
     fit_novelty,
     fit_readout,
 )
 
-__all__ = ['calibrate_readout']
+__all__ = ['calibrate_readout', 'deployment_readout']
 
 
-def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None,
+def calibrate_readout(agent: Any, *, steps: int = READOUT_STEPS, every: int | None = None,
                       seed: int = 1000, progress: bool = False
                       ) -> tuple[ContextReadout, NoveltyMonitor]:
     """Roll the agent through its train contexts; fit the read-out and the novelty monitor.
@@ -62,3 +63,22 @@ def calibrate_readout(agent: Any, *, steps: int = 2000, every: int | None = None
                         trace.segment[full], fitted_on=fitted_on),
             fit_novelty(trace.psi[full], trace.context[full], trace.segment[full], episodes,
                         fitted_on=fitted_on))
+
+
+def deployment_readout(agent: Any, steps: int = READOUT_STEPS
+                       ) -> tuple[ContextReadout, NoveltyMonitor] | None:
+    """The read-out and novelty monitor a deployment of `agent` (a ZeusAgent) carries.
+
+    One rule for `zeus export` and `zeus train`, so a trained checkpoint deploys as an export
+    does. None where there is nothing to fit: `steps` 0, pixels (every step would render), a
+    method without a learned psi, or a robot's task (no simulator here). ValueError when the
+    rollout is too short to fit them.
+    """
+    from sim_bridge.registry import is_simulated
+    from zeus_ros.learning.inference import InferenceAgent
+    from zeus_ros.learning.methods import method_objective
+
+    if steps <= 0 or agent.spec.obs_kind != 'state' or not is_simulated(agent.spec.task) or \
+            method_objective(agent.config.method).context_source != 'psi':
+        return None
+    return calibrate_readout(InferenceAgent(agent), steps=steps)

@@ -222,26 +222,21 @@ def export(checkpoint: Path, out: Path, *, evals: Path | None = None,
     psi; pixel agents would render every step).
     """
     from zeus_ros.learning.checkpoint import export_for_deployment, load_checkpoint
-    from zeus_ros.learning.methods import method_objective
+    from zeus_ros.learning.readout import store_readout
+    from zeus_ros.offline.evaluation.calibrate import deployment_readout
 
     if summaries is None:
         summaries = {} if evals is None else find_evaluations(checkpoint, evals)
     export_for_deployment(checkpoint, out)
     loaded = load_checkpoint(out, verify=False)  # just written; its old card is rewritten below
-    if readout_steps > 0 and loaded.spec.obs_kind == 'state' and \
-            method_objective(loaded.config.method).context_source == 'psi':
-        from zeus_ros.learning.inference import InferenceAgent
-        from zeus_ros.learning.readout import store_readout
-        from zeus_ros.offline.evaluation.calibrate import calibrate_readout
-
-        try:
-            readout, novelty = calibrate_readout(InferenceAgent(loaded.agent),
-                                                 steps=readout_steps)
-        except ValueError as error:  # the export is still valid without them
-            print(f'zeus export: warning: no context read-out stored ({error}); raise '
-                  '--readout-steps', file=sys.stderr)
-        else:
-            store_readout(out, readout, novelty=novelty)
+    try:
+        fitted = deployment_readout(loaded.agent, readout_steps)
+    except ValueError as error:  # the export is still valid without them
+        print(f'zeus export: warning: no context read-out stored ({error}); raise '
+              '--readout-steps', file=sys.stderr)
+    else:
+        if fitted is not None:
+            store_readout(out, fitted[0], novelty=fitted[1])
             loaded = load_checkpoint(out, verify=False)
     card = out.with_suffix('.md')
     card.write_text(card_text(out, loaded, summaries=summaries, command=command, commit=commit,

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from zeus_ros.bags.kinds import BagLabel
 from zeus_ros.offline.rollout import CollectStats
 
 __all__ = ['CollectJob', 'collect_bag', 'portable_task', 'run_workers', 'split_steps',
@@ -52,6 +53,15 @@ def portable_task(name: str) -> str:
 
     declared = declared_task(name)
     return str(declared.source) if declared is not None else name
+
+
+def collected_label(task: str, checkpoint: Path | str | None) -> BagLabel:
+    """The label of a bag that `zeus collect` or a loop round writes (bags/kinds.py)."""
+    from sim_bridge.registry import declared_task
+
+    declared = declared_task(task)
+    name = declared.name if declared is not None else task
+    return BagLabel('collected', task=name, checkpoint=str(checkpoint or ''))
 
 
 def worker_seeds(seed: int, workers: int) -> list[int]:
@@ -97,7 +107,8 @@ def collect_bag(job: CollectJob) -> CollectStats:
         job.bag.parent.mkdir(parents=True, exist_ok=True)
         writer: StepBagWriter | None = None
         try:
-            with StepBagWriter(job.bag, storage=job.storage, pixels=job.pixels) as writer:
+            with StepBagWriter(job.bag, storage=job.storage, pixels=job.pixels,
+                               label=collected_label(job.task, job.checkpoint)) as writer:
                 return collect(env, task, policy, writer, job.steps, progress=job.progress)
         except Exception as error:  # a full disk: one line for the parent, not a traceback
             line = disk_full_line(error, job.bag, writer, job.steps)

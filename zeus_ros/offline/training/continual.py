@@ -164,6 +164,7 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
+    from zeus_ros.bags.kinds import BagLabel
     from zeus_ros.bags.writer import StepBagWriter
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.rollout import AgentPolicy, collect
@@ -184,7 +185,8 @@ def rehearsal_bag(deployed: Path | str, folder: Path | str, settings: ContinualS
     folder.mkdir(parents=True, exist_ok=True)
     policy = AgentPolicy(agent, noise=REHEARSAL_NOISE, seed=settings.seed)
     try:
-        with StepBagWriter(partial, pixels=agent.obs_kind == 'pixels') as writer:
+        with StepBagWriter(partial, pixels=agent.obs_kind == 'pixels', label=BagLabel(
+                'rehearsal', task=agent.task, checkpoint=str(deployed))) as writer:
             collect(ScheduledEnv(task, schedule), task, policy, writer,
                     settings.rehearsal_steps, progress=False)
     finally:

@@ -145,8 +145,12 @@ def _collect_round(task_name: str, schedule: dict[str, Any], bags: Path, steps: 
 
 def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_steps: int,
              steps: int, updates: int, noise: float, schedule: dict[str, Any], seed: int,
-             progress: bool = True, evaluate: bool = True, resume: bool = False) -> list[Any]:
-    """Run the rounds; returns the TrainResult of each round trained. `updates` are per round."""
+             progress: bool = True, evaluate: bool = True, resume: bool = False,
+             readout_steps: int = 0) -> list[Any]:
+    """Run the rounds; returns the TrainResult of each round trained. `updates` are per round.
+
+    `readout_steps`: the last round's final.pt carries the read-out (train's `readout_steps`).
+    """
     from zeus_ros.offline.training.train import checkpoint_step
 
     out = Path(out)
@@ -198,7 +202,9 @@ def run_loop(task: str, config: Any, out: str | Path, *, rounds: int, random_ste
         results.append(train([bags], config.replace(num_updates=total), run, task=task,
                              resume=index > 0 or done_updates > 0
                              or (run / CHECKPOINT).exists(), evaluate=evaluate,
-                             progress=progress))
-    print(f'\nloop: done: {rounds} round(s); deploy {run / FINAL} (export it: zeus export '
-          f'--checkpoint {run / FINAL} --out my_policy.pt)')
+                             progress=progress,
+                             readout_steps=readout_steps if index == rounds - 1 else 0))
+    print(f'\nloop: done: {rounds} round(s); deploy {run / FINAL} (zeus launch --checkpoint '
+          f'{run / FINAL}; a smaller file with a card: zeus export --checkpoint {run / FINAL} '
+          '--out my_policy.pt)')
     return results

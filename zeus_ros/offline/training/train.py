@@ -323,7 +323,7 @@ def _start(out: Path, config: ZeusConfig, dataset: Any, replay: Any, resume: boo
 def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
           task: str | None = None, resume: bool = False, evaluate: bool = True,
           progress: bool = True, log: Callable[[str], None] = print,
-          namespace: str = '', strict: bool = False) -> TrainResult:
+          namespace: str = '', strict: bool = False, readout_steps: int = 0) -> TrainResult:
     """Train (or continue training) an agent on the transitions in `bags`.
 
     `namespace`: read /<namespace>/zeus/... topics (`ros2 bag record` of a namespaced system).
@@ -333,6 +333,9 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     Runs until `config.num_updates` updates in total (a resumed run counts from its
     checkpoint's step). Checkpoints every `checkpoint_interval` updates and at the end; a
     Ctrl-C also saves, so no finished update is lost.
+
+    `readout_steps` > 0: final.pt also carries the context read-out and novelty monitor,
+    fitted as `zeus export` fits them, so it deploys with the estimate-vs-truth view.
     """
     from zeus_ros.learning.checkpoint import save_checkpoint
     from zeus_ros.learning.utils import resolve_device
@@ -434,14 +437,34 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
         log(f'train: interrupted at update {step}; saved {out / CHECKPOINT} (use --resume)')
         raise
     bar.close()
+    seconds = time.perf_counter() - begin  # the updates' time: the read-out is timed apart
     save()
+    extra.update(_readout_extra(agent, readout_steps, log))
     final = save(FINAL)
     _plot(out, metrics, evals)
-    seconds = time.perf_counter() - begin
     result = TrainResult(out, final, start, step, seconds, metrics.rows, evals.rows)
     log(f'train: {step - start} updates in {seconds:.1f} s ({result.updates_per_s:.1f}/s); '
         f'checkpoints {out / CHECKPOINT}, {final}; metrics {metrics.path}')
     return result
+
+
+def _readout_extra(agent: Any, steps: int, log: Callable[[str], None]) -> dict[str, Any]:
+    """The read-out and novelty monitor for final.pt's extra ({} where none can be fitted)."""
+    from zeus_ros.learning.readout import EXTRA_KEY, NOVELTY_KEY
+    from zeus_ros.offline.evaluation.calibrate import deployment_readout
+
+    begin = time.perf_counter()
+    try:
+        fitted = deployment_readout(agent, steps)
+    except ValueError as error:  # final.pt still deploys, showing raw psi
+        log(f'train: warning: no context read-out in {FINAL} ({error}); fit one with zeus '
+            'export --readout-steps')
+        return {}
+    if fitted is None:
+        return {}
+    log(f'train: context read-out and novelty monitor fitted on {steps} steps of the policy in '
+        f'{time.perf_counter() - begin:.1f} s (as zeus export does); {FINAL} deploys with them')
+    return {EXTRA_KEY: fitted[0].to_dict(), NOVELTY_KEY: fitted[1].to_dict()}
 
 
 def _last_good(last: tuple[Path, int] | None) -> str:
