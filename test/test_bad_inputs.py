@@ -106,6 +106,8 @@ def test_train_on_a_full_disk_names_the_checkpoint_size_and_resumes_only_a_check
         raise DiskFullError(target, 3 << 20)
 
     monkeypatch.setattr('zeus_ros.offline.training.train.train', full)
+    monkeypatch.setattr('zeus_ros.bags.recording.find_bags', lambda _folder: [])  # no bag needed
+    monkeypatch.setattr('zeus_ros.bags.kinds.choose_bags', lambda bags, _kinds, _say: bags)
     config = write_config(tmp_path / 'minimal.yaml', MINIMAL)
     argv = ['--bags', str(tmp_path), '--config', str(config), '--out', str(out),
             '--no-progress', '--no-eval']

@@ -112,13 +112,6 @@ def main(argv: list[str] | None = None) -> int:
     from zeus_ros.bags.errors import BagError, IngestError
     from zeus_ros.bags.kinds import choose_bags
     from zeus_ros.bags.recording import find_bags
-
-    try:
-        bags = choose_bags(find_bags(args.bags), args.kinds,
-                           lambda line: print(f'zeus train: {line}', file=sys.stderr))
-    except (BagError, ValueError) as error:
-        print(f'zeus train: --bags: {error}', file=sys.stderr)
-        return 2
     from zeus_ros.offline.training.train import (  # torch: only once the arguments are good
         NonFiniteError,
         TrainError,
@@ -137,6 +130,12 @@ def main(argv: list[str] | None = None) -> int:
                      f'--config {args.config}: device')
     except ConfigError as error:
         print(f'zeus train: {error}', file=sys.stderr)
+        return 2
+    try:  # after the config: a bad config is the first thing said, whatever the bags hold
+        bags = choose_bags(find_bags(args.bags), args.kinds,
+                           lambda line: print(f'zeus train: {line}', file=sys.stderr))
+    except (BagError, ValueError) as error:
+        print(f'zeus train: --bags: {error}', file=sys.stderr)
         return 2
     if args.threads > 0:
         import torch
