@@ -71,21 +71,36 @@ export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 export LD_LIBRARY_PATH="$VENV/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 mkdir -p "$ROOT/log"
-# A symlink install keeps links to files the tree no longer has (a moved params file fails the
-# build: "can't copy ... not a regular file"), and installed data files that setup.py stopped
-# listing (the research checkpoints before the zoo): drop both, colcon lays the rest anew.
-for stale in "$ROOT/build/zeus_ros" "$ROOT/install/zeus_ros"; do
-  [ -d "$stale" ] && find "$stale" -xtype l -delete
-done
-rm -rf "$ROOT/install/zeus_ros/share/zeus_ros/checkpoints"
-say "colcon build (zeus_msgs, zeus_ros)"
-colcon --log-base "$ROOT/log" build --base-paths "$ROOT" "$ROOT/msg_defs" \
-  --build-base "$ROOT/build" --install-base "$ROOT/install" --symlink-install \
-  --event-handlers console_cohesion- summary+ status- \
-  --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
-  > "$ROOT/log/colcon-build.txt" 2>&1 || {
-    tail -n 60 "$ROOT/log/colcon-build.txt" >&2
-    say "colcon build failed: full log in log/colcon-build.txt" >&2
-    exit 1
-  }
+# The build is skipped when nothing it reads changed since the last good one (a stamp in
+# install/ holding scripts/build_inputs.sh's hash): a second `make demo` starts at once.
+STAMP="$ROOT/install/.zeus-build-inputs.sha256"
+INPUTS="$(bash "$ROOT/scripts/build_inputs.sh" "$ROOT") $REQ_HASH $VENV"  # + the interpreter
+built() {
+  [ "$(cat "$STAMP" 2>/dev/null)" = "$INPUTS" ] && [ -f "$ROOT/install/setup.bash" ] && \
+    [ -d "$ROOT/install/zeus_msgs" ] && [ -d "$ROOT/install/zeus_ros" ] && \
+    [ -z "$(find "$ROOT/install/zeus_ros" -xtype l -print -quit)" ]
+}
+if built; then
+  say "colcon build up to date (zeus_msgs, zeus_ros: no input changed since the last build)"
+else
+  # A symlink install keeps links to files the tree no longer has (a moved params file fails the
+  # build: "can't copy ... not a regular file"), and installed data files that setup.py stopped
+  # listing (the research checkpoints before the zoo): drop both, colcon lays the rest anew.
+  for stale in "$ROOT/build/zeus_ros" "$ROOT/install/zeus_ros"; do
+    [ -d "$stale" ] && find "$stale" -xtype l -delete
+  done
+  rm -rf "$ROOT/install/zeus_ros/share/zeus_ros/checkpoints"
+  rm -f "$STAMP"
+  say "colcon build (zeus_msgs, zeus_ros)"
+  colcon --log-base "$ROOT/log" build --base-paths "$ROOT" "$ROOT/msg_defs" \
+    --build-base "$ROOT/build" --install-base "$ROOT/install" --symlink-install \
+    --event-handlers console_cohesion- summary+ status- \
+    --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
+    > "$ROOT/log/colcon-build.txt" 2>&1 || {
+      tail -n 60 "$ROOT/log/colcon-build.txt" >&2
+      say "colcon build failed: full log in log/colcon-build.txt" >&2
+      exit 1
+    }
+  echo "$INPUTS" > "$STAMP"
+fi
 say "ready: source scripts/env.sh to use zeus_ros in this shell"

@@ -119,3 +119,28 @@ def test_a_config_from_the_package_share_still_passes_the_check(
     argv = ['--config', 'params/train/state_cpu.yaml', '--out', 'x',
             *(['--bags', '.'] if command == 'train' else ['--task', 'Cheetah-Bias-v0'])]
     assert parser.parse_args(argv).config == Path('params/train/state_cpu.yaml')
+
+
+def test_a_mistyped_config_or_task_file_is_answered_with_the_nearest(tmp_path: Path) -> None:
+    """A near-miss config or task file names the real one, still one line and nothing heavy."""
+    results = _probe([
+        ['train', '--bags', '.', '--config', 'params/train/state_cpux.yaml', '--out', 'x'],
+        ['train', '--bags', '.', '--config', 'state_cpu.yml', '--out', 'x'],
+        ['eval', '--task', 'params/tasks/Cheetah-Bais-v0.yaml', '--checkpoint', 'x.pt'],
+        ['eval', '--task', 'Cheetah-Bais-v0', '--checkpoint', 'x.pt'],
+    ], tmp_path)
+    wanted = ["did you mean 'params/train/state_cpu.yaml'?",
+              "did you mean 'params/train/state_cpu.yaml'?",
+              "did you mean 'params/tasks/Cheetah-Bias-v0.yaml'?",
+              "did you mean 'Cheetah-Bias-v0'?"]
+    for result, want in zip(results, wanted, strict=True):
+        err = result['err'].strip()
+        assert result['code'] == 2 and len(err.splitlines()) == 1, (result['argv'], err)
+        assert want in err, (result['argv'], err)
+        assert result['heavy'] == [], (result['argv'], result['heavy'])
+
+
+def test_no_suggestion_for_a_path_with_nothing_near(tmp_path: Path) -> None:
+    """An unrelated name gets no guess: a wrong 'did you mean' misleads more than none."""
+    [result] = _probe([['eval', '--checkpoint', 'nope.pt']], tmp_path)
+    assert result['code'] == 2 and 'did you mean' not in result['err'], result['err']

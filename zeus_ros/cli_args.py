@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 __all__ = ['EXPECT_SHA256_HELP', 'SEED_MAX', 'TASK_HELP', 'ZeusArgumentParser',
-           'flag_or_positional', 'input_path', 'module_doc', 'nearest', 'seed_arg', 'sha256_arg',
-           'task_name']
+           'flag_or_positional', 'input_path', 'module_doc', 'nearest', 'nearest_path',
+           'seed_arg', 'sha256_arg', 'task_name']
 
 EXPECT_SHA256_HELP = ('refuse the checkpoint unless its sha256 is this (64 hex digits, as '
                       'sha256sum prints it); a sidecar FILE.sha256, its card or the zoo index '
@@ -72,7 +72,39 @@ def input_path(value: str | os.PathLike[str], flag: str) -> Path:
     if shared.exists():
         return shared
     raise ValueError(f'{flag} {value}: not found in {Path.cwd()} nor in the package share '
-                     f'{share_dir()}')
+                     f'{share_dir()}{nearest_path(path)}')
+
+
+NEAREST_FOLDERS = ('params/train', 'params/tasks')
+"""Share folders a bare or misplaced config / task file name is also matched against."""
+
+
+def nearest_path(path: Path) -> str:
+    """'; did you mean P?' for the closest existing name beside `path` (here or in the share).
+
+    A mistyped `params/train/state_cpux.yaml` names `params/train/state_cpu.yaml`; a bare
+    `state_cpux.yaml` is also matched against the share's params/train/ and params/tasks/.
+    Only folder listings: no import, so the error stays at once (issue 52).
+    """
+    from zeus_ros.system.launch_defaults import share_dir
+
+    shown: dict[str, str] = {}  # lower-cased name -> the path to suggest
+    folders = [(path.parent, path.parent)] if path.is_absolute() else [
+        (Path.cwd() / path.parent, path.parent), (share_dir() / path.parent, path.parent),
+        *((share_dir() / sub, Path(sub)) for sub in NEAREST_FOLDERS)]
+    for folder, prefix in folders:
+        try:
+            names = sorted(entry.name for entry in folder.iterdir())[:_MAX_NAMES]
+        except OSError:
+            continue
+        for name in names:
+            shown.setdefault(name.lower(), os.fspath(prefix / name))
+    match = difflib.get_close_matches(path.name.lower(), list(shown), n=1, cutoff=0.75)
+    return f"; did you mean '{shown[match[0]]}'?" if match else ''
+
+
+_MAX_NAMES = 2000
+"""Names read per folder at most: a huge working directory must not slow the error."""
 
 
 def module_doc(name: str) -> str:
@@ -199,9 +231,11 @@ def _missing_path(value: str | os.PathLike[str], flag: str, share: bool) -> str:
         except ValueError as error:
             return str(error).removeprefix(f'{flag} ')
         return ''
-    if Path(os.path.expanduser(os.fspath(value))).exists():
+    path = Path(os.path.expanduser(os.fspath(value)))
+    if path.exists():
         return ''
-    return f'{os.fspath(value)}: no such file or folder (looked in {Path.cwd()})'
+    return (f'{os.fspath(value)}: no such file or folder (looked in {Path.cwd()})'
+            f'{nearest_path(path)}')
 
 
 def flag_or_positional(parser: ZeusArgumentParser, flag: str, *, many: bool,

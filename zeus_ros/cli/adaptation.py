@@ -13,7 +13,7 @@ import sys
 EVAL_SEED = 200
 """The default --seed: offline/evaluation/adaptation.EVAL_SEED (a test keeps the two equal)."""
 
-__all__ = ['main']
+__all__ = ['main', 'same_file']
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         mine = measure_adaptation(args.checkpoint, episodes=args.episodes, seed=args.seed,
                                   progress=not args.no_progress,
-                                  expect_sha256=args.expect_sha256)
+                                  expect_sha256=args.expect_sha256, label='yours')
         reports = [('yours', mine)]
         other = None
         if args.against == 'zoo':
@@ -72,10 +72,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(f'zeus adaptation: no comparison: {error}', file=sys.stderr)
         elif args.against != 'none':
             other = Path(args.against)
-        if other is not None:
-            reports.append(('zoo' if args.against == 'zoo' else str(other),
-                            measure_adaptation(other, episodes=args.episodes, seed=args.seed,
-                                               progress=not args.no_progress)))
+        label = 'zoo' if args.against == 'zoo' else str(other)
+        if other is not None and same_file(args.checkpoint, other):
+            # Same bytes, same seed: a second measurement would print the same row again.
+            print(f'zeus adaptation: your checkpoint is the {label} one (same sha256): '
+                  'measured once', file=sys.stderr)
+            reports = [(f'yours = {label}', mine)]
+        elif other is not None:
+            reports.append((label, measure_adaptation(
+                other, episodes=args.episodes, seed=args.seed, progress=not args.no_progress,
+                label=label)))
     except (CheckpointError, ValueError, FileNotFoundError) as error:
         print(f'zeus adaptation: {error}', file=sys.stderr)
         return 2
@@ -84,6 +90,13 @@ def main(argv: list[str] | None = None) -> int:
           'context, paired')
     print(format_reports(reports))
     return 0
+
+
+def same_file(one: Path, other: Path) -> bool:
+    """Whether two checkpoint files hold the same bytes (sha256): one evaluation serves both."""
+    from zeus_ros.offline.evaluation.records import checkpoint_sha256
+
+    return checkpoint_sha256(one) == checkpoint_sha256(other)
 
 
 if __name__ == '__main__':

@@ -1,6 +1,7 @@
 """`zeus inspect`: watch the context topics live; it only subscribes, never changes anything.
 
-The terminal view refreshes once a second: the true context against the estimate in the
+The terminal view refreshes once a second (not on a terminal, as in a log file or a pipe: one
+line every 10 s, PIPE_REFRESH_S): the true context against the estimate in the
 context's own units (the read-out the estimator publishes on zeus/context_readout when its
 checkpoint holds one; psi otherwise), the current segment's return, the step rate,
 observation-to-action latency and the health counters that the nodes publish on /diagnostics.
@@ -21,7 +22,7 @@ from pathlib import Path
 import signal
 import sys
 import time
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -40,6 +41,10 @@ GenericAnalyzer `timeout` default; the nodes publish every 1 s, the trainer ever
 LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 DISCOVERY_SETTLE_S = 2.0
 """Seconds after the first step before a step without an estimate means 'no estimator'."""
+TERMINAL_REFRESH_S = 1.0
+"""Seconds between views on a terminal (the --refresh default there)."""
+PIPE_REFRESH_S = 10.0
+"""Seconds between lines when stdout is no terminal: a log must not grow a block a second."""
 NOTHING_HINT = ('is a system running (zeus launch, zeus demo)? It must use the same '
                 'ROS_DOMAIN_ID (and --namespace, if it runs in one)')
 
@@ -182,11 +187,16 @@ class Inspector:
                 else int(status.level), status.message, status.hardware_id, now,
                 now - heard.at if heard else 0.0)
 
-    def spin(self, duration: float | None, steps: int | None, refresh: float,
-             quiet: bool) -> None:
-        """Spin until the limit, a stop signal or Ctrl-C, redrawing every `refresh` seconds."""
+    def spin(self, duration: float | None, steps: int | None, refresh: float | None,
+             quiet: bool, out: IO[str] | None = None) -> None:
+        """Spin until the limit, a stop signal or Ctrl-C, showing a view every `refresh` s.
+
+        `refresh` None: every 1 s on a terminal, every 10 s otherwise (`refresh_s`).
+        """
         import rclpy
 
+        out = sys.stdout if out is None else out
+        refresh = refresh_s(out, refresh)
         start = time.monotonic()
         next_draw = start + refresh
         hinted = False
@@ -202,12 +212,17 @@ class Inspector:
                     continue
                 next_draw = now + refresh
                 if self.current() is not None:
-                    print(self.view(), flush=True)
+                    self.show(out)
                 elif not hinted and self.first_step_at is None:  # one hint, then quiet
-                    print(self.waiting_hint(), flush=True)
+                    print(self.waiting_hint(), file=out, flush=True)
                     hinted = True
         except KeyboardInterrupt:
             pass
+
+    def show(self, out: IO[str]) -> None:
+        """The view on a terminal; one line of it (`one_line`) in a log file or a pipe."""
+        view = self.view()
+        print(view if _is_terminal(out) else one_line(view), file=out, flush=True)
 
     def listening(self) -> str:
         """Which topics in which domain: '/zeus/* in ROS_DOMAIN_ID=42 (discovery LOCALHOST)'."""
@@ -385,6 +400,23 @@ class HeardStatus:
         return f'{LEVELS.get(self.level, str(self.level))}: {summary(self.message)}'
 
 
+def _is_terminal(out: IO[str]) -> bool:
+    isatty = getattr(out, 'isatty', None)
+    return bool(isatty and isatty())
+
+
+def refresh_s(out: IO[str], given: float | None) -> float:
+    """Seconds between views: `given` (--refresh), else 1 s on a terminal, 10 s otherwise."""
+    if given is not None:
+        return given
+    return TERMINAL_REFRESH_S if _is_terminal(out) else PIPE_REFRESH_S
+
+
+def one_line(view: str) -> str:
+    """The view's lines joined by ' | ': one line per update for a log file (issue 52)."""
+    return ' | '.join(line.strip() for line in view.splitlines() if line.strip())
+
+
 def _is_zero(text: str) -> bool:
     try:
         return float(text) == 0.0
@@ -401,8 +433,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--steps', type=at_least(1), default=None, help='stop after N steps')
     parser.add_argument('--png', type=Path, default=None, help='save the figure here at the end')
     parser.add_argument('--csv', type=Path, default=None, help='save the per-step log here')
-    parser.add_argument('--refresh', type=at_least(0.05, float), default=1.0,
-                        help='seconds between redraws')
+    parser.add_argument('--refresh', type=at_least(0.05, float), default=None,
+                        help=f'seconds between views (default {TERMINAL_REFRESH_S:g} on a '
+                        f'terminal; otherwise {PIPE_REFRESH_S:g}, one line each)')
     parser.add_argument('--quiet', action='store_true', help='no live view, only the summary')
     parser.add_argument('--namespace', default='',
                         help='watch the system in this namespace (e.g. r1 for /r1/zeus/...)')

@@ -446,15 +446,38 @@ def _verify_checkpoints(launch: LaunchPlan) -> None:
     """Refuse, before any node starts, a checkpoint the launch names that its record refutes.
 
     The nodes check it too (a params file's relative path is theirs to find); this spares a
-    start-up that ends with every agent node exiting 2. IntegrityError is a ValueError.
+    start-up that ends with every agent node exiting 2: a checkpoint whose sha256 differs from
+    its record, or one trained for another family than the task its node (else the bridge)
+    runs. IntegrityError is a ValueError; so is the mismatch, one line.
     """
     from zeus_ros.integrity import verify_file
 
-    named = {str(node.parameters['checkpoint']) for node in launch.nodes
+    named = {str(node.parameters['checkpoint']): node.name for node in launch.nodes
              if node.name in AGENT_NODES and node.parameters.get('checkpoint')}
-    for checkpoint in sorted(named):
+    for checkpoint, name in sorted(named.items()):
         if Path(checkpoint).is_absolute():
             verify_file(checkpoint)
+            _check_task(launch, name, checkpoint)
+
+
+def _check_task(launch: LaunchPlan, name: str, checkpoint: str) -> None:
+    """ValueError when `checkpoint` was trained for another task than node `name` will run."""
+    from sim_bridge.registry import is_task_file
+
+    task = launch.parameter(name, 'task') or launch.parameter('sim_bridge', 'task')
+    if not task or is_task_file(str(task)):  # a task file: its node resolves the name
+        return
+    from zeus_ros.learning.checkpoint import stored_task
+    from zeus_ros.learning.errors import CheckpointError
+
+    try:
+        stored = stored_task(checkpoint)
+    except CheckpointError as error:
+        raise ValueError(str(error)) from None
+    if stored != task:
+        raise ValueError(f"checkpoint {checkpoint} was trained for '{stored}', but {name} "
+                         f"runs '{task}': nothing started; pass --task {stored}, or a "
+                         f'checkpoint trained for {task}')
 
 
 if __name__ == '__main__':

@@ -31,7 +31,7 @@ from zeus_ros.learning.spec import AgentSpec
 
 __all__ = ['DEPLOY_MODULES', 'FORMAT_VERSION', 'LoadedCheckpoint', 'export_for_deployment',
            'load_checkpoint', 'nonfinite_tensors', 'save_checkpoint', 'save_deployment',
-           'verify_checkpoint']
+           'stored_task', 'verify_checkpoint']
 
 FORMAT_VERSION = 1
 """Bump when the layout changes; older files are then refused with a clear message."""
@@ -208,6 +208,25 @@ def verify_checkpoint(path: Path, data: bytes | None, *, sha256: str | None = No
     except IntegrityError as error:
         raise CheckpointIntegrityError(str(error)) from None
     return data
+
+
+def stored_task(path: str | Path) -> str:
+    """The task a checkpoint was trained for, read without building its agent.
+
+    For a check that must come before anything starts (`zeus launch` pairing a checkpoint with
+    another family's bridge): one safe torch.load, no networks built, no sha256 check (the
+    caller's verify_file or load_checkpoint does that). Raises CheckpointError.
+    """
+    path = Path(path)
+    try:
+        payload = torch.load(path, map_location='cpu', weights_only=True)
+    except FileNotFoundError:
+        raise _fail(path, 'no such file') from None
+    except Exception as error:  # torch raises many types for corrupt / foreign files
+        raise _fail(path, _load_error(error)) from None
+    if not isinstance(payload, dict) or 'task' not in payload:
+        raise _fail(path, 'not a zeus_ros checkpoint (no task)')
+    return str(payload['task'])
 
 
 def load_checkpoint(path: str | Path, *, map_location: str | torch.device = 'cpu',

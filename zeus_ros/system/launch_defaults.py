@@ -206,6 +206,15 @@ class LaunchPlan:
     clock: str = ''
     """The clock topic every node is remapped to ('': /clock)."""
 
+    def parameter(self, name: str, key: str) -> Any:
+        """Node `name`'s `key` as it will start: the plan's override, else the params file's."""
+        for node in self.nodes:
+            if node.name == name and key in node.parameters:
+                return node.parameters[key]
+        values = [s[key] for s in _node_sections(read_params(self.params_file), name)
+                  if s.get(key) not in (None, '')]
+        return values[-1] if values else None
+
     @property
     def remappings(self) -> list[tuple[str, str]]:
         """(from, to) remaps of every node: the clock, when it is not /clock."""

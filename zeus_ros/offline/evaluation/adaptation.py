@@ -13,7 +13,7 @@ with this function.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,10 +48,13 @@ def _per_value(rows: Sequence[dict[str, Any]], episodes: int) -> np.ndarray:
 
 def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_SEED,
                        splits: Sequence[str] = MEASURED_SPLITS, progress: bool = True,
-                       expect_sha256: str | None = None) -> AdaptationReport:
+                       expect_sha256: str | None = None, label: str = ''
+                       ) -> AdaptationReport:
     """Returns and value of adaptation of one checkpoint on its family's splits.
 
     `expect_sha256`: refuse the file unless it has this sha256 (zeus_ros/integrity.py).
+    Each progress bar says its pass, `LABEL pass i/N: what`: a bar that starts over is the
+    next pass, not the same work again (issue 52).
     """
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.diagnostics import context_sensitivity
@@ -64,25 +67,40 @@ def measure_adaptation(checkpoint: Path, *, episodes: int = 3, seed: int = EVAL_
 
     agent = InferenceAgent.from_checkpoint(checkpoint, expect_sha256=expect_sha256)
     report = AdaptationReport(Path(checkpoint), agent.task, agent.method)
+    desc = pass_names(splits, bool(agent.context_dim), label)
     train_mean = None
     if agent.context_dim:
         traces: list[Any] = []
         values = split_values(agent.task, 'train')
         evaluate_contexts(agent, values, episodes=episodes, seed=seed, traces=traces,
-                          progress=progress)
+                          progress=progress, desc=next(desc))
         train_mean = overall_mean_context(agent, traces)
         report.sensitivity = context_sensitivity(agent, traces, values)
     for split in splits:
         values = split_values(agent.task, split)
         live = _per_value(evaluate_contexts(agent, values, episodes=episodes, seed=seed,
-                                            progress=progress), episodes)
+                                            progress=progress, desc=next(desc)), episodes)
         report.returns[split] = mean_se(live)
         if train_mean is not None:
             frozen = _per_value(evaluate_contexts(
                 agent, values, episodes=episodes, seed=seed, frozen=[train_mean] * len(values),
-                progress=progress), episodes)
+                progress=progress, desc=next(desc)), episodes)
             report.adaptation[split] = mean_se(live - frozen)
     return report
+
+
+def pass_names(splits: Sequence[str], context: bool, label: str = '') -> Iterator[str]:
+    """The progress-bar names of measure_adaptation's passes, in order: 'pass i/N: ...'.
+
+    With a learned context: the train values (for the mean context), then per split the live
+    and the frozen pass; without one, one pass per split.
+    """
+    names = (['train values (mean context)'] if context else []) + [
+        f'{split} {kind}' for split in splits for kind in (('live', 'frozen') if context
+                                                           else ('returns',))]
+    prefix = f'{label} ' if label else ''
+    for index, name in enumerate(names, 1):
+        yield f'{prefix}pass {index}/{len(names)}: {name}'
 
 
 def fmt(pair: tuple[float, float] | None) -> str:
