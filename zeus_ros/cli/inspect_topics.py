@@ -340,7 +340,7 @@ class Inspector:
                                        'rollbacks')
                               and not (k == 'rate_hz' and _is_zero(v)))
             if shown or state:
-                lines.append(f'          {name}: ' + ' | '.join(filter(None, (state, shown))))
+                lines.append(f'          {name}: ' + ' | '.join(filter(None, (shown, state))))
         return '\n'.join(lines)
 
     def close(self) -> None:
