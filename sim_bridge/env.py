@@ -95,6 +95,17 @@ class ScheduledEnv:
         return EnvStep(self.step_index, self.episode, 0, result, None, ActionStatus.NONE, '',
                        self.sim_time, self.segment)
 
+    def end_episode(self) -> bool:
+        """End the running episode now: the next step() is the next episode's reset.
+
+        An operator's reset (sim_bridge ~/reset_episode): the pending action is not applied,
+        as at a time limit. False when no episode runs yet (or it ends anyway).
+        """
+        if self.episode < 0 or self._needs_reset:
+            return False
+        self._needs_reset = True
+        return True
+
     def step(self, action: np.ndarray | None) -> EnvStep:
         """Apply one action (None: nothing arrived) and return observation k+1."""
         if self._needs_reset:

@@ -17,7 +17,9 @@ background thread spins the node (step and context-truth subscriptions, paramete
 /diagnostics). A candidate that passes is copied to OUT/deployed/ and set as `checkpoint` on
 context_estimator and then policy (they pair by sha256: no mismatched pair ever acts); the
 previous checkpoint stays on disk and is what a failed live check restores. Every decision is
-one log line, one /diagnostics status and one line of OUT/history.jsonl.
+one log line, one /diagnostics status and one line of OUT/history.jsonl. Operators pause and
+resume rounds, run one now and swap the pair atomically through its services
+(trainer_controls.py).
 
 Installed as `continual_trainer_node`. Its parameters (SPECS) carry a description and a range
 (`ros2 param describe`); a bad one stops it at start with one line (exit 2) and is refused
@@ -50,6 +52,7 @@ from zeus_ros.atomic_file import replace_text
 from zeus_ros.bags.kinds import REHEARSAL_FOLDER
 from zeus_ros.bags.recording import closed_splits, split_steps
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
+from zeus_ros.nodes.trainer_controls import TrainerControls
 from zeus_ros.system.continual_settings import (
     ContinualSettings,
     append_history,
@@ -204,6 +207,7 @@ class ContinualTrainer(Node):
         self.clients_ = {name: AsyncParameterClient(self, name) for name in TARGETS}
         self.create_timer(5.0, lambda: self.report('status'))
         serve_live_changes(self, SPECS, self.p, self._changed)
+        self.controls = TrainerControls(self)
 
     def _changed(self, changed: dict[str, Any]) -> None:
         """A live change: the round's settings anew (read at the next round), a history line."""
@@ -232,7 +236,8 @@ class ContinualTrainer(Node):
         """One /diagnostics status: the state, the counts, the deployed checkpoint."""
         from zeus_ros.nodes.messages import diagnostics_message
 
-        values = {'event': event, 'state': self.state, 'deployed': str(self.deployed),
+        values = {'event': event, 'state': self.state, 'paused': self.controls.paused,
+                  'deployed': str(self.deployed),
                   'previous': str(self.previous or ''), 'history': str(self.history),
                   **self.counts, **self.progress}
         if message:
@@ -325,21 +330,27 @@ class Trainer:
 
     def poll(self) -> None:
         """Check a swap under watch, then start a round when enough new steps are closed."""
-        n = self.node
+        n, controls = self.node, self.node.controls
+        if controls.swapped:  # an operator's swap: the round's live check compares no more
+            controls.swapped, self.watch = False, None
         self.check_live()
         splits = closed_splits(n.recording)
         known = {p.resolve() for p in self.since_swap}
         self.since_swap += [b for b in splits if b.resolve() not in known
                             and b.resolve() not in self.used]
+        controls.new_splits = len(self.since_swap)
         total = sum(split_steps(b) for b in self.since_swap)
         with n.lock:
             novel = n.novelty.raised
         needed = min(n.settings.new_steps, int(n.p['novelty_min_steps'])) if novel \
             else n.settings.new_steps
-        if self.watch is not None or total - self.steps_at_round < needed:
+        asked, controls.round_asked = controls.round_asked, False
+        if not asked and (controls.paused or self.watch is not None
+                          or total - self.steps_at_round < needed):
             return
-        trigger = ('novelty alarm' if total - self.steps_at_round < n.settings.new_steps
-                   else 'new steps')
+        trigger = 'operator' if asked else (
+            'novelty alarm' if total - self.steps_at_round < n.settings.new_steps
+            else 'new steps')
         self.steps_at_round = total
         self.round(splits, trigger)
         removed = prune_recording(closed_splits(n.recording),

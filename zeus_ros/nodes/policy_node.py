@@ -16,6 +16,12 @@ reached one of the pair but not the other, estimates are refused (counted as `mi
 the safe action goes out instead. Steps and observations come from its bridge only, contexts from
 its estimator only (paired by publisher GID and node name: `step_source`, `context_source`;
 senders.py): any other publisher is refused unread and an ERROR on /diagnostics.
+
+Operator services (services.py): `~/freeze_context` (std_srvs/SetBool) sets `frozen_context`
+to the checkpoint's train-mean context (else the newest estimate), or back to live;
+`~/stage_checkpoint` (zeus_msgs/SwapCheckpoint) loads a checkpoint that the policy switches to
+at the first estimate stamped with its sha256: the policy's half of the atomic pair swap
+(pair_swap.py; continual_trainer ~/swap_checkpoint).
 """
 
 from __future__ import annotations
@@ -26,9 +32,11 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
 from zeus_ros.learning.inference import MAX_CONTEXT_LAG, InferenceAgent
+from zeus_ros.learning.readout import TRAIN_MEAN_KEY
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
 from zeus_ros.nodes.handshake import handshake_of
@@ -45,6 +53,7 @@ from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInpu
 from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import WaitReport, count_publishers, steady_timer
 from zeus_ros.nodes.senders import SenderPairing, SenderSubscription
+from zeus_ros.nodes.services import serve_swap, serve_switch
 from zeus_ros.nodes.spin import run_node
 from zeus_ros.nodes.topics import TOPICS, action_qos, step_qos
 
@@ -103,6 +112,8 @@ class PolicyNode(Node):
         self.agent: InferenceAgent | None = None
         self.loaded: LoadedAgent | None = None
         self._pending: LoadedAgent | None = None
+        self._staged: LoadedAgent | None = None  # used from its first estimate on
+        self._adopting = ''  # the staged path, while set as `checkpoint` (no reload)
         if self.params['checkpoint']:
             self.loaded = load_inference_agent('policy', self.params)
             self.agent = self.loaded.agent
@@ -172,6 +183,8 @@ class PolicyNode(Node):
             self, SPECS, self.params, self._apply_live,
             check=lambda values: self._parse_frozen(values['frozen_context']),
             prepare=self._prepare_live)
+        serve_switch(self, 'freeze_context', self._freeze_context)
+        serve_swap(self, 'stage_checkpoint', self._stage_checkpoint)
         source = 'random policy' if self.loaded is None else \
             f'{self.loaded.agent.method} checkpoint for {self.loaded.agent.task}: loaded ' \
             f'{self.loaded.describe()}'
@@ -202,7 +215,7 @@ class PolicyNode(Node):
     def _prepare_live(self, changed: dict[str, Any]) -> None:
         """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
         self._pending = None
-        if 'checkpoint' not in changed:
+        if 'checkpoint' not in changed or changed['checkpoint'] == self._adopting:
             return
         if self.agent is None or not changed['checkpoint']:
             raise ValueError('policy: switching between the random policy and a checkpoint '
@@ -226,8 +239,63 @@ class PolicyNode(Node):
             self._first_context = None
             self.get_logger().info(f'redeployed live: {self.agent.method} checkpoint '
                                    f'{self.loaded.describe()}')
+        if 'checkpoint' in changed and changed['checkpoint'] != self._adopting:
+            self._staged = None  # a redeploy by parameter overrides a staged swap
         if 'frozen_context' in changed or 'checkpoint' in changed:
             self.frozen = self._parse_frozen(self.params['frozen_context'])
+
+    # -- operator services (services.py) ----------------------------------------------------
+    def _freeze_context(self, freeze: bool) -> str:
+        """Freeze psi at the train mean (else the newest estimate), or make it live."""
+        if not freeze:
+            text, done = '', 'psi live again (frozen_context cleared)'
+        else:
+            if self.agent is None or not self.needs_context:
+                raise ValueError('this policy uses no context: nothing to freeze')
+            mean = self.agent.extra.get(TRAIN_MEAN_KEY)
+            if mean is not None:
+                values, source = np.asarray(mean, np.float32), "the checkpoint's train mean"
+            elif self._newest_context is not None:
+                values, source = self._newest_context[1], 'the newest estimate'
+            else:
+                raise ValueError('no context to freeze at yet (no estimate, no train mean in '
+                                 'the checkpoint)')
+            text = ','.join(f'{v:.9g}' for v in values)
+            done = f'psi frozen at {source} ({text}): frozen_context set'
+        result = self.set_parameters([Parameter('frozen_context', value=text)])[0]
+        if not result.successful:
+            raise ValueError(result.reason)
+        return done
+
+    def _stage_checkpoint(self, checkpoint: str, expect_sha256: str) -> tuple[str, str]:
+        """Load a checkpoint to switch to at its first estimate ('' unstages); ValueError."""
+        if not checkpoint:
+            self._staged = None
+            return 'nothing staged', '' if self.loaded is None else self.loaded.sha256
+        if self.loaded is None:
+            raise ValueError('the random policy cannot switch to a checkpoint: restart it')
+        self._prepare_live({'checkpoint': checkpoint})  # loads and checks it, or refuses
+        staged, self._pending = self._pending, None
+        assert staged is not None
+        if expect_sha256 and staged.sha256 != expect_sha256:
+            raise ValueError(f'{staged.path} has sha256 {staged.sha256[:12]}, expected '
+                             f'{expect_sha256[:12]}')
+        self._staged = staged
+        return (f'staged {staged.describe()}: used from the first estimate stamped with it',
+                staged.sha256)
+
+    def _adopt_staged(self) -> None:
+        """The estimator runs the staged checkpoint now: so does the policy, from this step."""
+        assert self._staged is not None
+        self._pending, self._staged = self._staged, None
+        path = str(self._pending.path)
+        self._apply_live({'checkpoint': path})
+        self._adopting = path  # `checkpoint` tells what runs, without loading it again
+        result = self.set_parameters([Parameter('checkpoint', value=path)])[0]
+        self._adopting = ''
+        if not result.successful:
+            self.get_logger().warning(f'runs {path}, parameter checkpoint not updated: '
+                                      f'{result.reason}')
 
     def _become_ready(self) -> None:
         if self.needs_context and count_publishers(self, TOPICS.CONTEXT) == 0:
@@ -247,6 +315,8 @@ class PolicyNode(Node):
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_context(self, msg: ContextEstimate) -> None:
+        if self._staged is not None and msg.checkpoint_sha256 == self._staged.sha256:
+            self._adopt_staged()
         if self.loaded is not None and msg.checkpoint_sha256 != self.loaded.sha256:
             self.counts['mismatched'] += 1
             self.get_logger().warning(

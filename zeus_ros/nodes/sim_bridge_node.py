@@ -40,6 +40,7 @@ from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.params import LOCK_SPECS, Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.peers import WaitReport, missing_peers, steady_timer
 from zeus_ros.nodes.senders import PAIRING_SETTLE_S, SenderPairing, SenderSubscription
+from zeus_ros.nodes.services import serve_trigger
 from zeus_ros.nodes.spin import run_node
 from zeus_ros.nodes.topics import TOPICS, image_qos, publisher_qos, step_qos
 
@@ -113,7 +114,8 @@ class SimBridgeNode(Node):
         self.exit_code = 0
         self.finished = False  # max_steps reached: run_nodes ends the spin (spin.py)
         self.counts = dict.fromkeys(
-            ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected', 'foreign'),
+            ('steps', 'ok', 'clipped', 'rejected', 'timeouts', 'stale', 'unexpected', 'foreign',
+             'resets'),
             0
         )
         self._rate = RateMeter()
@@ -160,6 +162,7 @@ class SimBridgeNode(Node):
         self._check_live(self.params)
         self._live = serve_live_changes(self, SPECS, self.params, lambda _changed: None,
                                         check=self._check_live)
+        serve_trigger(self, 'reset_episode', self._reset_episode)
         self.get_logger().info(
             f'{self.params["task"]} in {self.mode} mode, contexts {list(task.context_names)}, '
             f'pixels={self.params["pixels"]}; waiting for peers on {self._sub_action.topic_name}'
@@ -231,6 +234,14 @@ class SimBridgeNode(Node):
                 throttle_duration_sec=5.0,
             )
             self._advance(None)
+
+    def _reset_episode(self) -> str:
+        """~/reset_episode: the episode ends at the next step, counted as `resets`."""
+        if not self.env.end_episode():
+            raise ValueError('no episode to end: not stepping yet, or this one ends anyway')
+        self.counts['resets'] += 1
+        return (f'episode {self.env.episode} ends at the next step (step '
+                f"{self.env.step_index + 1} is the next episode's reset)")
 
     def _pair_sender(self) -> bool:
         """Pair with the one action publisher (or action_sender) before step 0."""
