@@ -16,12 +16,14 @@ pytestmark = pytest.mark.ros
 
 
 def test_a_dying_node_stops_the_group_and_is_named(tmp_path) -> None:
-    """A policy with a missing checkpoint exits 2; launch stops sim_bridge and names the policy."""
+    """A policy refusing its parameters exits 2; launch stops sim_bridge and names the policy.
+
+    (A missing checkpoint no longer gets that far: `zeus launch` refuses it before any start.)
+    """
     params = tmp_path / 'params.yaml'
     params.write_text(
         'sim_bridge:\n  ros__parameters:\n    task: Cheetah-Run-v0\n'
-        'policy:\n  ros__parameters:\n'
-        f'    checkpoint: {tmp_path / "missing.pt"}\n')
+        'policy:\n  ros__parameters:\n    task: Cheetah-Run-v0\n    noise: 5.0\n')
     result = subprocess.run(
         [sys.executable, '-m', 'zeus_ros.cli', 'launch', '--params', str(params),
          '--nodes', 'sim_bridge,policy', '--timeout', '120'],
@@ -29,7 +31,7 @@ def test_a_dying_node_stops_the_group_and_is_named(tmp_path) -> None:
         timeout=180, check=False)
     assert result.returncode == 1, result.stdout + result.stderr
     assert "node 'policy' died with exit code 2" in result.stderr
-    assert '[policy] error: policy:' in result.stdout and 'missing.pt' in result.stdout
+    assert '[policy] error: policy: parameter noise must be <= 0.5' in result.stdout
     assert '[sim_bridge]' in result.stdout
 
 

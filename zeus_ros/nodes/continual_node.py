@@ -246,7 +246,28 @@ class ContinualTrainer(Node):
                                                      [message] if problem else []))
 
     def set_checkpoint(self, path: Path, timeout: float = 30.0) -> str | None:
-        """Both nodes on `path` (estimator first); None, or why it failed (both restored)."""
+        """Both nodes on `path`; None, or why it failed (the pair stays on its checkpoint).
+
+        Through the atomic pair swap (pair_swap.py: the policy stages it, switches with the
+        estimator's first estimate of it: no step is acted on by a mismatched pair) when the
+        policy offers it; else the two parameters one after the other, estimator first.
+        Called from the main thread; the swap runs on the spinning executor.
+        """
+        swapper, executor = self.controls.swapper, self.executor
+        if executor is not None and swapper.stage.wait_for_service(timeout_sec=2.0):
+            task = executor.create_task(swapper.swap(str(path), ''))
+            end = time.monotonic() + timeout
+            while not task.done() and time.monotonic() < end:
+                time.sleep(0.01)
+            if not task.done():
+                task.cancel()
+                return f'the pair swap did not answer within {timeout:g} s'
+            error = task.exception()
+            return None if error is None else str(error)
+        return self._set_parameters(path, timeout)
+
+    def _set_parameters(self, path: Path, timeout: float) -> str | None:
+        """The pair's `checkpoint` parameters, estimator first (a policy without staging)."""
         done: list[str] = []
         for name in TARGETS:
             client = self.clients_[name]
