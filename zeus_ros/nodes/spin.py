@@ -61,11 +61,13 @@ def _exit_now(code: int) -> NoReturn:
     os._exit(code)
 
 
-def _deliver_published(nodes: Sequence[Node], timeout: float = 2.0) -> None:
+def _deliver_published(nodes: Sequence[Node], timeout: float = 5.0) -> None:
     """A node finished its job: let reliable readers (a recorder) take what it last published.
 
     Destroying a publisher drops what its readers have not acknowledged yet; a recorder that
-    runs a little behind would lose the last steps of a run. Waits `timeout` seconds at most.
+    runs a little behind would lose the last steps of a run. Waits `timeout` seconds at most
+    (no wait when they are caught up; 2 s once lost the last steps of a one-process loop to a
+    recorder starved by a three-worker test run on two cores).
     """
     from rclpy.duration import Duration
 
