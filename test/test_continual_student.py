@@ -107,3 +107,52 @@ def test_a_student_round_trains_the_teacher_and_deploys_the_refreshed_student(
     assert line['refreshed_student'] == answer['candidate']
     assert line['refreshed_sha256'] == answer['sha256'] and line['student_sha256']
     assert any('pixel student' in text for text in lines)
+    # the trainer's swap: the student to OUT/deployed, its teacher beside it; found there
+    # after the round folder is pruned (what a rollback or a restart deploys again)
+    import shutil
+
+    from zeus_ros.system.continual_settings import TEACHER_SUFFIX
+
+    copy = tmp_path / 'deployed' / 'round_001_abc.pt'
+    copy.parent.mkdir()
+    shutil.copy2(answer['candidate'], copy)
+    shutil.copy2(answer['teacher_candidate'], copy.with_name(copy.stem + TEACHER_SUFFIX))
+    shutil.rmtree(tmp_path / 'round_001')
+    assert state_teacher(copy) == copy.with_name(copy.stem + TEACHER_SUFFIX)
+
+
+def test_continual_pixels_plan_deploys_the_student_and_the_trainer_retrains_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`continual:=true obs:=pixels`: frames on, the zoo student on both agents and the trainer.
+
+    `zeus launch` refuses, before anything starts, a pixel checkpoint the trainer cannot
+    retrain (one line, exit 2).
+    """
+    from zeus_ros.cli import launch as launch_cli
+    from zeus_ros.learning.checkpoint import load_checkpoint, save_deployment
+    from zeus_ros.system import launch_defaults as d
+
+    plan = d.plan_from_arguments({'continual': 'true', 'obs': 'pixels', 'task': BIAS})
+    nodes = {node.name: node.parameters for node in plan.nodes}
+    student = str(pixel_checkpoint(BIAS))
+    assert nodes['sim_bridge']['pixels'] is True
+    assert nodes[d.TRAINER]['checkpoint'] == nodes['policy']['checkpoint'] == student
+    assert nodes['context_estimator']['checkpoint'] == student
+    assert nodes[d.TRAINER]['recording'] == nodes['recorder']['output']
+    assert nodes[d.TRAINER]['task'] == BIAS and nodes['policy']['noise'] == d.CONTINUAL_NOISE
+    launch_cli._check_student(plan)  # its teacher is found: goes ahead
+
+    def no_start(*_args: object, **_kwargs: object) -> None:
+        raise AssertionError('a process was started')
+
+    monkeypatch.setattr(launch_cli, 'plan_processes', no_start)
+    monkeypatch.setattr(launch_cli, 'run_group', no_start)
+    loaded = load_checkpoint(student, load_optimizers=False)
+    gone = {**loaded.extra, 'distill': {**loaded.extra['distill'], 'teacher': 'gone/zeus.pt'}}
+    lost = save_deployment(tmp_path / 'lost.pt', loaded.agent, step=loaded.step, extra=gone)
+    code = launch_cli.main(['--continual', '--obs', 'pixels', '--task', BIAS,
+                            '--checkpoint', str(lost), '--no-progress'])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert 'state teacher' in err and 'not found' in err

@@ -20,15 +20,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ['STUDENT_FILE', 'TEACHER_SUFFIX', 'StudentError', 'refresh_on_swap', 'state_teacher',
+from zeus_ros.system.continual_settings import TEACHER_SUFFIX
+
+__all__ = ['STUDENT_FILE', 'StudentError', 'refresh_on_swap', 'state_teacher',
            'teacher_path']
 
 STUDENT_FILE = 'student.pt'
 """The refreshed student, beside the round's candidate (OUT/round_NNN/student.pt)."""
-TEACHER_SUFFIX = '.teacher.pt'
-"""A deployed student's teacher is copied beside it under the student's name + this suffix
-(the trainer's OUT/deployed/): a student relaunched from there still finds its teacher after
-the round folder it names is pruned."""
 
 
 class StudentError(ValueError):
