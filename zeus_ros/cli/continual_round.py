@@ -10,11 +10,14 @@ round's memory goes back to the OS when this process ends.
 Request: `deployed`, `first_checkpoint` (the rehearsal's), `rehearsal` (its folder),
 `new_bags`, `splits`, `out` (the round's folder), `history`, `settings` (ContinualSettings
 fields), `corrupt_rewards` and `forced` (the drills), `resume_from` (a refused candidate to
-continue, or null), `threads` (torch threads), `result`, and `parent_pid` (optional: the
+continue, or null), `teacher` (optional: the state teacher of a deployed pixel student; null:
+the one its record names), `threads` (torch threads), `result`, and `parent_pid` (optional: the
 round is killed when that process, the node, dies; it never outlives it). The round runs at
 the priority it inherits (the node lowers its own with its `nice` parameter).
 Answer: `status` 'done' (with run_round's fields: candidate, sha256, deploy, reason, gain,
-se, required, summary, resume_from, episode_length), 'stopped' (SIGINT/SIGTERM during the
+se, required, summary, resume_from, episode_length; for a pixel student also
+teacher_candidate, teacher_sha256 and teacher, the candidate then the refreshed student or
+null), 'stopped' (SIGINT/SIGTERM during the
 training: nothing written) or 'failed' (`error`: the exception's type, `reason`: its text;
 the traceback goes to stderr). Log lines go to stdout (the node logs each one).
 Exit code: 0 done, 1 failed, 2 a bad request, 3 stopped.
@@ -63,7 +66,7 @@ def _round(request: dict[str, Any], stop: threading.Event) -> dict[str, Any]:
             request['history'], ContinualSettings(**request['settings']),
             first_checkpoint=request['first_checkpoint'], rehearsal_folder=request['rehearsal'],
             corrupt_rewards=bool(request['corrupt_rewards']), forced=bool(request['forced']),
-            round_number=int(request.get('round', 0)),
+            round_number=int(request.get('round', 0)), teacher=request.get('teacher'),
             start=request.get('resume_from'), log=lambda line: print(line, flush=True),
             stop=stop.is_set)
     except RoundStopped:

@@ -458,6 +458,23 @@ def _verify_checkpoints(launch: LaunchPlan) -> None:
         if Path(checkpoint).is_absolute():
             verify_file(checkpoint)
             _check_task(launch, name, checkpoint)
+    _check_student(launch)
+
+
+def _check_student(launch: LaunchPlan) -> None:
+    """ValueError (one line) for a pixel checkpoint the continual trainer cannot retrain.
+
+    Not a teacher-head student, or its state teacher not found (continual_student.py): its
+    rounds would each fail with that line after minutes of recording.
+    """
+    if not any(node.name == TRAINER for node in launch.nodes):
+        return
+    checkpoint = str(launch.parameter(TRAINER, 'checkpoint') or '')
+    if not checkpoint or not Path(checkpoint).is_file():
+        return
+    from zeus_ros.offline.training.continual_student import state_teacher
+
+    state_teacher(checkpoint)  # a StudentError is a ValueError
 
 
 def _check_task(launch: LaunchPlan, name: str, checkpoint: str) -> None:

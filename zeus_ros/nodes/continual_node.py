@@ -16,7 +16,11 @@ SIGKILL after STOP_GRACE_S), a child that fails is logged and counted as a faile
 background thread spins the node (step and context-truth subscriptions, parameter clients,
 /diagnostics). A candidate that passes is copied to OUT/deployed/ and set as `checkpoint` on
 context_estimator and then policy (they pair by sha256: no mismatched pair ever acts); the
-previous checkpoint stays on disk and is what a failed live check restores. Every decision is
+previous checkpoint stays on disk and is what a failed live check restores. A deployed pixel
+student (`zeus launch --continual --obs pixels`) changes nothing here: its round trains and
+gates the student's state teacher and answers with the refreshed student
+(offline/training/continual_student.py); that is what is swapped, its teacher copied beside
+it (TEACHER_SUFFIX), where the next round, a rollback or a restart finds it. Every decision is
 one log line, one /diagnostics status and one line of OUT/history.jsonl. Operators pause and
 resume rounds, run one now and swap the pair atomically through its services
 (trainer_controls.py).
@@ -54,6 +58,7 @@ from zeus_ros.bags.recording import closed_splits, split_steps
 from zeus_ros.nodes.params import Spec, declare_specs, serve_live_changes
 from zeus_ros.nodes.trainer_controls import TrainerControls
 from zeus_ros.system.continual_settings import (
+    TEACHER_SUFFIX,
     ContinualSettings,
     append_history,
     field_docs,
@@ -432,8 +437,8 @@ class Trainer:
         self.episode_length = self.episode_length or int(answer['episode_length'])
         if not answer['deploy'] and not forced:
             n.counts['refusals'] += 1
-            n.report('refuse', f'round {number}: refused {answer["sha256"][:12]}: '
-                     f'{answer["reason"]}')
+            refused = answer.get('teacher_sha256') or answer['sha256']  # a student's teacher
+            n.report('refuse', f'round {number}: refused {refused[:12]}: {answer["reason"]}')
         else:
             self.swap(answer, number, forced and not answer['deploy'])
         self._prune_candidates()
@@ -445,6 +450,11 @@ class Trainer:
         target = n.out / 'deployed' / f'round_{number:03d}_{sha256[:12]}.pt'
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(answer['candidate'], target)
+        teacher: dict[str, str] = {}  # a pixel student's state teacher, beside it
+        if answer.get('teacher_candidate'):
+            copy = target.with_name(target.stem + TEACHER_SUFFIX)
+            shutil.copy2(answer['teacher_candidate'], copy)
+            teacher = {'teacher': str(copy), 'teacher_sha256': answer['teacher_sha256']}
         why = n.set_checkpoint(target)
         if why is not None:
             n.counts['failures'] += 1
@@ -471,7 +481,7 @@ class Trainer:
                 f"previous checkpoint's (gate gain {gain:+.1f} per episode)")
         self.log.info(line)
         append_history(n.history, {'event': 'swap', 'round': number, 'checkpoint': str(target),
-                                   'sha256': sha256, 'forced': forced,
+                                   'sha256': sha256, **teacher, 'forced': forced,
                                    'previous': str(n.previous), 'gate_gain': gain})
         n.report('swap', line)
 

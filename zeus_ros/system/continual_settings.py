@@ -24,8 +24,14 @@ from typing import Any
 
 from zeus_ros.atomic_file import replace_text
 
-__all__ = ['ContinualSettings', 'ResumePoint', 'RoundProgress', 'append_history',
-           'field_docs', 'read_history', 'read_progress', 'resume_point']
+__all__ = ['TEACHER_SUFFIX', 'ContinualSettings', 'ResumePoint', 'RoundProgress',
+           'append_history', 'field_docs', 'read_history', 'read_progress', 'resume_point']
+
+TEACHER_SUFFIX = '.teacher.pt'
+"""A deployed pixel student's state teacher is copied beside it (the trainer's OUT/deployed/)
+under the student's name + this suffix, and found there again (continual_student.py): a
+rollback, a restart or a relaunch from the copy still finds the teacher its actor came from
+after the round folder its record names is pruned."""
 
 
 @dataclass(frozen=True)

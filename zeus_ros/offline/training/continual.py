@@ -382,12 +382,15 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
                     corrupt_rewards: bool = False, log: Callable[[str], None] = print,
                     stop: Callable[[], bool] = lambda: False,
                     rehearsal: Path | None = None, start: Path | None = None,
-                    round_number: int = 0) -> RoundResult:
+                    round_number: int = 0,
+                    on_decision: Callable[[Candidate, GateResult], dict[str, Any]] | None = None
+                    ) -> RoundResult:
     """Train a candidate on the replay mix, gate it, and record the decision (no swap here).
 
     `rehearsal`: a bag (`rehearsal_bag`) added to the old data of the round. `start`: an
     earlier refused candidate to continue (`resume_from`); the gate still compares against
-    `deployed`.
+    `deployed`. `on_decision`: called once decided, before the history line; its fields join
+    that line (a pixel deployment's refreshed student: continual_student.py).
     """
     old = [*replay_mix(splits, new_bags, settings), *([rehearsal] if rehearsal else [])]
     progress = RoundProgress(Path(out) / PROGRESS_FILE)
@@ -406,6 +409,7 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
                 f'{confirmation.reason}'))
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 
+    decided = {} if on_decision is None else on_decision(candidate, result)
     record = append_history(history, {
         'event': 'gate', 'round': round_number, 'candidate': str(candidate.path),
         'sha256': candidate.sha256,
@@ -425,7 +429,7 @@ def continual_round(deployed: Path | str, new_bags: Sequence[Path], splits: Sequ
             'deploy': confirmation.deploy, 'reason': confirmation.reason,
             'gate_s': round(confirmation.seconds, 2), 'values': confirmation.values},
         'decision': 'deploy' if result.deploy else 'refuse',
-        'reason': result.reason})
+        'reason': result.reason, **decided})
     log(f'continual: {"DEPLOY" if result.deploy else "REFUSE"} {candidate.path.name} '
         f'({candidate.sha256[:12]}): {result.summary()}; {result.reason}')
     return RoundResult(candidate, result, record)
@@ -448,8 +452,8 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
               first_checkpoint: Path | str, rehearsal_folder: Path | str,
               corrupt_rewards: bool = False, forced: bool = False,
               start: Path | str | None = None, log: Callable[[str], None] = print,
-              stop: Callable[[], bool] = lambda: False, round_number: int = 0
-              ) -> dict[str, Any]:
+              stop: Callable[[], bool] = lambda: False, round_number: int = 0,
+              teacher: Path | str | None = None) -> dict[str, Any]:
     """One round of the live trainer, as `zeus continual-round` runs it: a JSON-ready answer.
 
     The rehearsal recording of `first_checkpoint` (made once under `rehearsal_folder`, in a
@@ -461,10 +465,21 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
     the task's episode length (the live check's scale). Raises what `continual_round` raises
     (RoundStopped when `stop` answers True). Round `round_number` gates on evaluation seeds
     of its own (eval_seed + round_number x ROUND_SEED).
+
+    A deployed pixel student (continual_student.py): the rehearsal, the training, the chain
+    and the gate are its state teacher's (`teacher`, else the one its record names); the
+    answer's candidate is the refreshed student (written when deployed or forced; None when
+    refused) and `teacher_candidate` / `teacher` the state candidate / the deployed teacher.
+    Raises StudentError (one line) for a pixel checkpoint without a state teacher.
     """
+    from zeus_ros.offline.training.continual_student import refresh_on_swap, state_teacher
+
     settings = replace(settings, eval_seed=settings.eval_seed + round_number * ROUND_SEED)
     from zeus_ros.offline.evaluation.records import checkpoint_sha256
 
+    state = state_teacher(deployed, teacher)
+    first = state_teacher(first_checkpoint) if state is not None else None
+    first_checkpoint = first or first_checkpoint
     # One rehearsal per first checkpoint and size under `rehearsal_folder`: a restarted
     # launch (a new recording folder beside it) finds it again instead of recording anew.
     folder = Path(rehearsal_folder)
@@ -472,19 +487,31 @@ def run_round(deployed: Path | str, new_bags: Sequence[Path | str], splits: Sequ
         folder /= f'{checkpoint_sha256(first_checkpoint)[:12]}_{settings.rehearsal_steps}'
     rehearsal = rehearsal_bag(Path(first_checkpoint), folder, settings, log)
     begin = Path(start) if start is not None and Path(start).is_file() else None
-    result = continual_round(Path(deployed), [Path(b) for b in new_bags],
-                             [Path(b) for b in splits], out, history, settings,
-                             corrupt_rewards=corrupt_rewards, log=log, stop=stop,
-                             rehearsal=rehearsal, start=begin, round_number=round_number)
-    resume = None if forced else resume_from(result, settings, corrupt_rewards)
     from sim_bridge.registry import task_class
     from zeus_ros.learning.inference import InferenceAgent
 
     task = InferenceAgent.from_checkpoint(deployed).task
+    if state is not None:
+        log(f'continual: pixel student {Path(deployed).name}: the round trains its state '
+            f'teacher {state} on the recorded state vectors')
+    result = continual_round(state or Path(deployed), [Path(b) for b in new_bags],
+                             [Path(b) for b in splits], out, history, settings,
+                             corrupt_rewards=corrupt_rewards, log=log, stop=stop,
+                             rehearsal=rehearsal, start=begin, round_number=round_number,
+                             on_decision=None if state is None else
+                             refresh_on_swap(Path(deployed), task, forced))
+    resume = None if forced else resume_from(result, settings, corrupt_rewards)
     gate_result = result.gate
-    return {'candidate': str(result.candidate.path), 'sha256': result.candidate.sha256,
-            'deploy': gate_result.deploy, 'reason': gate_result.reason,
-            'gain': gate_result.gain, 'se': gate_result.se, 'required': gate_result.required,
-            'summary': gate_result.summary(),
-            'resume_from': None if resume is None else str(resume),
-            'episode_length': int(task_class(task).episode_length)}
+    answer: dict[str, Any] = {
+        'candidate': str(result.candidate.path), 'sha256': result.candidate.sha256,
+        'deploy': gate_result.deploy, 'reason': gate_result.reason,
+        'gain': gate_result.gain, 'se': gate_result.se, 'required': gate_result.required,
+        'summary': gate_result.summary(),
+        'resume_from': None if resume is None else str(resume),
+        'episode_length': int(task_class(task).episode_length)}
+    if state is not None:
+        refreshed = result.record.get('refreshed_student')
+        answer.update(candidate=refreshed, sha256=result.record.get('refreshed_sha256'),
+                      teacher_candidate=str(result.candidate.path),
+                      teacher_sha256=result.candidate.sha256, teacher=str(state))
+    return answer
