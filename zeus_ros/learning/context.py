@@ -124,11 +124,36 @@ class ContextEncoder(nn.Module):
 
     def forward(self, history: HistoryFeatures) -> torch.Tensor:
         """Encode a history in phi space into (B, context_dim)."""
+        return self.pool(self.codes(history), history.mask)
+
+    def codes(self, history: HistoryFeatures) -> torch.Tensor:
+        """(B, k, E) per-transition codes: kept by callers that also need psi(H_{t+1})."""
         if history.feat.shape[1] != self.k:
             raise ValueError(f'history length {history.feat.shape[1]} does not match k={self.k}')
-        x = torch.cat([history.feat, history.action, history.reward, history.next_feat], dim=-1)
-        codes = torch.tanh(self.code_norm(self.transition(x)))
-        return self.head(aggregate(codes, history.mask, self.aggregation))
+        return self.encode(history.feat, history.action, history.reward, history.next_feat)
+
+    def encode(self, feat: torch.Tensor, action: torch.Tensor, reward: torch.Tensor,
+               next_feat: torch.Tensor) -> torch.Tensor:
+        """Codes of transitions (..., F), (..., A), (..., 1), (..., F) -> (..., E)."""
+        x = torch.cat([feat, action, reward, next_feat], dim=-1)
+        return torch.tanh(self.code_norm(self.transition(x)))
+
+    def pool(self, codes: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """Aggregate (B, k, E) codes over the real slots and project: (B, context_dim)."""
+        return self.head(aggregate(codes, mask, self.aggregation))
+
+    def shifted(self, codes: torch.Tensor, mask: torch.Tensor, feat: torch.Tensor,
+                action: torch.Tensor, reward: torch.Tensor, next_feat: torch.Tensor
+                ) -> torch.Tensor:
+        """psi(H_{t+1}) from H_t's codes: the k - 1 kept slots' codes are reused, one is new.
+
+        Equal to psi(history.shifted(...)) (codes are per transition), for 1/k of the
+        transition MLP's cost.
+        """
+        new = self.encode(feat, action, reward.to(feat.dtype), next_feat).unsqueeze(1)
+        real = torch.ones_like(mask[:, :1])
+        return self.pool(torch.cat([codes[:, 1:], new], dim=1),
+                         torch.cat([mask[:, 1:], real], dim=1))
 
 
 class ContextNormalizer(nn.Module):

@@ -55,7 +55,8 @@ def dynamics_loss(pred: Gaussian, target: torch.Tensor, kind: str) -> torch.Tens
 def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.Tensor,
                  action: torch.Tensor, psi1: torch.Tensor, psi2: torch.Tensor, *,
                  use_sigma: bool = True, scale_free: bool = False,
-                 bounded: bool = False) -> ContextLoss:
+                 bounded: bool = False,
+                 at_psi1: tuple[torch.Tensor, Gaussian] | None = None) -> ContextLoss:
     """Eq. 1 context loss: distances in psi space should match d computed from T and R.
 
     d(c1, c2) = |R(s, a, psi1) - R(s, a, psi2)| + W2(T(s, a, psi1), T(s, a, psi2)) on the SAME
@@ -76,11 +77,18 @@ def context_loss(transition: TransitionModel, reward: RewardModel, feat: torch.T
             the same minimum, but a gradient of the size eq. 1's would have at psi's scale
             instead of 1 / (mean psi distance) times it, which outweighs the dynamics loss's
             gradient into psi whenever psi is tight.
+        at_psi1: R(s, a, psi1) and T(s, a, psi1) when the caller computed them on this same
+            (s, a) already (the dynamics and reward losses do): used detached, not recomputed.
     """
     with torch.no_grad():
         feat, p1, p2 = feat.detach(), psi1.detach(), psi2.detach()
-        r_gap = (reward(feat, action, p1) - reward(feat, action, p2)).abs().squeeze(-1)
-        t1, t2 = transition(feat, action, p1), transition(feat, action, p2)
+        if at_psi1 is None:
+            r1, t1 = reward(feat, action, p1), transition(feat, action, p1)
+        else:
+            r1 = at_psi1[0].detach()
+            t1 = Gaussian(mu=at_psi1[1].mu.detach(), sigma=at_psi1[1].sigma.detach())
+        r_gap = (r1 - reward(feat, action, p2)).abs().squeeze(-1)
+        t2 = transition(feat, action, p2)
         if not use_sigma:
             t2 = Gaussian(mu=t2.mu, sigma=t1.sigma)
         task_distance = r_gap + w2_diagonal_gaussians(t1, t2)

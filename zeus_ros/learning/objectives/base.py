@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, cast
 
 import torch
 
@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from torch import nn
 
     from zeus_ros.learning.batch import HistoryBatch
-    from zeus_ros.learning.context import HistoryFeatures
+    from zeus_ros.learning.context import ContextEncoder, HistoryFeatures
     from zeus_ros.learning.spec import AgentSpec
 
 __all__ = [
@@ -264,7 +264,9 @@ class PsiObjective(Objective):
         history, (feat, next_feat, *model_feats) = host.history_features(
             batch.hist_obs, batch.hist_action, batch.hist_reward, batch.hist_next_obs,
             batch.hist_mask, batch.obs, batch.next_obs, *extra)
-        psi = m['psi'](history)
+        psi_net = cast('ContextEncoder', m['psi'])
+        codes = psi_net.codes(history)  # kept: psi(H_{t+1}) below reuses k - 1 of them
+        psi = psi_net.pool(codes, history.mask)
         action = host.normalize_action(batch.action)
         target_next = next_feat.detach()  # stopped phi(o'): no gradient from the dynamics loss
         model = None
@@ -275,10 +277,14 @@ class PsiObjective(Objective):
             ae = autoencoder_loss(m['decoder'], feat, batch.obs, cfg.decoder_latent_lambda)
             total = total + ae
             metrics['loss/reconstruction'] = ae
-        with torch.no_grad():
-            next_history = history.detach().shifted(feat.detach(), action, batch.reward,
-                                                    target_next)
-            next_context = m.get('psi_target', m['psi'])(next_history)
+        with torch.no_grad():  # psi(H_{t+1}), H_{t+1} = H_t + (o_t, a_t, r, o_{t+1})
+            if 'psi_target' in m:
+                next_history = history.detach().shifted(feat.detach(), action, batch.reward,
+                                                        target_next)
+                next_context = m['psi_target'](next_history)
+            else:  # the same psi: reuse H_t's codes, encode only the new transition
+                next_context = psi_net.shifted(codes.detach(), history.mask, feat.detach(),
+                                                action, batch.reward, target_next)
         if cfg.context_consistency > 0:
             consistency = consistency_loss(psi, next_context, batch.not_done)
             total = total + cfg.context_consistency * consistency

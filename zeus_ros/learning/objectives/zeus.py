@@ -44,9 +44,10 @@ class Zeus(PsiObjective):
         """Dynamics + reward NLL/MSE on the model transition, + alpha_psi * eq. 1 (with a pair)."""
         m, cfg, model = host.modules, host.config, step.model
         assert model is not None  # predicts_transitions
-        dyn = dynamics_loss(m['transition'](model.feat, model.action, step.psi), model.target,
-                            cfg.dynamics_loss)
-        rew = F.mse_loss(m['reward'](model.feat, model.action, step.psi), model.reward.float())
+        predicted = m['transition'](model.feat, model.action, step.psi)
+        predicted_reward = m['reward'](model.feat, model.action, step.psi)
+        dyn = dynamics_loss(predicted, model.target, cfg.dynamics_loss)
+        rew = F.mse_loss(predicted_reward, model.reward.float())
         total = dyn + rew
         metrics['loss/dynamics'], metrics['loss/reward'] = dyn, rew
         pair = step.pair
@@ -59,7 +60,11 @@ class Zeus(PsiObjective):
                                m['psi'](pair_history),
                                use_sigma=cfg.dynamics_loss == 'gaussian_nll',
                                scale_free=cfg.context_loss.startswith('scale_free'),
-                               bounded=cfg.context_loss == 'scale_free_bounded')
+                               bounded=cfg.context_loss == 'scale_free_bounded',
+                               # eq. 1's d is at (phi(o_t), a_t): reuse T and R there if the
+                               # models predicted that transition (not a later one)
+                               at_psi1=((predicted_reward, predicted) if model.feat is step.feat
+                                        else None))
             total = total + float(cfg.alpha_psi) * ctx.loss
             metrics['loss/context'] = ctx.loss
             metrics['train/task_distance'] = ctx.task_distance.mean()
