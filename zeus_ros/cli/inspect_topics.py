@@ -327,10 +327,7 @@ class Inspector:
         now = time.monotonic()
         for name, values in sorted(self.health.items()):
             heard = self.statuses.get(name)
-            state = heard.state(now) if heard else ''
-            if state.startswith('STALE'):  # its counters are old news
-                lines.append(f'          {name}: {state}')
-                continue
+            state = heard.state(now) if heard else ''  # STALE: the counters below are old news
             # A node's rate is 0.0 until its window holds two events: not shown until then.
             shown = ', '.join(f'{k}={v}' for k, v in values.items()
                               if k in ('rate_hz', 'timeouts', 'rejected', 'stale', 'safe',
@@ -340,7 +337,8 @@ class Inspector:
                                        'rollbacks')
                               and not (k == 'rate_hz' and _is_zero(v)))
             if shown or state:
-                lines.append(f'          {name}: ' + ' | '.join(filter(None, (shown, state))))
+                parts = (state, shown) if state.startswith('STALE') else (shown, state)
+                lines.append(f'          {name}: ' + ' | '.join(filter(None, parts)))
         return '\n'.join(lines)
 
     def close(self) -> None:
