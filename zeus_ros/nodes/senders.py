@@ -218,11 +218,14 @@ class SenderPairing:
                     f'pid {self._agreed.pid or "?"}, {how})'
                     if self._agreed is not None else f'{sender} now drives {self.topic}')
             return True
-        if sender is not None and self._within_introduction(sender, graph):
-            # foreign only if it turns out not to be the restart (see `refused`)
-            self._early[sender.gid] = self._early.get(sender.gid, 0) + 1
+        if sender is None or not sender.node or self._within_introduction(sender, graph):
+            # Foreign only if it turns out not to be the restart (see `refused`). A publisher
+            # the graph has not named yet may be the restart too (the graph learns a node's
+            # name after its endpoints: 10 of a restart's actions under load): the same grace.
+            self._newcomers.setdefault(gid, time.monotonic())
+            self._early[gid] = self._early.get(gid, 0) + 1
         else:
-            self._refused += 1 + (self._early.pop(sender.gid, 0) if sender else 0)
+            self._refused += 1 + self._early.pop(sender.gid, 0)
         if sender is not None and not self._introducing(sender, graph):
             self._name_once(sender, graph)
             return False
