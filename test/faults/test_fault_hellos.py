@@ -182,7 +182,7 @@ def test_hello_poisoning_cannot_stop_a_restart_from_re_pairing(
           f'running ({relayed.count("relaying")} nodes relayed)')
 
 
-@pytest.mark.ros_quiet
+@pytest.mark.alone  # a 4-s SIGSTOP of a 300-step/s loop: failed once among three xdist workers
 def test_unkeyed_a_stalled_policy_is_not_replaced_by_a_forged_hello(
         ros_processes: ProcessGroup) -> None:
     """Blank key: one WARN, 'pairing': 'unkeyed'; a stalled policy is not taken over.
