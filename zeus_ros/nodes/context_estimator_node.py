@@ -109,6 +109,7 @@ class ContextEstimatorNode(Node):
         self._novel_steps = [0, 0]  # steps scored above / at or below the threshold, per second
         self._last_novelty = float('nan')
         steady_timer(self, 1.0, self._publish_diagnostics)
+        handshake_of(self).urgent = self._publish_status  # a refused hello: ERROR at once
         self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
                                         prepare=self._prepare_live)
         self.get_logger().info(
@@ -225,6 +226,11 @@ class ContextEstimatorNode(Node):
         self._last_novelty = score
 
     def _publish_diagnostics(self) -> None:
+        self._publish_status()
+        self._publish_novelty()
+
+    def _publish_status(self) -> None:
+        """The node's own status ('context'): also published at once for a refused hello."""
         (p50, p99), _ = self._latency.report()
         self.counts['foreign'] = self.inputs.refused
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{p50:.2f}',
@@ -239,6 +245,9 @@ class ContextEstimatorNode(Node):
         errors = [*self.inputs.errors(), *self._clock_watch.errors(), *stalled, *late]
         self._pub_diag.publish(diagnostics_message(self, 'context', values, [*problems, *slow],
                                                    errors))
+
+    def _publish_novelty(self) -> None:
+        """The 'context novelty' status, over the steps of the last 1-s tick."""
         if self._novelty is not None:
             # WARN while most steps of the last second lay outside the training contexts.
             novel, usual = self._novel_steps

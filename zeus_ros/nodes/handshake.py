@@ -67,6 +67,7 @@ _KEPT = 4096  # GIDs remembered (a node restarting a hundred times forgets its o
 _GID_HEX = re.compile(f'[0-9a-f]{{{2 * GID_SIZE}}}')
 _PREFIX = 12  # bytes of a DDS GUID (the rmw's GID) that name the participant
 _NAME_WAIT_S = 2.0  # how long a refusal's log line waits for the graph to name its sender
+ERROR_WINDOW_S = 5.0  # a refused sender stays an ERROR on /diagnostics this long after a hello
 _REPEAT_S = 30.0  # a sender that goes on: one line per this many seconds with its count
 _UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # rmw_dds_common's name before the node is announced
 _warned_unkeyed = False  # the unkeyed WARN is said once per process
@@ -178,6 +179,10 @@ class Handshake:
         self.key = os.environ.get(KEY_ENV, '').strip().encode()
         self.nonce = secrets.token_hex(8)
         self.sha256: Callable[[], str] = lambda: ''
+        self.urgent: Callable[[], None] = lambda: None
+        """Publishes the node's /diagnostics now: called when a sender starts being refused,
+        so its ERROR goes out at once rather than at the next 1-s tick (diagnostic_updater's
+        force_update)."""
         self._by_gid: dict[str, Hello] = {}
         self._sent: tuple[int, str] = (-1, '')
         self._sent_at = -RESEND_S
@@ -269,12 +274,15 @@ class Handshake:
         now = time.monotonic()
         self.refused += 1
         refusal = self.refusals.get(sender)
+        news = refusal is None or now - refusal.last >= ERROR_WINDOW_S
         if refusal is None:
             refusal = self.refusals[sender] = Refusal(sender, why, claims, first=now)
         refusal.why, refusal.claims = why, claims
         refusal.count += 1
         refusal.last = now
         self._log_refusals()
+        if news:  # not yet an ERROR on /diagnostics: say it now
+            self.urgent()
 
     def sender_name(self, sender: bytes) -> str:
         """The node the ROS graph names for publisher `sender` of zeus/pairing ('' unknown)."""
@@ -317,7 +325,7 @@ class Handshake:
                 f'({refusal.count} from this sender, {self.refused} in all; docs/security.md)')
             refusal.logged, refusal.logged_count = now, refusal.count
 
-    def errors(self, window: float = 5.0) -> list[str]:
+    def errors(self, window: float = ERROR_WINDOW_S) -> list[str]:
         """The /diagnostics ERROR line naming who sent the hellos refused lately (empty: none).
 
         A sender is named while its last refused hello is less than `window` seconds old.

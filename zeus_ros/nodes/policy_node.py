@@ -179,6 +179,7 @@ class PolicyNode(Node):
                                             self._check_deadline)
         self._deadline_timer.cancel()
         steady_timer(self, 1.0, self._publish_diagnostics)
+        handshake_of(self).urgent = self._publish_diagnostics  # a refused hello: ERROR at once
         self._live = serve_live_changes(
             self, SPECS, self.params, self._apply_live,
             check=lambda values: self._parse_frozen(values['frozen_context']),

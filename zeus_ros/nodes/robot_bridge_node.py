@@ -188,6 +188,7 @@ class RobotBridgeNode(Node):
         self._wait_report = WaitReport(self)
         steady_timer(self, self.period, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
+        handshake_of(self).urgent = self._publish_diagnostics  # a refused hello: ERROR at once
         self._check_periods(self.params)
         self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
                                         check=self._check_live)

@@ -341,3 +341,4 @@ class SenderPairing:
             f'a second publisher on {self.topic}: {sender}; its {self.what} are refused '
             f'(paired with {paired})' + (f'; under the paired name but {why}' if why else '')
             + '. Use SROS2 to keep it off the domain (docs/security.md)')
+        self._handshake.urgent()  # its ERROR on /diagnostics now, not at the next tick

@@ -158,6 +158,7 @@ class SimBridgeNode(Node):
         # deadline, re-armed by every step (_publish), so it fires only for an overdue action.
         self._tick = steady_timer(self, tick, self._on_tick)
         steady_timer(self, 1.0, self._publish_diagnostics)
+        handshake_of(self).urgent = self._publish_diagnostics  # a refused hello: ERROR at once
         self._wait_report = WaitReport(self)
         self._check_live(self.params)
         self._live = serve_live_changes(self, SPECS, self.params, lambda _changed: None,
