@@ -227,7 +227,7 @@ class ContextEstimatorNode(Node):
 
     def _publish_diagnostics(self) -> None:
         self._publish_status()
-        self._publish_novelty()
+        self._publish_novelty_status()
 
     def _publish_status(self) -> None:
         """The node's own status ('context'): also published at once for a refused hello."""
@@ -246,7 +246,7 @@ class ContextEstimatorNode(Node):
         self._pub_diag.publish(diagnostics_message(self, 'context', values, [*problems, *slow],
                                                    errors))
 
-    def _publish_novelty(self) -> None:
+    def _publish_novelty_status(self) -> None:
         """The 'context novelty' status, over the steps of the last 1-s tick."""
         if self._novelty is not None:
             # WARN while most steps of the last second lay outside the training contexts.
