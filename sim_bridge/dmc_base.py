@@ -21,6 +21,7 @@ from sim_bridge.model_edit import (
     CompiledModel,
     ModelCache,
     SyncedRenderer,
+    compile_spec,
     copy_physical_state,
     load_suite_spec,
 )
@@ -120,6 +121,10 @@ class DmcTask(ContextualTask):
         """The task's model as an editable spec (the suite XML named by `xml_name`)."""
         return load_suite_spec(self.xml_name, light_textures=light_textures)
 
+    def _suite_model(self) -> bool:
+        """Whether the model is dm_control's suite XML (its own warnings are not the user's)."""
+        return True
+
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
         """Context-independent edits made once (e.g. explicit densities, contact priority)."""
 
@@ -149,7 +154,7 @@ class DmcTask(ContextualTask):
     def _build(self, key: Hashable) -> mujoco.MjModel:
         assert isinstance(key, tuple)
         self._edit_spec(self._spec, dict(zip(self.model_params, key, strict=True)))
-        return self._spec.compile()
+        return compile_spec(self._spec, suite=self._suite_model())
 
     @property
     def model(self) -> mujoco.MjModel:
@@ -254,7 +259,8 @@ class DmcTask(ContextualTask):
             spec = self._load_spec(light_textures=False)
             self._prepare_spec(spec)
             self._edit_spec(spec, self._context)
-            self._renderer = SyncedRenderer(spec.compile(), camera=self.camera)
+            self._renderer = SyncedRenderer(compile_spec(spec, suite=self._suite_model()),
+                                            camera=self.camera)
         return self._renderer.render(self._current.model, self._current.data, height, width)
 
     def close(self) -> None:

@@ -237,6 +237,10 @@ class MjcfTask(DmcTask):
     def _load_spec(self, *, light_textures: bool) -> mujoco.MjSpec:
         return self.task_spec.load_spec(light_textures=light_textures)
 
+    def _suite_model(self) -> bool:
+        """`model: suite:NAME.xml`: dm_control's file; a user's own MJCF keeps its warnings."""
+        return self.task_spec.model.startswith('suite:')
+
     def _prepare_spec(self, spec: mujoco.MjSpec) -> None:
         """One-time edits, then the defaults the `scale` mapping multiplies (validates paths)."""
         for path, value in self.task_spec.prepare:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -207,3 +208,68 @@ def test_sim_bridge_and_the_random_policy_run_a_task_file(tmp_path: Path) -> Non
         group.stop_all()
     assert set(seen.values()) == {'PointMass-Payload-v0'}
     assert [truths[s] for s in (0, 10, 20)] == [0.05, 0.1, 0.3]  # the file's train presets
+
+
+# --- Issue 52: no settotalmass warning from the suite's cheetah ----------------------------------
+
+_SUITE_CHEETAH_FILE = {
+    'name': 'Cheetah-Gear-File-v0', 'model': 'suite:cheetah.xml', 'episode_length': 10,
+    'observation': ['joint:*.qpos', 'joint:*.qvel'], 'reward': 'velocity:rootx',
+    'context': {
+        'gain': {'paths': ['actuator:*.gear[0]'], 'mapping': 'scale', 'default': 1.0,
+                 'range': [0.1, 2.0]},
+        'torso_radius': {'paths': ['geom:torso.size[0]'], 'default': 0.046,
+                         'range': [0.02, 0.1]}}}
+
+
+def _run_briefly(task_name: str, context: dict[str, float]) -> None:
+    """Build, recompile for another context (a geometry change included), render-free steps."""
+    task = make_task(task_name, seed=0)
+    task.reset()
+    task.set_context(context)
+    task.step(np.zeros(6))
+    task.close()
+
+
+@pytest.mark.parametrize('which', ['Cheetah-Bias-v0', 'Cheetah-Motor-v0', 'suite file'])
+def test_cheetah_tasks_compile_without_the_settotalmass_warning(
+        tmp_path: Path, capfd: pytest.CaptureFixture[str], which: str) -> None:
+    """No MuJoCo settotalmass deprecation, neither as a Python warning nor on stderr.
+
+    The built-in families replace settotalmass by a density; a `suite:cheetah.xml` task file
+    compiles dm_control's model as is, its warning silenced (sim_bridge/model_edit.py).
+    """
+    name, context = which, {'Cheetah-Bias-v0': {'motor_bias': 0.4},
+                            'Cheetah-Motor-v0': {'motor_gain': 0.5}}.get(which, {})
+    if which == 'suite file':
+        path = tmp_path / 'cheetah_gear.yaml'
+        path.write_text(yaml.safe_dump(_SUITE_CHEETAH_FILE))
+        name, context = str(path), {'gain': 0.5, 'torso_radius': 0.08}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter('always')
+        _run_briefly(name, context)
+    assert not [w for w in caught if 'settotalmass' in str(w.message)], \
+        [str(w.message) for w in caught]
+    assert 'settotalmass' not in capfd.readouterr().err
+
+
+def test_a_suite_cheetah_file_keeps_the_suites_masses_and_solver_scale(tmp_path: Path) -> None:
+    """Silencing, not replacing: the compiled model is dm_control's (total 14 kg, same stats)."""
+    from dm_control import suite
+
+    path = tmp_path / 'cheetah_gear.yaml'
+    path.write_text(yaml.safe_dump(_SUITE_CHEETAH_FILE))
+    model = make_task(str(path), seed=0).model
+    reference = suite.load('cheetah', 'run', task_kwargs={'random': 0}).physics.model
+    np.testing.assert_array_equal(model.body_mass, reference.body_mass)
+    assert model.stat.meaninertia == reference.stat.meaninertia
+    assert model.stat.meanmass == reference.stat.meanmass
+
+
+def test_a_users_own_mjcf_with_settotalmass_still_warns(tmp_path: Path) -> None:
+    """Only dm_control's file is silenced: in the user's own model the warning can be acted on."""
+    path = _task_file(tmp_path, {})
+    xml = tmp_path / 'm.xml'
+    xml.write_text(xml.read_text().replace('<mujoco>', '<mujoco>\n<compiler settotalmass="3"/>'))
+    with pytest.warns(UserWarning, match='settotalmass'):
+        make_task(str(path))
