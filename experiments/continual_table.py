@@ -78,8 +78,9 @@ def main() -> int:
     parser.add_argument('--root', type=Path, default=ROOT)
     args = parser.parse_args()
     table = rows(args.root)
-    fields = sorted({k for r in table for k in r}, key=lambda k: list(table[0]).index(k)
-                    if k in table[0] else 99)
+    fields: list[str] = []  # first seen first: the same column order on every run
+    for row in table:
+        fields += [key for key in row if key not in fields]
     with (args.root / 'scenarios.csv').open('w', newline='') as handle:
         writer = csv.DictWriter(handle, fieldnames=fields)
         writer.writeheader()
