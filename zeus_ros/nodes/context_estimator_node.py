@@ -17,7 +17,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rclpy.node import Node
 from zeus_msgs.msg import ContextEstimate, ContextTruth, StepFeedback
 
 from zeus_ros.learning.readout import NoveltyTracker
@@ -31,6 +30,7 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.lifecycle import LIFECYCLE_SPECS, ManagedNode
 from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
@@ -52,26 +52,34 @@ SPECS: dict[str, Spec] = {
     **HEARD_SPECS,
     **latency_specs(20.0, 200.0, 'observation -> context'),
     **LOCK_SPECS,
+    **LIFECYCLE_SPECS,
 }
 WARN_COUNTS = ('gaps', 'rejected', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
 
 
-class ContextEstimatorNode(Node):
-    """Keeps the rolling history and publishes the learned context for every step."""
+class ContextEstimatorNode(ManagedNode):
+    """Keeps the rolling history and publishes the learned context for every step.
+
+    Managed (lifecycle.py): configure loads the checkpoint and subscribes to the steps;
+    activate publishes contexts (the publisher appears at the first activation and stays for
+    the node's life, so the policy's pairing holds); deactivate stops estimating and
+    publishing (a step missed meanwhile is a counted gap of the history).
+    """
 
     def __init__(self, **node_options: Any) -> None:
         """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
         super().__init__('context_estimator', **node_options)
         self.params = declare_specs(self, SPECS)
-        self.loaded = load_inference_agent('context_estimator', self.params)
+        self.loaded: LoadedAgent | None = None
         self._pending: LoadedAgent | None = None
-        self.agent = self.loaded.agent
-        self.history = self.agent.new_history()
-        self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
-                                          self.params['image_size'])
+        self.agent: Any = None
+        self.inputs: StepInputs | None = None
+        self._readers: list[tuple[Any, int]] = []  # must hear their publisher before the steps
+        self._armed = False  # this configuration's steps are subscribed (or will be)
         self.counts = dict.fromkeys(('estimates', 'gaps', 'missing_steps', 'rejected',
                                      'foreign'), 0)
+        self._foreign_before = 0  # refused by the step pairings of earlier configurations
         self._prev: tuple[int, np.ndarray] | None = None
         self._missing_in_episode = 0
         self._rate = RateMeter()
@@ -79,27 +87,7 @@ class ContextEstimatorNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
         self._window = WindowCounts()
         self._clock_watch = ClockWatch(self)
-        handshake_of(self).sha256 = lambda: self.loaded.sha256  # the start hello's checkpoint
-        expected = self.params['expected_subscribers']
-        # Steps, observations (and true contexts) from one step source only: paired by GID.
-        self.inputs = StepInputs(
-            self, self.decoder, self._on_step, self._reject, mode=self.params['mode'],
-            extra_parts=['truth'] if self.agent.needs_true_context else [],
-            subscribe=not expected, source=self.params['step_source'])
-        self.assembler = self.inputs.assembler
-        readers = []  # what must hear its publisher before the steps are subscribed
-        if self.agent.needs_true_context:
-            readers.append((self.inputs.subscription(
-                ContextTruth, TOPICS.CONTEXT_TRUTH,
-                lambda m: self.assembler.add(m.step, 'truth', m), step_qos(), 'true contexts'),
-                1))
-        # Publisher last: a peer that sees it knows the subscriptions above already exist;
-        # with expected_subscribers the steps are subscribed once the readers hear the context.
-        self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT,
-                                          publisher_qos(self.params['mode']))
-        if expected:
-            self.inputs.subscribe_when_heard(self._pub, expected,
-                                             self.params['subscriber_timeout'], readers)
+        self._pub: Any = None
         # The estimate in the context's units, for people and plotting tools (the policy never
         # reads it): published whenever the checkpoint holds a read-out; the publisher exists
         # only then, so a viewer can tell "no read-out" from "not arrived yet".
@@ -108,15 +96,65 @@ class ContextEstimatorNode(Node):
         self._novelty: NoveltyTracker | None = None
         self._novel_steps = [0, 0]  # steps scored above / at or below the threshold, per second
         self._last_novelty = float('nan')
+        # autostart: configure (the checkpoint first: a bad one is the process's one line) and
+        # activate now, as an unmanaged node would start.
+        self.autostart(self.params['autostart'])
+        # the start hello's checkpoint
+        handshake_of(self).sha256 = lambda: '' if self.loaded is None else self.loaded.sha256
         steady_timer(self, 1.0, self._publish_diagnostics)
         handshake_of(self).urgent = self._publish_status  # a refused hello: ERROR at once
         self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
                                         prepare=self._prepare_live)
+
+    # -- lifecycle (lifecycle.py) ------------------------------------------------------------
+    def _configure(self) -> None:
+        """Load the checkpoint; subscribe to the steps (and true contexts) of one source."""
+        self.loaded = load_inference_agent('context_estimator', self.params)
+        self.agent = self.loaded.agent
+        self.history = self.agent.new_history()
+        self.decoder = ObservationDecoder(self.agent.obs_kind, self.agent.obs_shape,
+                                          self.params['image_size'])
+        self._prev, self._missing_in_episode = None, 0
+        # Steps, observations (and true contexts) from one step source only: paired by GID.
+        self.inputs = StepInputs(
+            self, self.decoder, self._on_step, self._reject, mode=self.params['mode'],
+            extra_parts=['truth'] if self.agent.needs_true_context else [],
+            subscribe=not self.params['expected_subscribers'],
+            source=self.params['step_source'])
+        self.assembler = self.inputs.assembler
+        self._readers = []
+        if self.agent.needs_true_context:
+            self._readers.append((self.inputs.subscription(
+                ContextTruth, TOPICS.CONTEXT_TRUTH,
+                lambda m: self.assembler.add(m.step, 'truth', m), step_qos(), 'true contexts'),
+                1))
         self.get_logger().info(
             f'{self.agent.method} checkpoint for {self.agent.task} ({self.agent.obs_kind}, '
             f'k={self.agent.k}, context dim {self.agent.context_dim}): loaded '
             f'{self.loaded.describe()}')
         self._log_readout()
+
+    def _activate(self) -> None:
+        """The context publisher (first activation), then the steps once it is heard."""
+        # Publisher after the subscriptions: a peer that sees it knows they already exist;
+        # with expected_subscribers the steps are subscribed once the readers hear the context.
+        if self._pub is None:  # kept for the node's life: the policy's pairing holds
+            self._pub = self.create_publisher(ContextEstimate, TOPICS.CONTEXT,
+                                              publisher_qos(self.params['mode']))
+        expected = self.params['expected_subscribers']
+        if not self._armed and expected and self.inputs is not None:
+            self.inputs.subscribe_when_heard(self._pub, expected,
+                                             self.params['subscriber_timeout'], self._readers)
+        self._armed = True
+
+    def _release(self) -> None:
+        """Unsubscribe and drop the checkpoint (the publishers stay, unused till configured)."""
+        if self.inputs is not None:
+            self._foreign_before += self.inputs.refused
+            self.inputs.destroy()
+        self.inputs, self._readers, self._armed = None, [], False
+        self.loaded = self._pending = self.agent = self._novelty = None
+        self._prev = None
 
     def _log_readout(self) -> None:
         novelty = self.loaded.novelty
@@ -139,14 +177,14 @@ class ContextEstimatorNode(Node):
     def _prepare_live(self, changed: dict[str, Any]) -> None:
         """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
         self._pending = None
-        if 'checkpoint' in changed:
+        if self.configured and 'checkpoint' in changed:  # unconfigured: configure loads it
             loaded = load_inference_agent('context_estimator', {**self.params, **changed})
             check_swappable('context_estimator', self.agent, loaded.agent)
             self._pending = loaded
 
     def _apply_live(self, changed: dict[str, Any]) -> None:
         """Swap in the checkpoint loaded by the check; the episode's history carries over."""
-        if 'checkpoint' not in changed or self._pending is None:
+        if 'checkpoint' not in changed or self._pending is None or not self.configured:
             return
         self.loaded, self._pending = self._pending, None
         self.agent = self.loaded.agent
@@ -166,6 +204,8 @@ class ContextEstimatorNode(Node):
                                   throttle_duration_sec=2.0)
 
     def _on_step(self, parts: StepParts) -> None:
+        if not self.active:  # inactive: no estimate (the steps missed are a gap on activate)
+            return
         feedback: StepFeedback = parts.parts['feedback']
         received, raw = parts.parts['obs']
         step = parts.step
@@ -232,17 +272,25 @@ class ContextEstimatorNode(Node):
     def _publish_status(self) -> None:
         """The node's own status ('context'): also published at once for a refused hello."""
         (p50, p99), _ = self._latency.report()
-        self.counts['foreign'] = self.inputs.refused
+        inputs = self.inputs
+        self.counts['foreign'] = self._foreign_before + (0 if inputs is None else inputs.refused)
         values = {'rate_hz': f'{self._rate.rate:.1f}', 'latency_p50_ms': f'{p50:.2f}',
-                  'latency_p99_ms': f'{p99:.2f}', 'dropped': self.assembler.dropped,
-                  'late': self.assembler.late, **self.counts, **self._live.values()}
+                  'latency_p99_ms': f'{p99:.2f}',
+                  'dropped': 0 if inputs is None else inputs.assembler.dropped,
+                  'late': 0 if inputs is None else inputs.assembler.late, **self.counts,
+                  **self._live.values(), 'lifecycle': self.lifecycle_state()}
         grown = self._window.delta(self.counts)
         problems = [*self._window.problems(grown, WARN_COUNTS), *self._live.problems()]
+        if not self.active:
+            problems.append(f'{values["lifecycle"]}: no estimates (`ros2 lifecycle set '
+                            f'{self.get_fully_qualified_name()} activate`)')
         _, stalled = rate_problems(self._rate.rate, grown['estimates'], 0.0, 0.0,
-                                   self.counts['estimates'] > 0, what='estimates')
+                                   self.active and self.counts['estimates'] > 0,
+                                   what='estimates')
         slow, late = latency_problems(p99, self.params['latency_warn_ms'],
                                       self.params['latency_error_ms'], 'observation -> context')
-        errors = [*self.inputs.errors(), *self._clock_watch.errors(), *stalled, *late]
+        errors = [*(inputs.errors() if inputs is not None else []), *self._clock_watch.errors(),
+                  *stalled, *late]
         self._pub_diag.publish(diagnostics_message(self, 'context', values, [*problems, *slow],
                                                    errors))
 
@@ -266,7 +314,7 @@ class ContextEstimatorNode(Node):
 
     def destroy_node(self) -> None:
         """The step subscriptions are ours (not rclpy's): they go before the node."""
-        self.inputs.destroy()
+        self._release()
         super().destroy_node()
 
 

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
 __all__ = ['PEER_SILENT_S', 'PEER_STATUS', 'diagnostics_message', 'hardware_id',
-           'peer_statuses', 'set_device', 'summary', 'watch_peer']
+           'peer_statuses', 'set_device', 'summary', 'unwatch_peers', 'watch_peer']
 
 PEER_SILENT_S = 3.0
 """Seconds without a message from a peer that was heard before: its status turns STALE.
@@ -56,6 +56,12 @@ def hardware_id(node: Node) -> str:
 def watch_peer(node: Node, pairing: Any) -> None:
     """Report `pairing`'s paired publisher (senders.SenderPairing) as a peer of `node`."""
     node.__dict__.setdefault(_WATCHED, []).append(pairing)
+
+
+def unwatch_peers(node: Node, pairings: Sequence[Any]) -> None:
+    """Stop reporting `pairings` (a managed node's cleanup: its next configure pairs anew)."""
+    watched = node.__dict__.get(_WATCHED, [])
+    watched[:] = [p for p in watched if not any(p is gone for gone in pairings)]
 
 
 def peer_statuses(node: Node, now: float | None = None) -> list[DiagnosticStatus]:

@@ -12,6 +12,7 @@ from zeus_msgs.msg import StateVector, StepFeedback
 
 from zeus_ros.learning.frames import FrameStack
 from zeus_ros.nodes.assembler import StampJoin, StepAssembler, StepParts
+from zeus_ros.nodes.diagnostics import unwatch_peers
 from zeus_ros.nodes.messages import array_from_image, stamp_ns
 from zeus_ros.nodes.params import Spec
 from zeus_ros.nodes.peers import call_when_ready, unmatched_readers
@@ -125,10 +126,16 @@ class StepInputs:
         return [line for pairing in self.pairings for line in pairing.errors()]
 
     def destroy(self) -> None:
-        """Our subscriptions are waitables: they go before the node."""
+        """Our subscriptions are waitables: they go before the node (or a lifecycle cleanup).
+
+        Never subscribes again afterwards (a pending `subscribe_when_heard` finds it done), and
+        its pairings are no longer reported as peers.
+        """
         for subscription in self._subscriptions:
             subscription.destroy()
         self._subscriptions.clear()
+        self.subscribed = True
+        unwatch_peers(self.node, self.pairings)
 
     def subscribe(self) -> None:
         """Subscribe to StepFeedback and the observation topic (once)."""

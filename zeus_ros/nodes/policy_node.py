@@ -31,7 +31,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from zeus_msgs.msg import Action, ContextEstimate, StepFeedback
 
@@ -39,6 +38,7 @@ from zeus_ros.learning.inference import MAX_CONTEXT_LAG, InferenceAgent
 from zeus_ros.learning.readout import TRAIN_MEAN_KEY
 from zeus_ros.nodes.agent_loader import LoadedAgent, check_swappable, load_inference_agent
 from zeus_ros.nodes.assembler import StepParts
+from zeus_ros.nodes.diagnostics import unwatch_peers
 from zeus_ros.nodes.handshake import handshake_of
 from zeus_ros.nodes.health import (
     ClockWatch,
@@ -47,6 +47,7 @@ from zeus_ros.nodes.health import (
     latency_specs,
     rate_problems,
 )
+from zeus_ros.nodes.lifecycle import LIFECYCLE_SPECS, ManagedNode
 from zeus_ros.nodes.messages import diagnostics_message
 from zeus_ros.nodes.meters import LatencyMeter, RateMeter
 from zeus_ros.nodes.observation import HEARD_SPECS, ObservationDecoder, StepInputs
@@ -96,13 +97,21 @@ SPECS: dict[str, Spec] = {
     **HEARD_SPECS,
     **latency_specs(40.0, 200.0, 'observation -> action'),
     **LOCK_SPECS,
+    **LIFECYCLE_SPECS,
 }
 WARN_COUNTS = ('stale', 'safe', 'rejected', 'mismatched', 'foreign')
 """Counted faults that WARN while they grow (health.WINDOW_S), then clear."""
 
 
-class PolicyNode(Node):
-    """Publishes Action k for observation k, conditioned on the context of step k."""
+class PolicyNode(ManagedNode):
+    """Publishes Action k for observation k, conditioned on the context of step k.
+
+    Managed (lifecycle.py): configure loads the checkpoint and subscribes to the steps and
+    contexts; activate acts (the action publisher appears at the first activation and stays
+    for the node's life, so sim_bridge's pairing holds across deactivate / activate);
+    deactivate answers the observation still waiting for its context with the safe action,
+    then publishes nothing: sim_bridge applies its own safe action after `action_timeout`.
+    """
 
     def __init__(self, **node_options: Any) -> None:
         """`node_options` go to rclpy's Node (cli_args, context): one process can hold several."""
@@ -114,6 +123,40 @@ class PolicyNode(Node):
         self._pending: LoadedAgent | None = None
         self._staged: LoadedAgent | None = None  # used from its first estimate on
         self._adopting = ''  # the staged path, while set as `checkpoint` (no reload)
+        self.needs_context = False
+        self.frozen: np.ndarray | None = None
+        # The data path: built by configure, let go of by cleanup (_release).
+        self.inputs: StepInputs | None = None
+        self._senders: SenderPairing | None = None
+        self._sub_context: SenderSubscription | None = None
+        self._deadline_timer: Any = None
+        self._ready_timer: Any = None
+        self._armed = False  # this configuration's steps are subscribed (or will be)
+        self.counts = dict.fromkeys(
+            ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched', 'foreign'), 0)
+        self._foreign_before = 0  # refused by the pairings of earlier configurations
+        self._forget_steps()
+        self._rate = RateMeter()
+        self._latency = LatencyMeter()  # observation in -> action out
+        self._window = WindowCounts()
+        self._clock_watch = ClockWatch(self)
+        self._pub: Any = None
+        self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self._wait_report = WaitReport(self)
+        # autostart: configure (the checkpoint first: a bad one is the process's one line) and
+        # activate now, as an unmanaged node would start.
+        self.autostart(self.params['autostart'])
+        handshake_of(self).sha256 = lambda: '' if self.loaded is None else self.loaded.sha256
+        steady_timer(self, 1.0, self._publish_diagnostics)
+        handshake_of(self).urgent = self._publish_diagnostics  # a refused hello: ERROR at once
+        self._live = serve_live_changes(self, SPECS, self.params, self._apply_live,
+                                        check=self._check_live, prepare=self._prepare_live)
+        serve_switch(self, 'freeze_context', self._freeze_context)
+        serve_swap(self, 'stage_checkpoint', self._stage_checkpoint)
+
+    # -- lifecycle (lifecycle.py) ------------------------------------------------------------
+    def _configure(self) -> None:
+        """Load the checkpoint (or the task, for the random policy); subscribe to the inputs."""
         if self.params['checkpoint']:
             self.loaded = load_inference_agent('policy', self.params)
             self.agent = self.loaded.agent
@@ -135,29 +178,12 @@ class PolicyNode(Node):
         self.low = np.asarray(low, dtype=np.float32)
         self.high = np.asarray(high, dtype=np.float32)
         self.decoder = ObservationDecoder(obs_kind, obs_shape, self.params['image_size'])
-        self.counts = dict.fromkeys(
-            ('actions', 'fresh', 'stale', 'safe', 'rejected', 'mismatched', 'foreign'), 0)
-        self._contexts: dict[int, np.ndarray] = {}
-        self._newest_context: tuple[float, np.ndarray] | None = None
-        # (observation step, context step it waits for, feedback, observation, deadline)
-        self._waiting: tuple[int, int, Any, np.ndarray, float] | None = None
-        self._episode_start = 0  # step of the current episode's first observation
-        self._first_context: int | None = None  # first context's step since start / redeploy
-        self._rate = RateMeter()
-        self._latency = LatencyMeter()  # observation in -> action out
-        self._received: tuple[int, float] | None = None  # the newest observation's step, time
-        self._first_step_at: float | None = None  # "no context for N s" counts from here
-        self._window = WindowCounts()
-        self._clock_watch = ClockWatch(self)
-        handshake_of(self).sha256 = lambda: '' if self.loaded is None else self.loaded.sha256
-
-        mode = self.params['mode']
-        self._pub: Any = None
-        self._pub_diag = self.create_publisher(DiagnosticArray, TOPICS.DIAGNOSTICS, 10)
+        self._forget_steps()
         # Steps and observations from one step source only (paired by GID and name, as the
         # contexts below): another publisher on them is refused, counted and an ERROR.
         self.inputs = StepInputs(self, self.decoder, self._on_observation, self._reject,
-                                 mode=mode, subscribe=not self.params['expected_subscribers'],
+                                 mode=self.params['mode'],
+                                 subscribe=not self.params['expected_subscribers'],
                                  source=self.params['step_source'])
         self.assembler = self.inputs.assembler
         # Contexts come from one estimator only (the only publisher, by GID; followed through
@@ -168,24 +194,11 @@ class PolicyNode(Node):
         self._sub_context = SenderSubscription(
             self, ContextEstimate, TOPICS.CONTEXT, step_qos(depth=100), self._on_context,
             admit=self._senders.accepts) if self.needs_context else None
-        # The action publisher appears only once a context source exists: sim_bridge starts
-        # stepping when it sees an action publisher, so step 0 already gets its context.
-        # Steady clocks: with use_sim_time, ROS time only moves once sim_bridge steps.
-        self._wait_report = WaitReport(self)
-        self._ready_timer = steady_timer(self, 0.05, self._become_ready)
         # Armed only while an observation waits for its context (no polling): it fires once,
         # when context k is overdue by context_deadline.
         self._deadline_timer = steady_timer(self, self.params['context_deadline'],
                                             self._check_deadline)
         self._deadline_timer.cancel()
-        steady_timer(self, 1.0, self._publish_diagnostics)
-        handshake_of(self).urgent = self._publish_diagnostics  # a refused hello: ERROR at once
-        self._live = serve_live_changes(
-            self, SPECS, self.params, self._apply_live,
-            check=lambda values: self._parse_frozen(values['frozen_context']),
-            prepare=self._prepare_live)
-        serve_switch(self, 'freeze_context', self._freeze_context)
-        serve_swap(self, 'stage_checkpoint', self._stage_checkpoint)
         source = 'random policy' if self.loaded is None else \
             f'{self.loaded.agent.method} checkpoint for {self.loaded.agent.task}: loaded ' \
             f'{self.loaded.describe()}'
@@ -195,6 +208,61 @@ class PolicyNode(Node):
         uses = f'acts on context k - {lag} (context_lag)' if lag else 'waits for context k'
         self.get_logger().info(f'{source}; {obs_kind} observations, '
                                f'{uses if self.needs_context else "no context"}')
+
+    def _activate(self) -> None:
+        """Act from the next observation on, as if just started (no context carried over).
+
+        The action publisher appears only once a context source exists: sim_bridge starts
+        stepping when it sees an action publisher, so step 0 already gets its context.
+        Steady clocks: with use_sim_time, ROS time only moves once sim_bridge steps.
+        """
+        self._forget_steps()
+        if not self._armed and self._ready_timer is None:
+            self._ready_timer = steady_timer(self, 0.05, self._become_ready)
+
+    def _deactivate(self) -> None:
+        """The observation waiting for its context gets the safe action; then none get any."""
+        self._stop_ready_timer()
+        if self._waiting is not None:
+            step, _wanted, feedback, _obs, _deadline = self._waiting
+            self._waiting = None
+            self._deadline_timer.cancel()
+            self._publish(step, feedback, self._safe_action(), 'safe')
+
+    def _release(self) -> None:
+        """Unsubscribe, drop the timers and the checkpoint (the action publisher stays)."""
+        self._stop_ready_timer()
+        self._foreign_before += sum(pairing.refused for pairing in (self._senders, self.inputs)
+                                    if pairing is not None)
+        if self._sub_context is not None:
+            self._sub_context.destroy()
+        if self.inputs is not None:
+            self.inputs.destroy()
+        if self._senders is not None:
+            unwatch_peers(self, [self._senders])
+        if self._deadline_timer is not None:
+            self.destroy_timer(self._deadline_timer)
+        self.inputs = self._senders = self._sub_context = self._deadline_timer = None
+        self.agent = self.loaded = self._pending = self._staged = None
+        self._adopting, self._armed, self.frozen = '', False, None
+        self._forget_steps()
+
+    def _stop_ready_timer(self) -> None:
+        if self._ready_timer is not None:
+            self._ready_timer.cancel()
+            self.destroy_timer(self._ready_timer)
+            self._ready_timer = None
+
+    def _forget_steps(self) -> None:
+        """No observation waiting, no context kept: the state of a node just started."""
+        self._contexts: dict[int, np.ndarray] = {}
+        self._newest_context: tuple[float, np.ndarray] | None = None
+        # (observation step, context step it waits for, feedback, observation, deadline)
+        self._waiting: tuple[int, int, Any, np.ndarray, float] | None = None
+        self._episode_start = 0  # step of the current episode's first observation
+        self._first_context: int | None = None  # first context's step since start / redeploy
+        self._received: tuple[int, float] | None = None  # the newest observation's step, time
+        self._first_step_at: float | None = None  # "no context for N s" counts from here
 
     def _parse_frozen(self, text: str, agent: InferenceAgent | None = None
                       ) -> np.ndarray | None:
@@ -213,10 +281,19 @@ class PolicyNode(Node):
                              f"(the checkpoint's context size), got {text!r}")
         return values
 
+    def _check_live(self, values: dict[str, Any]) -> None:
+        """frozen_context must fit the checkpoint (unconfigured: configure checks it)."""
+        if self.configured:
+            self._parse_frozen(values['frozen_context'])
+
     def _prepare_live(self, changed: dict[str, Any]) -> None:
-        """Load a new checkpoint (even the same path: the file may be new) or refuse it."""
+        """Load a new checkpoint (even the same path: the file may be new) or refuse it.
+
+        Unconfigured, a change is taken as it is: the next configure loads it.
+        """
         self._pending = None
-        if 'checkpoint' not in changed or changed['checkpoint'] == self._adopting:
+        if not self.configured or 'checkpoint' not in changed or \
+                changed['checkpoint'] == self._adopting:
             return
         if self.agent is None or not changed['checkpoint']:
             raise ValueError('policy: switching between the random policy and a checkpoint '
@@ -232,6 +309,8 @@ class PolicyNode(Node):
 
     def _apply_live(self, changed: dict[str, Any]) -> None:
         """Live parameter changes read through self.params; frozen_context needs parsing."""
+        if not self.configured:
+            return
         if 'checkpoint' in changed and self._pending is not None:
             self.loaded, self._pending = self._pending, None
             self.agent = self.loaded.agent
@@ -248,6 +327,7 @@ class PolicyNode(Node):
     # -- operator services (services.py) ----------------------------------------------------
     def _freeze_context(self, freeze: bool) -> str:
         """Freeze psi at the train mean (else the newest estimate), or make it live."""
+        self._require_configured()
         if not freeze:
             text, done = '', 'psi live again (frozen_context cleared)'
         else:
@@ -270,6 +350,7 @@ class PolicyNode(Node):
 
     def _stage_checkpoint(self, checkpoint: str, expect_sha256: str) -> tuple[str, str]:
         """Load a checkpoint to switch to at its first estimate ('' unstages); ValueError."""
+        self._require_configured()
         if not checkpoint:
             self._staged = None
             return 'nothing staged', '' if self.loaded is None else self.loaded.sha256
@@ -285,6 +366,12 @@ class PolicyNode(Node):
         return (f'staged {staged.describe()}: used from the first estimate stamped with it',
                 staged.sha256)
 
+    def _require_configured(self) -> None:
+        """An operator service of an unconfigured node is refused with the way out."""
+        if not self.configured:
+            raise ValueError(f'unconfigured: `ros2 lifecycle set '
+                             f'{self.get_fully_qualified_name()} configure` first')
+
     def _adopt_staged(self) -> None:
         """The estimator runs the staged checkpoint now: so does the policy, from this step."""
         assert self._staged is not None
@@ -299,14 +386,18 @@ class PolicyNode(Node):
                                       f'{result.reason}')
 
     def _become_ready(self) -> None:
-        if self.needs_context and count_publishers(self, TOPICS.CONTEXT) == 0:
+        """First activation: the action publisher once a context source exists; the steps."""
+        if self._pub is None and self.needs_context and \
+                count_publishers(self, TOPICS.CONTEXT) == 0:
             self._wait_report.waiting('a context_estimator publishing on '
                                       f'{self.resolve_topic_name(TOPICS.CONTEXT)}')
             return
-        self._pub = self.create_publisher(Action, TOPICS.ACTION,
-                                          action_qos(self.params['mode']))
-        self._ready_timer.cancel()
-        self.destroy_timer(self._ready_timer)
+        if self._pub is None:  # kept for the node's life: the pairings of its readers hold
+            self._pub = self.create_publisher(Action, TOPICS.ACTION,
+                                              action_qos(self.params['mode']))
+        self._stop_ready_timer()
+        self._armed = True
+        assert self.inputs is not None
         # With expected_subscribers: observations only once sim_bridge and the recorder hear
         # the actions and this node hears the estimator (sim_bridge then waits for this node
         # as one of its step subscribers), so step 0 gets its context here.
@@ -350,6 +441,8 @@ class PolicyNode(Node):
 
     # -- acting ------------------------------------------------------------------------------
     def _on_observation(self, parts: StepParts) -> None:
+        if not self.active:  # inactive: sim_bridge applies its safe action after its timeout
+            return
         feedback: StepFeedback = parts.parts['feedback']
         obs = self.decoder.observation(parts.parts['obs'][1], feedback.first)
         if self._waiting is not None:  # a newer observation overtook the one still waiting
@@ -438,29 +531,33 @@ class PolicyNode(Node):
             self._received = None
 
     def _publish_diagnostics(self) -> None:
-        self.counts['foreign'] = self._senders.refused + self.inputs.refused
+        refused = [p.refused for p in (self._senders, self.inputs) if p is not None]
+        self.counts['foreign'] = self._foreign_before + sum(refused)
         (p50, p99), _ = self._latency.report()
-        values = {'rate_hz': f'{self._rate.rate:.1f}', 'dropped': self.assembler.dropped,
+        values = {'rate_hz': f'{self._rate.rate:.1f}',
+                  'dropped': 0 if self.inputs is None else self.inputs.assembler.dropped,
                   'context_lag': self.params['context_lag'], 'latency_p50_ms': f'{p50:.2f}',
-                  'latency_p99_ms': f'{p99:.2f}', **self.counts, **self._live.values()}
+                  'latency_p99_ms': f'{p99:.2f}', **self.counts, **self._live.values(),
+                  'lifecycle': self.lifecycle_state()}
         grown = self._window.delta(self.counts)
         problems = [*self._window.problems(grown, WARN_COUNTS), *self._live.problems()]
+        if not self.active:
+            problems.append(f'{values["lifecycle"]}: not acting (`ros2 lifecycle set '
+                            f'{self.get_fully_qualified_name()} activate`)')
         _, stalled = rate_problems(self._rate.rate, grown['actions'], 0.0, 0.0,
-                                   self.counts['actions'] > 0, what='actions')
+                                   self.active and self.counts['actions'] > 0, what='actions')
         slow, late = latency_problems(p99, self.params['latency_warn_ms'],
                                       self.params['latency_error_ms'], 'observation -> action')
-        errors = [*(self._senders.errors() if self.needs_context else []),
-                  *self.inputs.errors(), *self._clock_watch.errors(), *stalled, *late]
+        errors = [*(self._senders.errors() if self._senders and self.needs_context else []),
+                  *(self.inputs.errors() if self.inputs else []), *self._clock_watch.errors(),
+                  *stalled, *late]
         self._pub_diag.publish(diagnostics_message(self, 'actions', values, [*problems, *slow],
                                                    errors))
 
     def destroy_node(self) -> None:
-        """The context subscription is ours (not rclpy's): it goes before the node."""
-        if self._sub_context is not None:
-            self._sub_context.destroy()
-        self.inputs.destroy()
+        """The step and context subscriptions are ours (not rclpy's): they go before the node."""
+        self._release()
         super().destroy_node()
-
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of `ros2 run zeus_ros policy_node`."""
