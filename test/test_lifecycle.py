@@ -5,7 +5,9 @@ sim_bridge (every step's status is the timeout's safe action); configure + activ
 policy's actions are applied; deactivate, none are; activate again, they are applied again on
 the same publisher (sim_bridge's pairing holds, nothing foreign). The estimator, on the
 default `autostart`, reports 'active'; both appear as `ros2 lifecycle nodes` finds them (a
-`~/get_state` service of type lifecycle_msgs/srv/GetState).
+`~/get_state` service of type lifecycle_msgs/srv/GetState). In the one-process container, a
+policy left unconfigured holds the loop (sim_bridge waits for an action publisher) until it is
+configured and activated by service.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 import pytest
 
 from live_fixtures import TASK, container, node, tiny_checkpoint
-from ros_harness import ProcessGroup, driver_node, spin_until
+from ros_harness import ProcessGroup, driver_node, fresh_domain_id, ros_context, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -166,3 +168,37 @@ def test_a_container_policy_on_autostart_false_holds_the_loop_until_activated(
         assert spin_until(probe, lambda: len([s for s in status.values() if s in (
             ActionStatus.OK, ActionStatus.CLIPPED)]) >= 20, timeout=60), \
             ros_processes.log_text('lc-container')[-2000:]
+
+
+def test_a_failed_configure_leaves_the_node_unconfigured_and_fixable(tmp_path: Path) -> None:
+    """In process: a missing checkpoint fails configure, the right one then configures.
+
+    The failure is the transition's FAILURE, not an exception; operator services refuse while
+    the node is unconfigured; cleanup lets go of the checkpoint and the subscriptions.
+    """
+    from rclpy.lifecycle import TransitionCallbackReturn
+    from rclpy.parameter import Parameter
+
+    from zeus_ros.nodes.policy_node import PolicyNode
+
+    checkpoint = tiny_checkpoint(tmp_path / 'tiny.pt')
+    with ros_context(fresh_domain_id()) as context:
+        policy = PolicyNode(context=context, cli_args=[
+            '--ros-args', '-p', f'checkpoint:={tmp_path / "missing.pt"}',
+            '-p', 'autostart:=false'])
+        try:
+            assert policy.lifecycle_state() == 'unconfigured'
+            with pytest.raises(ValueError, match='unconfigured'):
+                policy._freeze_context(True)
+            assert policy.trigger_configure() == TransitionCallbackReturn.FAILURE
+            assert policy.lifecycle_state() == 'unconfigured' and policy.agent is None
+            assert policy.set_parameters([Parameter('checkpoint', value=str(checkpoint))])[
+                0].successful
+            assert policy.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            assert policy.lifecycle_state() == 'inactive' and policy.agent is not None
+            assert policy.trigger_activate() == TransitionCallbackReturn.SUCCESS
+            assert policy.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+            assert policy.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+            assert policy.agent is None and policy.inputs is None
+        finally:
+            policy.destroy_node()
