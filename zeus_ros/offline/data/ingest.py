@@ -527,11 +527,13 @@ def _match_images(path: Path, steps: list[int], topics: dict[str, _Topic], store
     return frames
 
 
-def _bad_steps(steps: list[int], messages: list[Any], name: str, length: int | None
-               ) -> dict[str, list[int]]:
-    """Steps whose field `name` is of another length or not finite, by kind (vectorised)."""
+def _bad_steps(steps: list[int], messages: list[Any], name: str, length: int | None,
+               matrix: np.ndarray | None = None) -> dict[str, list[int]]:
+    """Steps whose field `name` is of another length or not finite, by kind (vectorised).
+
+    `matrix`: the field stacked (stack_field) when every message was decoded in one group.
+    """
     bad: dict[str, list[int]] = {}
-    matrix = stack_field(messages, name) if length is not None else None
     if matrix is not None and matrix.shape[1] == length:  # one layout, all of that length
         rows = matrix.astype(np.float64)
     elif length is not None:
@@ -586,13 +588,16 @@ def _check_values(path: Path, topics: dict[str, _Topic], report: IngestReport,
         steps, messages = in_order[topic]
         if not steps:
             continue
-        length = _majority_length(messages, name) if vector else None
+        # One decoded group has one length: no need to count every message's (a view each).
+        matrix = stack_field(messages, name) if vector else None
+        length = (int(matrix.shape[1]) if matrix is not None
+                  else _majority_length(messages, name)) if vector else None
         key = f'{topic} {name}'
         if length is not None and lengths.setdefault(key, length) != length:
             raise IngestError(f'{path}: {bag_topic(topic, namespace)} {name} has {length} '
                               f'values, earlier bags {lengths[key]}: recorded on another task '
                               'or robot; ingest them apart')
-        bad = _bad_steps(steps, messages, name, length)
+        bad = _bad_steps(steps, messages, name, length, matrix)
         for why, steps in bad.items():
             if topic == TOPIC_ACTION:
                 effect = 'read as absent (the policy request is not trained on)'
