@@ -431,6 +431,33 @@ def test_batched_ingest_equals_one_by_one_decoding(tmp_path: Path, monkeypatch: 
     assert_ingests_as_one_by_one([tmp_path / 'pixels'], monkeypatch)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_recorded_pixel_bag_ingests_through_raw_bytes_as_decoded(
+        tmp_path: Path, storage: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A recorded 84x84 pixel bag's image batches after the first skip decoding, exactly.
+
+    They take FrameStore.add_raw (pixels sliced from the CDR bytes), and the dataset is the
+    one-by-one decode's and what the env rendered, frame for frame (issue 51).
+    """
+    from zeus_ros.offline.data.frames import FrameStore
+
+    from live_fixtures import assert_ingests_as_one_by_one
+
+    steps = 150
+    env, actions, frames = _run_collect(tmp_path / 'bag', storage=storage, pixels=True,
+                                        steps=steps)
+    calls: list[bool] = []
+    add_raw = FrameStore.add_raw
+    with monkeypatch.context() as patch:
+        patch.setattr(FrameStore, 'add_raw',
+                      lambda store, raws: calls.append(add_raw(store, raws)) or calls[-1])
+        ds = ingest_bags(tmp_path / 'bag')
+    assert calls == [False, True, True], calls  # the first batch is decoded: the model
+    _check_against_env(ds, env, actions, frames, steps)
+    assert_ingests_as_one_by_one([tmp_path / 'bag'], monkeypatch)
+
+
 def _frame(k: int, shape: tuple[int, int] = (8, 6)) -> np.ndarray:
     """A distinct HxWx3 uint8 frame per k."""
     return np.random.default_rng(k).integers(0, 256, (*shape, 3), np.uint8)

@@ -112,3 +112,22 @@ def test_a_qos_mismatch_is_named_and_the_messages_still_read(tmp_path: Path) -> 
     with pytest.raises(IngestError, match='qos'):
         ingest_bags(bag, strict=True)
     shutil.rmtree(bag)
+
+
+def test_the_file_qos_comes_from_the_open_reader_as_the_file_holds_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The QoS the open reader parsed from the file (no second parse) equal the file's own."""
+    from rosbags.rosbag2 import Reader
+
+    from zeus_ros.bags.mcap_file import channel_qos, qos_text
+    from zeus_ros.offline.data import ingest
+
+    bag = _write_synthetic(tmp_path / 'qos', 4)
+    _edit_qos(bag, (TOPIC_STEP,))
+    mcap = next(bag.glob('*.mcap'))
+    with monkeypatch.context() as patch, Reader(bag) as reader:
+        patch.setattr(ingest, 'channel_qos', None)  # not parsed again
+        ours = ingest._file_qos(reader, mcap)
+    assert {t: qos_text(q) for t, q in ours.items()} == \
+        {t: qos_text(q) for t, q in channel_qos(mcap).items()}
+    assert 'reliable' in qos_text(ours[TOPIC_STEP])
