@@ -36,13 +36,17 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     'continual-round': ('zeus_ros.cli.continual_round',
                         "one round of the continual trainer (the node's child process)"),
 }
+INTERNAL = frozenset({'continual-round'})
+"""Commands other programs run (the continual trainer node its rounds): they dispatch like the
+others but stay out of `zeus --help`, which lists what a user types."""
 
 
 def usage() -> str:
-    """The top-level help text."""
+    """The top-level help text: the user's commands."""
     lines = ['usage: zeus <command> [options]', '', 'commands:']
-    width = max(10, *map(len, SUBCOMMANDS))
-    lines += [f'  {name:<{width}} {summary}' for name, (_module, summary) in SUBCOMMANDS.items()]
+    shown = {name: entry for name, entry in SUBCOMMANDS.items() if name not in INTERNAL}
+    width = max(10, *map(len, shown))
+    lines += [f'  {name:<{width}} {summary}' for name, (_module, summary) in shown.items()]
     lines += ['', "run 'zeus <command> --help' for a command's options"]
     return '\n'.join(lines)
 
