@@ -121,9 +121,9 @@ def _cell(entry: dict[str, Any], key: str) -> str:
 
 def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
     """Value of adaptation against each freeze, per method (mean ± s.e. over seeds)."""
-    from zeus_ros.offline.evaluation.metrics import _pyplot
+    from zeus_ros.offline.evaluation.metrics import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4))
     methods = [e for e in table if 'voa_train_mean' in e]
     for offset, freeze in zip((-0.3, -0.1, 0.1, 0.3), FREEZES[1:], strict=True):

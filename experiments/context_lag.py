@@ -30,11 +30,11 @@ from tqdm import tqdm
 
 from zeus_ros.offline.evaluation.eval_batch import find_checkpoints
 from zeus_ros.offline.evaluation.evaluate import (
-    _make_env,
-    _switch_schedule,
     default_switch_every,
     evaluate_contexts,
+    make_env,
     split_values,
+    switch_schedule,
     switching_order,
 )
 from zeus_ros.offline.evaluation.metrics import read_csv, write_csv
@@ -65,9 +65,9 @@ def lag_returns(path: Path, lags: list[int], split: str, episodes: int,
                                      progress=False, context_lag=lag)
         rows.append({**base, 'protocol': 'constant', 'lag': lag,
                      'return': float(np.mean([r['return'] for r in constant]))})
-        schedule = _switch_schedule(switching_order(values, SEED),
+        schedule = switch_schedule(switching_order(values, SEED),
                                     default_switch_every(agent.task))
-        env, task = _make_env(agent.task, schedule, SEED)
+        env, task = make_env(agent.task, schedule, SEED)
         try:
             trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=SEED,
                                                      context_lag=lag),
@@ -105,9 +105,9 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
     """Return against the lag per method: a row per task, a panel per protocol (mean ± s.e.)."""
-    from zeus_ros.offline.evaluation.metrics import _pyplot
+    from zeus_ros.offline.evaluation.metrics import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     tasks = list(dict.fromkeys(r['task'] for r in table))
     protocols = list(dict.fromkeys(r['protocol'] for r in table))
     fig, axes = plt.subplots(len(tasks), len(protocols), squeeze=False,

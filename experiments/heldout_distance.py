@@ -192,9 +192,9 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
     """Return, share of the oracle's headroom and value of adaptation against the distance."""
-    from zeus_ros.offline.evaluation.metrics import _pyplot
+    from zeus_ros.offline.evaluation.metrics import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(14, 4))
     panels = (('return', 'return (mean ± s.e. over seeds)'),
               ('share', "share of the oracle's headroom (paired)"),

@@ -82,9 +82,9 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def plot(table: list[dict[str, Any]], path: Path, title: str) -> None:
     """Return against blind steps per method (mean ± s.e.), no_context as a line."""
-    from zeus_ros.offline.evaluation.metrics import _pyplot
+    from zeus_ros.offline.evaluation.metrics import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for method in dict.fromkeys(r['method'] for r in table):
         sel = [r for r in table if r['method'] == method]

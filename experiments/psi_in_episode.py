@@ -127,9 +127,9 @@ def main() -> None:
 
 def _plot(rows: list[dict], path: Path, split: str) -> None:
     """Reward per block and psi's error per block, one line per label with s.e. bands."""
-    from zeus_ros.offline.evaluation.metrics import _pyplot
+    from zeus_ros.offline.evaluation.metrics import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
     for ax, key, title in ((axes[0], 'reward', 'reward per block'),
                            (axes[1], 'psi_rms_error', "psi's error as a context value (RMS)")):

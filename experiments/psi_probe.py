@@ -25,7 +25,7 @@ import torch
 
 from zeus_ros.learning.checkpoint import load_checkpoint
 from zeus_ros.learning.context import ContextNormalizer
-from zeus_ros.offline.training.train import _load_data
+from zeus_ros.offline.training.train import load_data
 
 
 def _psi(agent, batch) -> tuple[torch.Tensor, torch.Tensor]:
@@ -74,7 +74,7 @@ def main() -> None:
         agent, config = loaded.agent, loaded.config
         if 'psi' not in agent.modules:
             parser.error(f'{run}: method {config.method} has no learned context to probe')
-        _, replay = _load_data(sorted((run / 'bags').iterdir()), config, None, 'cpu', 0)
+        _, replay = load_data(sorted((run / 'bags').iterdir()), config, None, 'cpu', 0)
         batch = replay.sample(args.batch)
         psi, next_psi = _psi(agent, batch)
         norm = ContextNormalizer(config.context_dim, momentum=1.0, noise_scale=config.k / 2)

@@ -36,7 +36,7 @@ def _pixel_sensitivity(path: Path, episodes: int) -> float:
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.offline.evaluation.adaptation import EVAL_SEED
     from zeus_ros.offline.evaluation.diagnostics import extreme_indices
-    from zeus_ros.offline.evaluation.evaluate import _make_env, split_values
+    from zeus_ros.offline.evaluation.evaluate import make_env, split_values
     from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     class Recording(AgentPolicy):
@@ -49,7 +49,7 @@ def _pixel_sensitivity(path: Path, episodes: int) -> float:
     values = split_values(agent.task, 'train')
     runs = []
     for index in extreme_indices(values):
-        env, task = _make_env(agent.task, {'kind': 'constant', 'context': values[index]},
+        env, task = make_env(agent.task, {'kind': 'constant', 'context': values[index]},
                               EVAL_SEED + index)
         policy = Recording(agent, noise=0.0, seed=EVAL_SEED)
         policy.seen = []

@@ -271,14 +271,14 @@ def test_novelty_warns_on_an_extrapolation_context_and_clears_back_on_a_training
     from zeus_ros.learning.inference import InferenceAgent
     from zeus_ros.learning.readout import NoveltyTracker
     from zeus_ros.offline.evaluation.calibrate import calibrate_readout
-    from zeus_ros.offline.evaluation.evaluate import _make_env, _switch_schedule
+    from zeus_ros.offline.evaluation.evaluate import make_env, switch_schedule
     from zeus_ros.offline.rollout import AgentPolicy, run_steps
 
     torch.set_num_threads(1)
     agent = InferenceAgent.from_checkpoint(
         REPO / 'checkpoints/issue10_episodes/k10/cheetah_run_v1_10k/zeus_s0.pt')
     _readout, monitor = calibrate_readout(agent, steps=1000)
-    env, task = _make_env(agent.task, _switch_schedule(
+    env, task = make_env(agent.task, switch_schedule(
         [{'target_velocity': 1.29}, {'target_velocity': 4.0}], 20), 5)
     try:
         trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=5), 160,

@@ -34,10 +34,10 @@ def calibrate_readout(agent: Any, *, steps: int = READOUT_STEPS, every: int | No
     (what the estimator publishes once an episode is k steps old).
     """
     from zeus_ros.offline.evaluation.evaluate import (
-        _make_env,
-        _switch_schedule,
         default_switch_every,
+        make_env,
         split_values,
+        switch_schedule,
         switching_order,
     )
     from zeus_ros.offline.rollout import AgentPolicy, run_steps
@@ -47,7 +47,7 @@ def calibrate_readout(agent: Any, *, steps: int = READOUT_STEPS, every: int | No
     # long enough for a full history plus a settled novelty window in each segment.
     every = every or max(agent.k + NOVELTY_WINDOW + 5,
                          min(default_switch_every(agent.task), steps // (2 * len(values))))
-    env, task = _make_env(agent.task, _switch_schedule(values, every), seed)
+    env, task = make_env(agent.task, switch_schedule(values, every), seed)
     try:
         trace = run_steps(env, task, AgentPolicy(agent, noise=0.0, seed=seed), steps,
                           desc='read-out', progress=progress)

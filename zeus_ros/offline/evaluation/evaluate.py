@@ -37,8 +37,8 @@ from zeus_ros.offline.evaluation.records import checkpoint_sha256, write_record
 from zeus_ros.offline.rollout import AgentPolicy, Policy, Trace, random_policy, run_steps
 
 __all__ = ['SPLITS', 'adaptation_latencies', 'context_rank_correlation', 'evaluate',
-           'evaluate_contexts', 'mid_episode_switches', 'parse_values', 'split_values',
-           'switching_order']
+           'evaluate_contexts', 'make_env', 'mid_episode_switches', 'parse_values',
+           'split_values', 'switch_schedule', 'switching_order']
 
 RECOVERY_TOLERANCE = 0.10
 """A switch is absorbed once the reward is within 10% of its steady value on the new context."""
@@ -66,7 +66,8 @@ def default_switch_every(task: str) -> int:
     return max(1, min(100, int(task_class(task).episode_length) // 4))
 
 
-def _make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any, Any]:
+def make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any, Any]:
+    """(env, task): task `task_name` seeded `seed`, its context following `schedule`."""
     from sim_bridge.env import ScheduledEnv
     from sim_bridge.registry import make_task
     from sim_bridge.schedules import schedule_from_config
@@ -75,7 +76,7 @@ def _make_env(task_name: str, schedule: dict[str, Any], seed: int) -> tuple[Any,
     return ScheduledEnv(task, schedule_from_config(schedule, task, seed)), task
 
 
-def _switch_schedule(values: Sequence[dict[str, float]], every: int) -> dict[str, Any]:
+def switch_schedule(values: Sequence[dict[str, float]], every: int) -> dict[str, Any]:
     """Cycle through `values`, switching every `every` steps, unannounced."""
     return {'kind': 'switch', 'every': int(every), 'values': [dict(v) for v in values]}
 
@@ -112,7 +113,7 @@ def evaluate_contexts(agent: Any, values: Sequence[dict[str, float]], *, episode
     rows = []
     bar = tqdm(desc=desc, unit='step', disable=not progress)
     for index, value in enumerate(values):
-        env, task = _make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
+        env, task = make_env(name, {'kind': 'constant', 'context': dict(value)}, seed + index)
         steps = episodes * task.episode_length + 1
         if bar.total is None:  # known once a task is built
             bar.total = steps * len(values)
@@ -223,7 +224,7 @@ def mean_context_per_value(traces: Sequence[Trace], k: int) -> np.ndarray | None
 def random_rollout(task_name: str, values: Sequence[dict[str, float]], steps: int, *,
                    every: int, seed: int, progress: bool = True) -> Rollout:
     """Random-policy steps switching through `values` every `every` steps (probe data)."""
-    env, task = _make_env(task_name, _switch_schedule(values, every), seed)
+    env, task = make_env(task_name, switch_schedule(values, every), seed)
     try:
         trace = run_steps(env, task, random_policy(task, seed), steps, desc='probe data',
                           progress=progress)
@@ -379,7 +380,7 @@ def evaluate(checkpoint: str | Path, *, split: str, task: str | None = None,
               for v, t in zip(values, traces, strict=True)}
     if switch_every is None:
         switch_every = default_switch_every(agent.task)
-    env, sim = _make_env(agent.task, _switch_schedule(switching_order(values, seed),
+    env, sim = make_env(agent.task, switch_schedule(switching_order(values, seed),
                                                       switch_every), seed)
     try:
         switching = run_steps(env, sim, AgentPolicy(agent, noise=0.0, seed=seed),

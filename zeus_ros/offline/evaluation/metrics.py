@@ -17,20 +17,9 @@ import numpy as np
 
 from zeus_ros.atomic_file import atomic_write
 
-__all__ = [
-    'MetricsLog',
-    'RunningMean',
-    'format_table',
-    'metric_series',
-    'overlap_style',
-    'plot_bars',
-    'plot_grouped_lines',
-    'plot_heatmaps',
-    'plot_metric_grid',
-    'plot_trace',
-    'read_csv',
-    'write_csv',
-]
+__all__ = ['MetricsLog', 'RunningMean', 'format_table', 'metric_series', 'overlap_style',
+           'plot_bars', 'plot_grouped_lines', 'plot_heatmaps', 'plot_metric_grid', 'plot_trace',
+           'pyplot', 'read_csv', 'write_csv']
 
 
 def _columns(rows: Iterable[Mapping[str, Any]]) -> list[str]:
@@ -147,7 +136,7 @@ def overlap_style(index: int, count: int) -> dict[str, Any]:
             'alpha': 0.85}
 
 
-def _pyplot() -> Any:
+def pyplot() -> Any:
     """Matplotlib with the file-only backend (no display on robots and CI)."""
     import matplotlib
 
@@ -196,7 +185,7 @@ def plot_metric_grid(rows: Sequence[Mapping[str, Any]], keys: Sequence[str], pat
     notes = (['one value each so far (a curve needs two logged values):', *single]
              if single else []) + ([f'no data (NaN only): {", ".join(empty)}'] if empty else [])
     panels = len(curves) + bool(notes)
-    plt = _pyplot()
+    plt = pyplot()
     cols = min(3, panels)
     nrows = math.ceil(panels / cols)
     height = 2.8 * nrows if curves else 0.7 + 0.16 * len(notes)
@@ -234,7 +223,7 @@ def plot_grouped_lines(rows: Sequence[Mapping[str, Any]], *, x: str, y: str, gro
             groups.setdefault(row[group], []).append((row[x], row[y]))
     if not groups:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     cmap = plt.get_cmap('viridis')
     keys = sorted(groups, key=lambda g: (not isinstance(g, int | float), g))
@@ -260,7 +249,7 @@ def plot_heatmaps(matrices: Mapping[str, np.ndarray], labels: Sequence[str], pat
     `axis_label` names what the rows and columns are (e.g. 'torso_length [m]'), `units[i]`
     what the colour of matrix i measures (e.g. 'distance [m]').
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(matrices), figsize=(4.6 * len(matrices), 4.3),
                              squeeze=False)
     for index, (ax, (name, matrix)) in enumerate(zip(axes.flat, matrices.items(), strict=True)):
@@ -313,7 +302,7 @@ def plot_bars(labels: Sequence[str], series: Mapping[str, Sequence[float]], path
     Panels wrap after PANELS_PER_ROW and share the y axis and one legend: a row of grouped
     bars grew 0.6 in per bar (3168 px wide for 8 values of 6 policies).
     """
-    plt = _pyplot()
+    plt = pyplot()
     cols = max(1, min(PANELS_PER_ROW, len(labels)))
     nrows = max(1, math.ceil(len(labels) / cols))
     width = max(6.0, 0.6 + 2.9 * cols)
@@ -347,7 +336,7 @@ def plot_bars(labels: Sequence[str], series: Mapping[str, Sequence[float]], path
 def plot_trace(values: Sequence[float], others: Mapping[str, Sequence[float]], *,
                marks: Sequence[int], path: str | Path, title: str = '') -> Path:
     """A per-step trace with vertical marks (e.g. context switches) and extra lower panels."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1 + len(others), 1, figsize=(8.0, 2.4 * (1 + len(others))),
                              sharex=True, squeeze=False)
     panels = [('per-step reward', values), *others.items()]

@@ -146,11 +146,11 @@ def collect_round(task_name: str, schedule: dict[str, Any], teacher: Any, studen
     The teacher labels every visited step from the state (AgentPolicy keeps its state history
     of this very trajectory). Returns the complete episodes and their returns.
     """
-    from zeus_ros.offline.evaluation.evaluate import _make_env
+    from zeus_ros.offline.evaluation.evaluate import make_env
     from zeus_ros.offline.rollout import AgentPolicy
     from zeus_ros.offline.rollout import record_step as _record
 
-    env, task = _make_env(task_name, schedule, seed)
+    env, task = make_env(task_name, schedule, seed)
     labeller = AgentPolicy(teacher, noise=0.0, seed=seed)
     actor = None if student is None else AgentPolicy(student, noise=noise, seed=seed + 1)
     rng = np.random.default_rng(seed)

@@ -40,7 +40,7 @@ from zeus_ros.offline.evaluation.metrics import (
 from zeus_ros.yaml_text import YamlTextError, load_yaml_text
 
 __all__ = ['RUN_CONTROL_FIELDS', 'NonFiniteError', 'TrainError', 'TrainResult', 'apply_overrides',
-           'build_spec', 'check_device', 'read_config', 'run_warnings', 'train']
+           'build_spec', 'check_device', 'load_data', 'read_config', 'run_warnings', 'train']
 
 CHECKPOINT = 'checkpoint.pt'
 FINAL = 'final.pt'
@@ -258,9 +258,10 @@ def run_warnings(config: ZeusConfig, task: str, transitions: int) -> list[str]:
     return warnings
 
 
-def _load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
-               device: Any, seed: int, namespace: str = '', strict: bool = False
-               ) -> tuple[Any, Any]:
+def load_data(bags: Sequence[str | Path], config: ZeusConfig, task: str | None,
+              device: Any, seed: int, namespace: str = '', strict: bool = False
+              ) -> tuple[Any, Any]:
+    """(dataset, replay buffer) of `bags` for `config`; TrainError on another task or no frames."""
     from zeus_ros.offline.data.ingest import ingest_bags
     from zeus_ros.offline.data.replay import ReplayBuffer
 
@@ -344,7 +345,7 @@ def train(bags: Sequence[str | Path], config: ZeusConfig, out: str | Path, *,
     device = resolve_device(config.device)
     config = config.replace(device=str(device))
     resume_step = checkpoint_step(out / CHECKPOINT) if resume else 0
-    dataset, replay = _load_data(bags, config, task, device, config.seed + resume_step,
+    dataset, replay = load_data(bags, config, task, device, config.seed + resume_step,
                                  namespace, strict)
     agent, start = _start(out, config, dataset, replay, resume)
     cfg = agent.config
