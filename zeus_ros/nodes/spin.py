@@ -22,6 +22,7 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from zeus_ros.nodes.sender_subscription import raise_callback_error
 from zeus_ros.nodes.shutdown import bounded, start_stop_limit
 
 if TYPE_CHECKING:
@@ -204,6 +205,8 @@ def _spin_until_signal(executor: Executor, signals: list[int], nodes: Sequence[N
     """
     while not signals and rclpy.ok() and not _finished(nodes):
         executor.spin_once(timeout_sec=0.1)
+        for node in nodes:  # a paired subscription's callback failed: its traceback, exit 1
+            raise_callback_error(node)
 
 
 def _drain(executor: Executor, nodes: Sequence[Node], quiet: float) -> None:
