@@ -13,6 +13,7 @@ import subprocess
 import sys
 
 import pytest
+
 from ros_harness import fresh_domain_id, require_ros, ros_environment
 
 NODE = Path(__file__).with_name('failing_callback_node.py')
