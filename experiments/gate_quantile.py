@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import json
 from pathlib import Path
 import sys
 from typing import Any
 
+from drift_scenarios import bench_continual
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -35,16 +35,6 @@ sys.path.insert(0, str(REPO))
 EVAL_SEED = 9000
 """Seeds for choosing: neither a gate (300 + 1000 r, + 500) nor the references (7000) use them."""
 EPISODES = 5
-
-
-def _bench() -> Any:
-    """benchmarks/bench_continual.py: the scenarios and their context names live there."""
-    spec = importlib.util.spec_from_file_location('bench_continual',
-                                                  REPO / 'benchmarks' / 'bench_continual.py')
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def one_setting(request: dict[str, Any], scenario: str, quantile: float, ramp: float,
@@ -65,7 +55,7 @@ def one_setting(request: dict[str, Any], scenario: str, quantile: float, ramp: f
                        out / 'history.jsonl', ContinualSettings(**request['settings']),
                        first_checkpoint=request['first_checkpoint'],
                        rehearsal_folder=request['rehearsal'], round_number=1)
-    bench = _bench()
+    bench = bench_continual()
     task, _, values = bench.SCENARIOS[scenario]
     name = bench._context_name(task)
     agent = InferenceAgent.from_checkpoint(answer['candidate'])
@@ -87,7 +77,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--request', type=Path, required=True,
                         help="a live round's request.json (its splits and rehearsal must exist)")
-    parser.add_argument('--scenario', choices=sorted(_bench().SCENARIOS), required=True)
+    parser.add_argument('--scenario', choices=sorted(bench_continual().SCENARIOS), required=True)
     parser.add_argument('--setting', nargs='+', default=['0.995:1.5', '0.95:1.5'],
                         help='QUANTILE:RAMP pairs')
     parser.add_argument('--out', type=Path, required=True)

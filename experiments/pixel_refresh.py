@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 from pathlib import Path
 import sys
 import tempfile
 from typing import Any
 
+from drift_scenarios import bench_continual
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -32,16 +32,6 @@ sys.path.insert(0, str(REPO))
 ZOO = REPO / 'checkpoints' / 'cheetah_bias_v0'
 TEACHERS = sorted((REPO / 'checkpoints' / 'continual_drift').glob('bias_run*.pt'))
 OUT = REPO / 'docs' / 'results' / 'continual_drift' / 'pixels'
-
-
-def _bench() -> Any:
-    """benchmarks/bench_continual.py: the scenario values and reference seeds live there."""
-    spec = importlib.util.spec_from_file_location('bench_continual',
-                                                  REPO / 'benchmarks' / 'bench_continual.py')
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def measure(path: Path, contexts: dict[str, list[dict[str, float]]], episodes: int,
@@ -75,7 +65,7 @@ def main() -> int:
     from zeus_ros.offline.training.student_refresh import refresh_student
 
     torch.set_num_threads(1)
-    bench = _bench()
+    bench = bench_continual()
     task, _, values = bench.SCENARIOS['bias']
     episodes = args.episodes or bench.REFERENCE_EPISODES
     name = bench._context_name(task)
