@@ -34,9 +34,10 @@ GATE_QUANTILE = 0.95
 in some of the adapted actor (the gate's forgetting budget judges what that costs). Chosen
 offline on one Cheetah-Run-v1 drift recording (experiments/gate_quantile.py, seeds 9000):
 at 0.995, `low` sat in the train scores' far tail (5.35 against a 95th percentile of 2.3) and
-the deployed actor still acted on half the steps at 4.15-4.5 m/s, so a first round reached
--430 per episode there; at 0.95 -383 (0.90: -378, ramp 1.2: -374), every train value within
-1 per episode. Unchanged on the Bias and Motor recordings (-35.1 / -36.1, -64.9 / -64.6)."""
+the deployed actor still acted on most steps at 4.15-4.5 m/s; a first round reached -434 per
+episode there, -386 at 0.95, the train values within 1.5. On the Bias and Motor recordings:
+-35.8 / -37.8 and -62.1 / -51.4 beyond the range, at most 7.3 lost at a train value (Bias
+-0.25; docs/results/continual_drift/README.md#choosing-the-hand-over)."""
 GATE_RAMP = 1.5
 """`high` = GATE_RAMP x `low`: a ramp, not a switch, so the action is continuous in psi.
 Measured on the zoo's Cheetah-Bias-v0 (monitor units): per-step scores at the train values
